@@ -1,0 +1,202 @@
+"""Attack families: the attacker's throttle/brake signal u(t) in [-1, 1] from a parameter vector.
+
+Each family has a parameter box; every point of the box is a valid attack (ordered times are
+parameterised as offsets, so no sample is ever rejected). ``signal(params, times)`` returns u at the
+given times, NaN where the attack is not active yet (the attacker then cruises at the target speed).
+Pure code, no SUMO.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline, PchipInterpolator
+
+from .errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    low: float
+    high: float
+    unit: str = ""
+
+
+class AttackFamily:
+    """A parametric family of attack signals over a box of parameters."""
+
+    name: str = ""
+    parameters: tuple[Parameter, ...] = ()
+
+    @property
+    def dimension(self) -> int:
+        return len(self.parameters)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([p.low for p in self.parameters], dtype=float)
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([p.high for p in self.parameters], dtype=float)
+
+    def check(self, params: Sequence[float], field: str = "attack parameters") -> np.ndarray:
+        """The parameter vector as an array, or a ConfigError naming the offending parameter."""
+        x = np.asarray(params, dtype=float).reshape(-1)
+        if x.size != self.dimension:
+            raise ConfigError(field, list(map(float, x)), f"{self.dimension} values for {self.name}: {', '.join(self.names)}")
+        for value, p in zip(x, self.parameters):
+            if not (p.low <= value <= p.high):  # NaN fails too
+                raise ConfigError(f"{field}: {p.name}", float(value), f"a number in [{p.low:g}, {p.high:g}] {p.unit}".rstrip())
+        return x
+
+    def signal(self, params: Sequence[float], times_s: np.ndarray) -> np.ndarray:
+        x = self.check(params)
+        return np.clip(self._signal(x, np.asarray(times_s, dtype=float)), -1.0, 1.0)
+
+    def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        return {"family": self.name, "parameters": [p.__dict__ for p in self.parameters]}
+
+
+class Constant(AttackFamily):
+    """u(t) = c from t = 0: the simplest attack, for checks and demonstrations."""
+
+    name = "constant"
+    parameters = (Parameter("c", -1.0, 1.0),)
+
+    def _signal(self, x, t):
+        return np.full_like(t, x[0])
+
+
+class Persistent(AttackFamily):
+    """The paper's pi_s = (c, f, t_a): from t_a on, a square wave between +c and -c at frequency f.
+
+    Each period starts with throttle (+c) for its first half, then brakes (-c).
+    """
+
+    name = "persistent"
+    parameters = (
+        Parameter("c", 0.0, 1.0),
+        Parameter("f_hz", 0.02, 1.0, "Hz"),
+        Parameter("t_a_s", 0.0, 20.0, "s"),
+    )
+
+    def _signal(self, x, t):
+        c, f, t_a = x
+        phase = np.mod((t - t_a) * f, 1.0)
+        u = np.where(phase < 0.5, c, -c)
+        return np.where(t >= t_a, u, np.nan)
+
+
+class Intermittent(AttackFamily):
+    """The paper's pi_p = (t1, t2, t3, t4, c1, c2): u = c1 on [t1, t2], u = c2 on [t3, t4].
+
+    Times are searched as t1 and three non-negative durations (t2 - t1, t3 - t2, t4 - t3) so that
+    every point of the box is ordered. The attacker cruises outside the two windows.
+    """
+
+    name = "intermittent"
+    parameters = (
+        Parameter("t1_s", 0.0, 20.0, "s"),
+        Parameter("width1_s", 0.0, 10.0, "s"),
+        Parameter("pause_s", 0.0, 10.0, "s"),
+        Parameter("width2_s", 0.0, 10.0, "s"),
+        Parameter("c1", -1.0, 1.0),
+        Parameter("c2", -1.0, 1.0),
+    )
+
+    @staticmethod
+    def window_times(x: Sequence[float]) -> tuple[float, float, float, float]:
+        t1 = float(x[0])
+        t2 = t1 + float(x[1])
+        t3 = t2 + float(x[2])
+        return t1, t2, t3, t3 + float(x[3])
+
+    def _signal(self, x, t):
+        t1, t2, t3, t4 = self.window_times(x)
+        u = np.full_like(t, np.nan)
+        u[(t >= t1) & (t <= t2)] = x[4]
+        u[(t >= t3) & (t <= t4)] = x[5]
+        return u
+
+
+class Sine(AttackFamily):
+    """u(t) = A sin(2 pi f t + phase) from t = 0: the paper's example of a parametric attack."""
+
+    name = "sine"
+    parameters = (
+        Parameter("amplitude", 0.0, 1.0),
+        Parameter("f_hz", 0.02, 1.0, "Hz"),
+        Parameter("phase_rad", 0.0, 2.0 * math.pi, "rad"),
+    )
+
+    def _signal(self, x, t):
+        a, f, phase = x
+        return a * np.sin(2.0 * math.pi * f * t + phase)
+
+
+class Knots(AttackFamily):
+    """The nonparametric attack: one command every ``delta_s`` up to ``horizon_s``, interpolated.
+
+    ``pchip`` (default) is monotone between knots and never overshoots [-1, 1]; ``spline`` is the
+    authors' cubic spline with the overshoot clipped, kept for comparison. After the horizon the
+    last knot's value is held.
+    """
+
+    name = "knots"
+    INTERPOLATIONS = ("pchip", "spline")
+
+    def __init__(self, delta_s: float = 6.0, horizon_s: float = 48.0, interpolation: str = "pchip"):
+        if not (isinstance(delta_s, (int, float)) and 0.05 <= delta_s <= 600):
+            raise ConfigError("attack.delta_s", delta_s, "a number in [0.05, 600] seconds")
+        if not (isinstance(horizon_s, (int, float)) and delta_s <= horizon_s <= 3600):
+            raise ConfigError("attack.horizon_s", horizon_s, f"a number in [delta_s={delta_s:g}, 3600] seconds")
+        count = horizon_s / delta_s
+        if abs(count - round(count)) > 1e-9:
+            raise ConfigError("attack.horizon_s", horizon_s, f"a whole multiple of delta_s={delta_s:g} s")
+        if interpolation not in self.INTERPOLATIONS:
+            raise ConfigError("attack.interpolation", interpolation, f"one of {', '.join(self.INTERPOLATIONS)}")
+        self.delta_s = float(delta_s)
+        self.horizon_s = float(horizon_s)
+        self.interpolation = interpolation
+        self.name = "knots" if interpolation == "pchip" else "spline"
+        self.knot_times_s = np.arange(int(round(count)) + 1) * self.delta_s
+        self.parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(self.knot_times_s.size))
+
+    def _signal(self, x, t):
+        tk = self.knot_times_s
+        tc = np.clip(t, tk[0], tk[-1])  # hold the last value after the horizon
+        if self.interpolation == "pchip":
+            return PchipInterpolator(tk, x)(tc)
+        return CubicSpline(tk, x)(tc)
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(delta_s=self.delta_s, horizon_s=self.horizon_s, interpolation=self.interpolation)
+        return d
+
+
+FAMILIES = ("constant", "persistent", "intermittent", "sine", "knots", "spline")
+
+
+def make_attack(name: str, *, delta_s: float = 6.0, horizon_s: float = 48.0) -> AttackFamily:
+    """An attack family by name; ``spline`` is ``knots`` with the authors' cubic spline."""
+    if name == "knots":
+        return Knots(delta_s, horizon_s, "pchip")
+    if name == "spline":
+        return Knots(delta_s, horizon_s, "spline")
+    simple = {"constant": Constant, "persistent": Persistent, "intermittent": Intermittent, "sine": Sine}
+    if name not in simple:
+        raise ConfigError("attack", name, f"one of {', '.join(FAMILIES)}")
+    return simple[name]()

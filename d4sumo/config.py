@@ -1,0 +1,154 @@
+"""The episode configuration: frozen, validated on construction, round-trips through TOML/JSON.
+
+A config file is TOML with these tables (every key optional; defaults from SPEC section 1):
+
+    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s
+    [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
+    [controller] class = "switching" (or "package.module:ClassName") and the class's parameters
+    [attack]     family, params, delta_s, horizon_s        (read by the commands that take an attack)
+    [spec]       d_safe_m, formula                          (read by the specification)
+    [search]     optimizer, samples, seed                   (read by falsify)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from .control import VehicleParams, build_params, resolve_controller
+from .errors import ConfigError, check_number
+
+START_MODES = ("rest", "steady")
+SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
+MAX_FOLLOWERS = 10
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Which follower controller to run and its parameters (as (name, value) pairs, all resolved)."""
+
+    cls: str = "switching"
+    params: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cls, str) or not self.cls:
+            raise ConfigError("controller.class", self.cls, "a registered controller name or 'package.module:ClassName'")
+        controller = resolve_controller(self.cls)
+        resolved = build_params(controller, dict(self.params))  # validates every value
+        object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
+
+    def controller_class(self) -> type:
+        return resolve_controller(self.cls)
+
+    def build_params(self) -> Any:
+        return build_params(self.controller_class(), dict(self.params))
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """One episode of the paper's scenario: road, platoon, start mode, step and duration."""
+
+    network: str = "highway_4lane"  # a folder of sumo_scenarios/ or a path to one
+    followers: int = 3  # N followers behind the attacker: ids v1..vN
+    setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
+    speed_mps: float = 25.0  # target speed v_d of every car
+    start: str = "rest"  # rest: all at 0 m/s; steady: all at the target speed
+    step_s: float = 0.05
+    duration_s: float = 60.0
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.network, str) or not self.network:
+            raise ConfigError("scenario.network", self.network, "a scenario name (see `d4sumo scenarios`) or a folder")
+        if not _is_int(self.followers) or not (1 <= self.followers <= MAX_FOLLOWERS):
+            raise ConfigError("scenario.followers", self.followers, f"a whole number in [1, {MAX_FOLLOWERS}]")
+        check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True)
+        check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True)
+        if self.start not in START_MODES:
+            raise ConfigError("scenario.start", self.start, f"one of {', '.join(START_MODES)}")
+        check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds")
+        check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds")
+        if not isinstance(self.vehicle, VehicleParams):
+            raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
+        if not isinstance(self.controller, ControllerConfig):
+            raise ConfigError("controller", self.controller, "a [controller] table")
+
+    @property
+    def steps(self) -> int:
+        """Number of simulation steps in a full episode."""
+        return int(round(self.duration_s / self.step_s))
+
+    @property
+    def vehicle_ids(self) -> tuple[str, ...]:
+        return tuple(f"v{i}" for i in range(self.followers + 1))
+
+    def replace(self, **changes: Any) -> "EpisodeConfig":
+        return dataclasses.replace(self, **changes)
+
+    # --- TOML/JSON round trip -----------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("vehicle", "controller")}
+        return {
+            "scenario": scenario,
+            "vehicle": dataclasses.asdict(self.vehicle),
+            "controller": {"class": self.controller.cls, **dict(self.controller.params)},
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any], overrides: Mapping[str, Any] | None = None) -> "EpisodeConfig":
+        """Build from the [scenario], [vehicle] and [controller] tables; ``overrides`` are
+        dotted keys (``scenario.setpoint_m``) that win over the tables (command-line flags)."""
+        tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle", "controller")}
+        for dotted, value in (overrides or {}).items():
+            section, _, key = dotted.partition(".")
+            if section not in tables or not key:
+                raise ConfigError(dotted, value, "a key of [scenario], [vehicle] or [controller] as section.key")
+            tables[section][key] = value
+        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in ("vehicle", "controller")]
+        _check_keys("scenario", tables["scenario"], scenario_keys)
+        _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)])
+        controller_table = tables["controller"]
+        controller = ControllerConfig(
+            cls=controller_table.pop("class", "switching"), params=tuple(controller_table.items())
+        )
+        return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), controller=controller)
+
+
+def load_toml(path: str | Path) -> dict:
+    """Read a config file, refusing unknown tables; errors name the file and what is wrong."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError("--config", str(p), f"a readable TOML file ({exc.strerror})") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("--config", str(p), f"valid TOML ({exc})") from None
+    for key, value in doc.items():
+        if key not in SECTIONS or not isinstance(value, dict):
+            raise ConfigError(f"{p.name}: [{key}]", value if not isinstance(value, dict) else "table", f"tables {', '.join(SECTIONS)}")
+    return doc
+
+
+def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
+    value = doc.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"[{name}]", value, "a table")
+    return value
+
+
+def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+

@@ -1,0 +1,248 @@
+"""Longitudinal control of the cars: the paper's switching ACC/cruise controller (its Eq. 1).
+
+Pure code, no SUMO. A follower controller turns what the car senses (bumper gap to the car ahead,
+its own speed, the speed of the car ahead) into a command u in [-1, 1] (-1 full brake, +1 full
+throttle). Controllers are pluggable: a config names a registered controller ("switching") or any
+class as "package.module:ClassName" that follows the `FollowerController` protocol.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping, Protocol
+
+from .errors import ConfigError, check_number
+
+#: Mode values recorded in traces (signal ``mode_vI``).
+MODE_CC = 0.0
+MODE_ACC = 1.0
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Vehicle body and actuator: the same for the attacker and every follower."""
+
+    length_m: float = 4.5
+    max_accel_mps2: float = 3.5  # at full throttle, u = +1
+    max_decel_mps2: float = 8.0  # at full brake, u = -1 (a positive number)
+    actuator_lag_s: float = 0.5  # first-order lag between command and acceleration
+
+    def __post_init__(self) -> None:
+        check_number("vehicle.length_m", self.length_m, 0.5, 30.0, "metres")
+        check_number("vehicle.max_accel_mps2", self.max_accel_mps2, 0.1, 20.0, "m/s^2")
+        check_number("vehicle.max_decel_mps2", self.max_decel_mps2, 0.1, 20.0, "m/s^2 (positive)")
+        check_number("vehicle.actuator_lag_s", self.actuator_lag_s, 0.0, 5.0, "seconds")
+
+
+def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:
+    """Map a throttle/brake command in [-1, 1] to the acceleration it asks for [m/s^2]."""
+    return u * vehicle.max_accel_mps2 if u >= 0.0 else u * vehicle.max_decel_mps2
+
+
+def acceleration_to_command(a_mps2: float, vehicle: VehicleParams) -> float:
+    """The low-level controller: a wanted acceleration to throttle (u > 0) or brake (u < 0), never both."""
+    u = a_mps2 / vehicle.max_accel_mps2 if a_mps2 >= 0.0 else a_mps2 / vehicle.max_decel_mps2
+    return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+
+
+class Actuator:
+    """A car's drivetrain: command -> first-order-lagged acceleration -> speed (never below 0).
+
+    The lag is discretised exactly for a command held over one step. The speed is integrated from
+    the sensed speed, so the simulator stays the single source of the car's state.
+    """
+
+    __slots__ = ("accel_max", "decel_max", "alpha", "step_s", "max_speed_mps", "accel_mps2")
+
+    def __init__(self, vehicle: VehicleParams, step_s: float, max_speed_mps: float = math.inf):
+        self.accel_max = vehicle.max_accel_mps2
+        self.decel_max = vehicle.max_decel_mps2
+        lag = vehicle.actuator_lag_s
+        self.alpha = 1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag)
+        self.step_s = step_s
+        self.max_speed_mps = max_speed_mps
+        self.accel_mps2 = 0.0
+
+    def apply(self, u: float, speed_mps: float) -> float:
+        """Hold command u for one step from ``speed_mps``; return the speed at the step's end [m/s]."""
+        target = u * self.accel_max if u >= 0.0 else u * self.decel_max
+        self.accel_mps2 += (target - self.accel_mps2) * self.alpha
+        v = speed_mps + self.accel_mps2 * self.step_s
+        if v < 0.0:  # brakes stop the car, they never reverse it
+            return 0.0
+        return self.max_speed_mps if v > self.max_speed_mps else v
+
+
+@dataclass(frozen=True)
+class SwitchingParams:
+    """Gains of the paper's switching controller; defaults from the authors' public code."""
+
+    cruise_kp: float = 0.4  # [1/s] (m/s^2 per m/s of speed error)
+    cruise_ki: float = 0.01  # [1/s^2]
+    cruise_kd: float = 0.1  # [-]
+    cruise_integral_clamp: float = 20.0  # [m] bound on the integrated speed error
+    cruise_output_limit_mps2: float = 3.0
+    acc_kp: float = 0.9304  # [1/s^2] (m/s^2 per m of gap error)
+    acc_kv: float = 2.1599  # [1/s] (m/s^2 per m/s of speed difference)
+    eps_x_m: float = 1.0  # hysteresis on the gap
+    eps_v_mps: float = 1.0  # hysteresis on the speed
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not value == value:
+                raise ConfigError(f"controller.{f.name}", value, "a number")
+            if value < 0:
+                raise ConfigError(f"controller.{f.name}", value, "a number >= 0")
+        if self.eps_x_m <= 0 or self.eps_v_mps <= 0:
+            raise ConfigError("controller.eps_x_m/eps_v_mps", (self.eps_x_m, self.eps_v_mps), "numbers > 0")
+
+
+class CruiseControl:
+    """Discrete PID on speed with a clamped integral and a clamped output [m/s^2]."""
+
+    __slots__ = ("kp", "ki", "kd", "clamp", "limit", "step_s", "target_mps", "integral", "prev_error")
+
+    def __init__(self, params: SwitchingParams, target_speed_mps: float, step_s: float):
+        self.kp, self.ki, self.kd = params.cruise_kp, params.cruise_ki, params.cruise_kd
+        self.clamp = params.cruise_integral_clamp
+        self.limit = params.cruise_output_limit_mps2
+        self.step_s = step_s
+        self.target_mps = target_speed_mps
+        self.integral = 0.0
+        self.prev_error: float | None = None  # None: no derivative kick on (re)engagement
+
+    def disengage(self) -> None:
+        self.prev_error = None
+
+    def acceleration(self, speed_mps: float) -> float:
+        e = self.target_mps - speed_mps
+        i = self.integral + e * self.step_s
+        self.integral = i = self.clamp if i > self.clamp else (-self.clamp if i < -self.clamp else i)
+        d = 0.0 if self.prev_error is None else (e - self.prev_error) / self.step_s
+        self.prev_error = e
+        a = self.kp * e + self.ki * i + self.kd * d
+        return self.limit if a > self.limit else (-self.limit if a < -self.limit else a)
+
+
+class FollowerController(Protocol):
+    """What the co-simulation needs of a follower's controller.
+
+    Constructed as ``cls(params, setpoint_m=..., target_speed_mps=..., vehicle=..., step_s=...)`` where
+    ``params`` is an instance of ``cls.Params`` (a dataclass built from the config's controller table).
+    ``mode`` (optional) is recorded in the trace each step.
+    """
+
+    Params: type
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float: ...
+
+
+class SwitchingController:
+    """The paper's switching policy (Eq. 1): cruise control (PID) or ACC, with hysteresis.
+
+    CC when gap >= d + eps_x or v >= v_d + eps_v; ACC when gap <= d and v <= v_d; otherwise the mode
+    stays. ACC: a = Kp (gap - d) + Kv (v_lead - v).
+    """
+
+    Params = SwitchingParams
+
+    def __init__(
+        self,
+        params: SwitchingParams,
+        *,
+        setpoint_m: float,
+        target_speed_mps: float,
+        vehicle: VehicleParams,
+        step_s: float,
+    ):
+        self.params = params
+        self.vehicle = vehicle
+        self.setpoint_m = setpoint_m
+        self.target_speed_mps = target_speed_mps
+        self.cruise = CruiseControl(params, target_speed_mps, step_s)
+        self.mode = MODE_CC
+        self._mode_known = False
+        self._cc_gap = setpoint_m + params.eps_x_m
+        self._cc_speed = target_speed_mps + params.eps_v_mps
+        self._acc_kp, self._acc_kv = params.acc_kp, params.acc_kv
+        self._accel_max, self._decel_max = vehicle.max_accel_mps2, vehicle.max_decel_mps2
+
+    def select_mode(self, gap_m: float, speed_mps: float) -> float:
+        if gap_m >= self._cc_gap or speed_mps >= self._cc_speed:
+            mode = MODE_CC
+        elif gap_m <= self.setpoint_m and speed_mps <= self.target_speed_mps:
+            mode = MODE_ACC
+        elif self._mode_known:
+            mode = self.mode
+        else:
+            mode = MODE_CC  # inside the hysteresis band at start: cruise
+        if mode != self.mode and mode == MODE_ACC:
+            self.cruise.disengage()
+        self.mode = mode
+        self._mode_known = True
+        return mode
+
+    def desired_acceleration(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        """Eq. 1: the acceleration the active law asks for [m/s^2]."""
+        if self.select_mode(gap_m, speed_mps) == MODE_CC:
+            return self.cruise.acceleration(speed_mps)
+        return self._acc_kp * (gap_m - self.setpoint_m) + self._acc_kv * (lead_speed_mps - speed_mps)
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        # acceleration_to_command inlined: this runs for every follower at every step
+        a = self.desired_acceleration(gap_m, speed_mps, lead_speed_mps)
+        u = a / self._accel_max if a >= 0.0 else a / self._decel_max
+        return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+
+
+# --- registry of follower controllers ------------------------------------------------------------
+
+_REGISTRY: dict[str, type] = {}
+
+
+def register_controller(name: str, cls: type) -> None:
+    """Make a controller class available under a short name; names are never silently replaced."""
+    if name in _REGISTRY and _REGISTRY[name] is not cls:
+        raise ValueError(f"a follower controller is already registered as {name!r}")
+    _REGISTRY[name] = cls
+
+
+register_controller("switching", SwitchingController)
+
+
+def registered_controllers() -> tuple[str, ...]:
+    return tuple(sorted(_REGISTRY))
+
+
+def resolve_controller(name: str) -> type:
+    """A registered name, or "package.module:ClassName" for a user's own controller class."""
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    allowed = f"one of {', '.join(registered_controllers())}, or 'package.module:ClassName'"
+    if ":" not in name:
+        raise ConfigError("controller.class", name, allowed)
+    module_name, _, attr = name.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise ConfigError("controller.class", name, f"{allowed} (import failed: {exc})") from None
+    if not isinstance(getattr(cls, "Params", None), type) or not callable(getattr(cls, "command", None)):
+        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
+    return cls
+
+
+def build_params(cls: type, values: Mapping[str, Any]) -> Any:
+    """The controller's Params from a config table, refusing keys the class does not know."""
+    known = {f.name for f in dataclasses.fields(cls.Params)}
+    for key in values:
+        if key not in known:
+            raise ConfigError(f"controller.{key}", values[key], f"a key of {', '.join(sorted(known))}")
+    try:
+        return cls.Params(**values)
+    except TypeError as exc:
+        raise ConfigError("controller", dict(values), str(exc)) from None
+

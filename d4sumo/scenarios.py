@@ -1,0 +1,163 @@
+"""Road network variants: plain SUMO node/edge XML in ``sumo_scenarios/<name>/``, built with netconvert.
+
+A variant is a folder holding one ``*.nod.xml`` and one ``*.edg.xml`` that describe a straight one-way
+road (one edge, or a chain of edges). The ``.net.xml`` is built on first use and cached under the
+user's cache folder, keyed by a hash of the inputs, so editing a variant rebuilds it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ConfigError, SumoError
+
+log = logging.getLogger(__name__)
+
+#: The variants shipped with d4sumo (beside the package in a source checkout).
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "sumo_scenarios"
+
+
+@dataclass(frozen=True)
+class Road:
+    """A built network variant: what an episode needs to know about the road."""
+
+    name: str
+    net_file: Path
+    route_edges: tuple[str, ...]  # the straight chain of edges the platoon drives
+    length_m: float
+    speed_limit_mps: float  # the lowest limit along the chain
+    lanes: int
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "d4sumo" / "nets"
+
+
+def sumo_binary(name: str, explicit: str | None = None) -> str:
+    """Path of a SUMO program (netconvert, sumo-gui): the given path, the eclipse-sumo package's, or PATH's."""
+    if explicit:
+        if not (Path(explicit).is_file() and os.access(explicit, os.X_OK)):
+            raise SumoError(f"{name}: {explicit!r} is not an executable file")
+        return explicit
+    try:
+        import sumo  # the eclipse-sumo wheel ships SUMO's binaries
+
+        candidate = Path(sumo.SUMO_HOME) / "bin" / name
+        if candidate.is_file():
+            return str(candidate)
+    except ImportError:
+        pass
+    found = shutil.which(name)
+    if not found:
+        raise SumoError(f"{name} not found: install the eclipse-sumo package (pip install eclipse-sumo) or put {name} on PATH")
+    return found
+
+
+def list_scenarios(root: Path | None = None) -> list[str]:
+    root = root or SCENARIOS_DIR
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if p.is_dir() and _inputs(p, strict=False))
+
+
+def scenario_folder(name: str, root: Path | None = None) -> Path:
+    """The folder of a named variant, or of a path given directly."""
+    root = root or SCENARIOS_DIR
+    candidates = [root / name] if "/" not in name and os.sep not in name else []
+    candidates.append(Path(name))
+    for folder in candidates:
+        if folder.is_dir() and _inputs(folder, strict=False):
+            return folder.resolve()
+    names = list_scenarios(root)
+    raise ConfigError("scenario.network", name, f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, or a folder with *.nod.xml and *.edg.xml")
+
+
+def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | None:
+    nodes = sorted(folder.glob("*.nod.xml"))
+    edges = sorted(folder.glob("*.edg.xml"))
+    if len(nodes) == 1 and len(edges) == 1:
+        return nodes[0], edges[0]
+    if strict:
+        raise ConfigError("scenario.network", str(folder), "a folder with exactly one *.nod.xml and one *.edg.xml")
+    return None
+
+
+def build_road(name: str, *, root: Path | None = None, cache_dir: Path | None = None, netconvert: str | None = None) -> Road:
+    """Build (or take from the cache) the network of a variant and describe its road."""
+    folder = scenario_folder(name, root)
+    nodes, edges = _inputs(folder)
+    digest = hashlib.sha256(nodes.read_bytes() + b"\0" + edges.read_bytes()).hexdigest()[:16]
+    cache = Path(cache_dir) if cache_dir else default_cache_dir()
+    net_file = cache / f"{folder.name}-{digest}.net.xml"
+    info_file = net_file.with_suffix(".json")
+    if not (net_file.is_file() and info_file.is_file()):
+        cache.mkdir(parents=True, exist_ok=True)
+        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file)
+        _write_atomic(info_file, json.dumps(_describe(net_file)))
+    info = json.loads(info_file.read_text())
+    return Road(
+        name=folder.name,
+        net_file=net_file,
+        route_edges=tuple(info["route_edges"]),
+        length_m=info["length_m"],
+        speed_limit_mps=info["speed_limit_mps"],
+        lanes=info["lanes"],
+    )
+
+
+def _netconvert(binary: str, nodes: Path, edges: Path, out: Path) -> None:
+    # Build into a temporary file and rename, so parallel workers never read a half-written net.
+    fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".net.xml")
+    os.close(fd)
+    cmd = [binary, "--node-files", str(nodes), "--edge-files", str(edges), "--output-file", tmp, "--no-turnarounds", "true"]
+    log.info("building %s with netconvert", out.name)
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    except OSError as exc:
+        os.unlink(tmp)
+        raise SumoError(f"netconvert could not run ({binary}): {exc}") from None
+    if result.returncode != 0:
+        os.unlink(tmp)
+        raise SumoError(f"netconvert failed on {nodes.parent}: {(result.stderr or result.stdout).strip()[-500:]}")
+    os.replace(tmp, out)
+
+
+def _describe(net_file: Path) -> dict:
+    """The straight chain of edges from the road's start, its length and its lowest speed limit."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_file))
+    edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
+    starts = [e for e in edges if not e.getIncoming()]
+    if len(starts) != 1:
+        raise ConfigError("scenario.network", net_file.name, "a network with exactly one road start (a straight one-way chain of edges)")
+    chain = [starts[0]]
+    while True:
+        nxt = list(chain[-1].getOutgoing())
+        if not nxt:
+            break
+        if len(nxt) > 1 or nxt[0] in chain:
+            raise ConfigError("scenario.network", net_file.name, "a straight chain of edges without branches")
+        chain.append(nxt[0])
+    return {
+        "route_edges": [e.getID() for e in chain],
+        "length_m": sum(e.getLength() for e in chain),
+        "speed_limit_mps": min(e.getSpeed() for e in chain),
+        "lanes": min(e.getLaneNumber() for e in chain),
+    }
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)

@@ -1,0 +1,92 @@
+"""What an episode produces: a Trace (times and named signals) and the collisions SUMO reported.
+
+Signals (N followers, cars v0 = attacker .. vN, front to back):
+    pos_vI    front-bumper position along the road [m]
+    speed_vI  speed [m/s]
+    accel_vI  realised acceleration over the last step [m/s^2]
+    cmd_vI    throttle/brake command applied from this sample on [-1, 1]
+    gap_I     bumper gap between vI and vI+1, I = 0..N-1 (gap_0: attacker to v1) [m]
+    mode_vI   follower controller mode (0 cruise, 1 ACC), I >= 1, when the controller has one
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+OUTCOMES = ("success", "attacker_crash", "no_crash")
+
+
+@dataclass(frozen=True)
+class Trace:
+    times_s: np.ndarray
+    signals: Mapping[str, np.ndarray]
+    followers: int
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.signals[name]
+
+    def __len__(self) -> int:
+        return int(self.times_s.size)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.signals)
+
+    def gaps(self) -> np.ndarray:
+        """Bumper gaps, shape (samples, N): column i is gap_i."""
+        return np.column_stack([self.signals[f"gap_{i}"] for i in range(self.followers)])
+
+
+@dataclass(frozen=True)
+class Collision:
+    """A rear-end collision: ``follower`` ran into ``leader`` (the car just ahead of it)."""
+
+    leader: str
+    follower: str
+    time_s: float
+    position_m: float  # along the road, where SUMO saw the overlap
+    speed_diff_kmh: float  # follower speed minus leader speed at the collision
+
+    @property
+    def pair(self) -> str:
+        return f"{self.leader}-{self.follower}"
+
+    @property
+    def involves_attacker(self) -> bool:
+        return "v0" in (self.leader, self.follower)
+
+    def to_dict(self) -> dict:
+        return {
+            "pair": self.pair,
+            "time_s": round(self.time_s, 6),
+            "position_m": round(self.position_m, 4),
+            "speed_diff_kmh": round(self.speed_diff_kmh, 4),
+        }
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One simulated episode; it ends at the first collision (later data are not physical)."""
+
+    trace: Trace
+    collisions: tuple[Collision, ...] = field(default=())
+
+    @property
+    def first_collision(self) -> Collision | None:
+        return self.collisions[0] if self.collisions else None
+
+    @property
+    def outcome(self) -> str:
+        """success: followers collided and the attacker is untouched; attacker_crash; no_crash."""
+        if not self.collisions:
+            return "no_crash"
+        if any(c.involves_attacker for c in self.collisions):
+            return "attacker_crash"
+        return "success"
+
+    def min_gaps_m(self) -> dict[str, float]:
+        gaps = self.trace.gaps()
+        return {f"v{i}-v{i + 1}": float(gaps[:, i].min()) for i in range(self.trace.followers)}

@@ -1,0 +1,25 @@
+"""Shared fixtures. Tests that run SUMO carry the `sumo` marker and use it for real."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d4sumo.attacks import make_attack
+from d4sumo.config import EpisodeConfig
+
+#: Knots found by search that make v3 hit v2 from rest at the default setpoint (attacker untouched).
+SUCCESS_KNOTS = [0.46, -0.65, 0.73, 0.08, -0.4, -0.15, -0.94, -0.75, 0.34]
+#: Knots that make v1 hit the attacker.
+ATTACKER_CRASH_KNOTS = [-1, 1, 1, -1, 1, -1, -1, 1, -1]
+
+
+def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
+    return make_attack("knots").signal(values, np.arange(config.steps) * config.step_s)
+
+
+@pytest.fixture(scope="session")
+def road():
+    from d4sumo.scenarios import build_road
+
+    return build_road("highway_4lane")

@@ -1,0 +1,89 @@
+"""The command line: real runs, and one clear line with exit code 2 for every bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from d4sumo.cli import main
+
+
+def run(*argv):
+    return subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.sumo
+def test_simulate_json_summary_with_fcd(tmp_path):
+    fcd = tmp_path / "out.xml"
+    result = run("simulate", "--setpoint", "7", "--speed", "25", "--start", "rest",
+                 "--knots=0.46,-0.65,0.73,0.08,-0.4,-0.15,-0.94,-0.75,0.34", "--fcd", str(fcd), "--json")
+    assert result.returncode == 0, result.stderr
+    s = json.loads(result.stdout)
+    assert s["outcome"] == "success"
+    assert s["first_collision"]["pair"] == "v2-v3"
+    assert s["robustness"] > 0
+    assert set(s["min_gaps_m"]) == {"v0-v1", "v1-v2", "v2-v3"} and s["min_gaps_m"]["v2-v3"] < 0
+    assert s["config"]["controller"]["acc_kp"] == 0.9304
+    assert fcd.is_file() and "acceleration=" in fcd.read_text()[:5000]
+
+
+@pytest.mark.sumo
+def test_simulate_reads_a_toml_config_and_flags_override_it(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[scenario]\nsetpoint_m = 9\nstart = "steady"\n[attack]\nfamily = "constant"\nparams = [0.2]\n')
+    assert main(["simulate", "--config", str(cfg), "--setpoint", "6", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["config"]["scenario"]["setpoint_m"] == 6 and s["config"]["scenario"]["start"] == "steady"
+    assert s["attack"]["family"] == "constant" and s["attack"]["values"] == [0.2]
+
+
+@pytest.mark.sumo
+def test_scenarios_lists_the_variants(capsys):
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    assert "highway_4lane" in out and "highway_1lane" in out
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--network", "autobahn"], "--network (scenario.network): got 'autobahn'"),
+        (["--setpoint", "-1"], "--setpoint (scenario.setpoint_m): got -1.0; allowed: a number in (0, 200]"),
+        (["--followers", "0"], "--followers (scenario.followers): got 0"),
+        (["--knots=-1,1.5"], "--knots: m1: got 1.5; allowed: a number in [-1, 1]"),
+        (["--knots=-1,x"], "--knots: got '-1,x'"),
+        (["--attack", "sine"], "--params"),
+        (["--set", "vehicle.wheels=4"], "vehicle.wheels"),
+        (["--knots=1", "--constant", "1"], "one attack"),
+    ],
+)
+def test_bad_input_is_one_clear_line_and_exit_2(argv, expected, capsys):
+    assert main(["simulate", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("d4sumo: error: ")
+    assert expected in err
+
+
+def test_malformed_toml_is_one_clear_line(tmp_path, capsys):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[scenario\n")
+    assert main(["simulate", "--config", str(cfg)]) == 2
+    assert "valid TOML" in capsys.readouterr().err
+
+
+def test_a_missing_sumo_binary_is_one_clear_line(tmp_path, monkeypatch, capsys):
+    import d4sumo.scenarios as scenarios
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # nothing cached: netconvert must run
+    monkeypatch.setattr(scenarios, "sumo_binary", lambda name, explicit=None: str(tmp_path / "no" / name))
+    assert main(["simulate"]) == 2
+    err = capsys.readouterr().err
+    assert "netconvert" in err and "Traceback" not in err
+
+
+def test_an_unknown_flag_is_exit_2():
+    result = run("simulate", "--setpoitn", "3")
+    assert result.returncode == 2 and "unrecognized arguments" in result.stderr

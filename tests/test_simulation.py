@@ -1,0 +1,118 @@
+"""The SUMO co-simulation, for real through libsumo."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
+from sumolib.xml import parse_fast_nested
+
+from d4sumo.config import ControllerConfig, EpisodeConfig
+from d4sumo.control import SwitchingController, register_controller
+from d4sumo.errors import ConfigError
+from d4sumo.platoon import integrate
+from d4sumo.simulation import simulate
+
+pytestmark = pytest.mark.sumo
+
+CONFIG = EpisodeConfig()
+
+
+@pytest.fixture(scope="module")
+def success(road):
+    return simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road)
+
+
+def test_a_rear_end_collision_is_detected_at_the_first_real_overlap_with_the_right_pair(success):
+    assert success.outcome == "success"
+    first = success.first_collision
+    gaps = success.trace.gaps()
+    overlapping = np.argwhere(gaps < 0.0)
+    k, pair = overlapping[0]
+    assert k == len(success.trace) - 1  # the episode ends at the first overlap
+    assert np.all(gaps[:-1] >= 0.0)
+    assert first.pair == f"v{pair}-v{pair + 1}" == "v2-v3"
+    assert first.time_s == pytest.approx(success.trace.times_s[-1])
+    speeds = success.trace
+    assert first.speed_diff_kmh == pytest.approx((speeds["speed_v3"][-1] - speeds["speed_v2"][-1]) * 3.6)
+    assert first.speed_diff_kmh > 0
+
+
+def test_an_attacker_crash_is_classified_as_such(road):
+    episode = simulate(CONFIG, knots_signal(ATTACKER_CRASH_KNOTS, CONFIG), road=road)
+    assert episode.outcome == "attacker_crash"
+    assert episode.first_collision.pair == "v0-v1"
+
+
+def test_sumo_moves_the_cars_exactly_as_commanded(road, success):
+    """SUMO's ballistic update and Python's reference integration agree to rounding."""
+    reference = integrate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road.speed_limit_mps)
+    assert len(reference.trace) == len(success.trace)
+    for name in success.trace.names:
+        assert np.allclose(success.trace[name], reference.trace[name], atol=1e-6), name
+
+
+def test_fcd_gaps_agree_with_the_trace_to_one_centimetre(road, tmp_path):
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road, fcd_path=fcd)
+    pos = {}
+    for step, vehicle in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "speed", "pos"]):
+        pos[(round(float(step.time), 6), vehicle.id)] = float(vehicle.pos)
+    times = episode.trace.times_s
+    assert len({t for t, _ in pos}) == len(times)
+    for i in range(CONFIG.followers):
+        fcd_gap = np.array([pos[(round(t, 6), f"v{i}")] - 4.5 - pos[(round(t, 6), f"v{i + 1}")] for t in times])
+        assert np.max(np.abs(fcd_gap - episode.trace[f"gap_{i}"])) < 0.01
+
+
+def test_the_same_inputs_give_the_same_trace_twice(road, success):
+    again = simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road)
+    assert again.collisions == success.collisions
+    for name in success.trace.names:
+        assert np.array_equal(again.trace[name], success.trace[name])
+
+
+def test_full_brake_stops_every_car_without_reversing(road):
+    cfg = EpisodeConfig(start="steady", setpoint_m=60.0)  # far apart: everyone stops in time
+    episode = simulate(cfg, np.full(cfg.steps, -1.0), road=road)
+    assert episode.outcome == "no_crash"
+    for i in range(cfg.followers + 1):
+        speed = episode.trace[f"speed_v{i}"]
+        assert speed.min() == 0.0 and speed[-1] == 0.0
+
+
+def test_full_throttle_keeps_the_attacker_at_the_road_limit(road):
+    cfg = EpisodeConfig(start="steady", speed_mps=38.0)
+    episode = simulate(cfg, np.full(cfg.steps, 1.0), road=road)
+    assert episode.trace["speed_v0"].max() == road.speed_limit_mps
+
+
+def test_no_attack_from_rest_brings_every_car_to_the_target_speed(road):
+    episode = simulate(CONFIG, np.full(CONFIG.steps, np.nan), road=road)
+    assert episode.outcome == "no_crash" and len(episode.trace) == CONFIG.steps + 1
+    for i in range(CONFIG.followers + 1):
+        assert abs(episode.trace[f"speed_v{i}"][-1] - 25.0) < 0.5
+    assert set(np.unique(episode.trace["mode_v1"])) <= {0.0, 1.0}
+
+
+class Cautious(SwitchingController):
+    """A follower that keeps twice the setpoint: a user's own controller, plugged in by name."""
+
+    def __init__(self, params, *, setpoint_m, **kwargs):
+        super().__init__(params, setpoint_m=2 * setpoint_m, **kwargs)
+
+
+def test_a_users_controller_class_runs_in_sumo(road):
+    register_controller("test-cautious", Cautious)
+    cfg = EpisodeConfig(controller=ControllerConfig(cls="test-cautious"))
+    default = simulate(CONFIG, np.full(CONFIG.steps, np.nan), road=road)
+    cautious = simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+    assert cautious.trace["gap_2"][-1] > default.trace["gap_2"][-1] + 3.0
+
+
+def test_a_road_too_short_or_too_slow_is_refused(road):
+    with pytest.raises(ConfigError, match="speed limit"):
+        simulate(EpisodeConfig(speed_mps=45.0), np.full(1200, np.nan), road=road)
+    with pytest.raises(ConfigError, match="fits on"):
+        cfg = EpisodeConfig(duration_s=200.0)
+        simulate(cfg, np.full(cfg.steps, np.nan), road=road)
