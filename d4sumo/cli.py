@@ -19,6 +19,7 @@ from . import __version__
 from .attacks import FAMILIES, make_attack
 from .config import START_MODES, EpisodeConfig, load_toml
 from .errors import ConfigError, D4sumoError, check_number
+from .optimizers import OPTIMIZERS
 
 EXIT_USAGE = 2
 
@@ -34,6 +35,10 @@ EPISODE_FLAGS = {
     "length": "vehicle.length_m",
     "controller": "controller.class",
 }
+
+# config fields -> flags of falsify
+SEARCH_FLAGS = {"optimizer": "--optimizer", "samples": "--samples", "seed": "--seed", "attack": "--attack",
+                "spec.formula": "--formula", "spec.d_safe_m": "--d-safe", "attack.delta_s": "--delta", "attack.horizon_s": "--horizon"}
 
 
 def _add_episode_options(p: argparse.ArgumentParser) -> None:
@@ -167,7 +172,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     road = build_road(config.network)
     episode = simulate(config, attack_signal(family, params, config), road=road, fcd_path=args.fcd, gui=args.gui)
     robustness = psi_robustness(episode.trace, d_safe) if config.followers >= 2 else None
-    summary = {
+    _report(episode_summary(config, family, params, episode, robustness, d_safe, args.fcd), road.name, args.json)
+    return 0
+
+
+def episode_summary(config, family, params, episode, robustness, d_safe, fcd) -> dict:
+    return {
         "d4sumo": __version__,
         "config": config.to_dict(),
         "attack": None if family is None else {**family.describe(), "values": [float(v) for v in params]},
@@ -178,13 +188,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "robustness": robustness,
         "d_safe_m": d_safe,
         "simulated_s": float(episode.trace.times_s[-1]),
-        "fcd": str(args.fcd) if args.fcd else None,
+        "fcd": str(fcd) if fcd else None,
     }
-    if args.json:
+
+
+def _report(summary: dict, road_name: str, as_json: bool) -> None:
+    if as_json:
         print(json.dumps(summary, indent=2))
     else:
-        _print_summary(summary, road.name)
-    return 0
+        _print_summary(summary, road_name)
 
 
 def _print_summary(s: dict, road_name: str) -> None:
@@ -202,9 +214,161 @@ def _print_summary(s: dict, road_name: str) -> None:
         )
     print("min gaps: " + ", ".join(f"{k} {v:.2f} m" for k, v in s["min_gaps_m"].items()))
     if s["robustness"] is not None:
-        print(f"robustness of psi (d_safe {s['d_safe_m']:g} m): {s['robustness']:.4f}")
+        what = "the campaign's formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
+        print(f"robustness of {what}: {s['robustness']:.4f}")
     if s["fcd"]:
         print(f"FCD written to {s['fcd']}")
+
+
+def _search_tables(doc: dict) -> tuple[dict, dict]:
+    search, spec = dict(doc.get("search", {})), dict(doc.get("spec", {}))
+    for table, allowed, name in ((search, ("optimizer", "samples", "seed"), "search"), (spec, ("d_safe_m", "formula"), "spec")):
+        for key in table:
+            if key not in allowed:
+                raise ConfigError(f"{name}.{key}", table[key], f"a key of [{name}]: {', '.join(allowed)}")
+    return search, spec
+
+
+def _pick(flag, table: dict, key: str, default):
+    return flag if flag is not None else table.get(key, default)
+
+
+def campaign_from(args: argparse.Namespace, doc: dict):
+    from .campaign import Campaign
+
+    config = episode_config(args, doc)
+    search, spec = _search_tables(doc)
+    attack = dict(doc.get("attack", {}))
+    for key in ("params",):
+        if key in attack:
+            raise ConfigError(f"attack.{key}", attack[key], "no fixed parameters in a campaign: the optimiser chooses them")
+    return Campaign(
+        config=config,
+        attack=_pick(args.attack, attack, "family", "knots"),
+        optimizer=_pick(args.optimizer, search, "optimizer", "bo"),
+        samples=_pick(args.samples, search, "samples", 100),
+        seed=_pick(args.seed, search, "seed", 0),
+        d_safe_m=_pick(args.d_safe, spec, "d_safe_m", 0.0),
+        formula=_pick(args.formula, spec, "formula", None),
+        delta_s=_pick(args.delta, attack, "delta_s", 6.0),
+        horizon_s=_pick(args.horizon, attack, "horizon_s", 48.0),
+    )
+
+
+def cmd_falsify(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .campaign import Evaluator, run_campaign
+    from .store import Store
+
+    doc = load_toml(args.config) if args.config else {}
+    campaign = campaign_from(args, doc)
+    evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
+    best = [None]
+    with Store(args.db) as store, tqdm(total=campaign.samples, desc=f"{campaign.attack}/{campaign.optimizer}", unit="sample",
+                                      disable=args.quiet, file=sys.stderr, dynamic_ncols=True) as bar:
+
+        def progress(r) -> None:
+            counts[r.outcome] += 1
+            if r.robustness is not None and (best[0] is None or r.robustness > best[0]):
+                best[0] = r.robustness
+            bar.update(1)
+            bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
+
+        summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress)
+    top = summary.best
+    result = {
+        "db": str(args.db),
+        "campaign_id": summary.campaign_id,
+        "attack": campaign.attack,
+        "optimizer": campaign.optimizer,
+        "seed": campaign.seed,
+        "samples": len(summary.samples),
+        "outcomes": counts,
+        "best": None if top is None else {
+            "sample_id": top.id, "index": top.index, "robustness": top.robustness, "outcome": top.outcome,
+            "params": list(top.params), "collision": top.collision,
+        },
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"campaign {summary.campaign_id} ({campaign.attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
+    print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if top is not None:
+        c = top.collision
+        hit = f", {c['pair']} at {c['time_s']:.2f} s, {c['position_m']:.1f} m, {c['speed_diff_kmh']:.1f} km/h" if c else ""
+        print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}{hit}")
+        print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
+        print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd best_fcd.xml")
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from .campaign import Campaign, Evaluator
+    from .simulation import simulate
+    from .store import Store
+
+    with Store(args.db, create=False) as store:
+        row = store.sample(args.sample)
+        definition = store.campaign(row.campaign_id).definition
+    if row.outcome == "error":
+        print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
+    campaign = Campaign.from_definition(definition)
+    evaluator = Evaluator(campaign)
+    episode = simulate(campaign.config, evaluator.signal(row.params), road=evaluator.road, fcd_path=args.fcd, gui=args.gui)
+    rho = evaluator.spec.robustness(episode.trace)
+    summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, args.fcd)
+    summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
+                   stored_robustness=row.robustness, stored_outcome=row.outcome,
+                   reproduced=(row.robustness == rho and row.outcome == episode.outcome))
+    _report(summary, evaluator.road.name, args.json)
+    if not args.json:
+        print("reproduces the stored sample exactly" if summary["reproduced"] else
+              f"differs from the stored sample (stored robustness {row.robustness}, outcome {row.outcome})")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    import csv
+
+    from .attacks import make_attack
+    from .store import Store
+
+    with Store(args.db, create=False) as store:
+        campaigns = {c.id: c for c in store.campaigns()}
+        if args.campaign is not None and args.campaign not in campaigns:
+            raise ConfigError("--campaign", args.campaign, f"a campaign id of {args.db}: {', '.join(map(str, campaigns)) or 'none'}")
+        names: dict[int, tuple[str, ...]] = {}
+        columns: list[str] = []
+        for cid, c in campaigns.items():
+            a = c.definition["attack"]
+            names[cid] = make_attack(a["family"], delta_s=a.get("delta_s", 6.0), horizon_s=a.get("horizon_s", 48.0)).names
+            columns += [n for n in names[cid] if n not in columns]
+        header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "attack",
+                  "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
+                  "error"] + columns
+        out = open(args.out, "w", newline="") if args.out else sys.stdout
+        try:
+            writer = csv.writer(out)
+            writer.writerow(header)
+            rows = 0
+            for s in store.iter_samples(args.campaign):
+                d = campaigns[s.campaign_id].definition
+                sc = d["config"]["scenario"]
+                params = dict(zip(names[s.campaign_id], s.params))
+                writer.writerow([s.id, s.campaign_id, s.index, sc["network"], sc["followers"], sc["setpoint_m"], sc["speed_mps"],
+                                 sc["start"], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
+                                 s.time_s, s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
+                                + [params.get(n, "") for n in columns])
+                rows += 1
+        finally:
+            if args.out:
+                out.close()
+    if args.out:
+        print(f"{rows} samples written to {args.out}", file=sys.stderr)
+    return 0
 
 
 # --- entry point ---------------------------------------------------------------------------------
@@ -227,6 +391,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
     p.add_argument("--gui", action="store_true", help="watch the episode in sumo-gui (needs a display)")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("falsify", help="run a campaign: search for attacks that make the followers crash")
+    _add_episode_options(p)
+    g = p.add_argument_group("search")
+    g.add_argument("--attack", choices=[f for f in FAMILIES if f != "constant"], help="attack family [knots]")
+    g.add_argument("--delta", type=float, help="knot spacing Delta in s [6]")
+    g.add_argument("--horizon", type=float, help="last knot time in s [48]")
+    g.add_argument("--optimizer", choices=OPTIMIZERS, help="bo, ce, random or halton [bo]")
+    g.add_argument("--samples", type=int, help="budget: episodes to simulate [100]")
+    g.add_argument("--seed", type=int, help="seed: the same seed repeats the campaign exactly [0]")
+    g.add_argument("--formula", help="an STL formula (rtamt syntax) over the trace's signals instead of the paper's psi")
+    g.add_argument("--d-safe", type=float, dest="d_safe", help="d_safe of the paper's psi in m [0]")
+    p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database (created if new) [results.sqlite]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print a machine-readable summary")
+    p.set_defaults(func=cmd_falsify)
+
+    p = sub.add_parser("replay", help="re-simulate one stored sample exactly (FCD, sumo-gui)")
+    p.add_argument("db", type=Path, help="results database")
+    p.add_argument("sample", type=int, help="sample id (as printed by falsify and export)")
+    p.add_argument("--fcd", type=Path, help="write SUMO's FCD output to this file")
+    p.add_argument("--gui", action="store_true", help="watch it in sumo-gui (needs a display)")
+    p.add_argument("--json", action="store_true", help="print a machine-readable summary")
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("export", help="write stored samples to CSV")
+    p.add_argument("db", type=Path, help="results database")
+    p.add_argument("--out", type=Path, help="CSV file [standard output]")
+    p.add_argument("--campaign", type=int, help="only this campaign id")
+    p.set_defaults(func=cmd_export)
     return parser
 
 
@@ -237,7 +431,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.func(args)
     except ConfigError as exc:
-        flag = {key: f"--{dest}" for dest, key in EPISODE_FLAGS.items()}.get(exc.field)
+        flag = {**{key: f"--{dest}" for dest, key in EPISODE_FLAGS.items()}, **SEARCH_FLAGS}.get(exc.field)
         field = f"{flag} ({exc.field})" if flag else exc.field
         print(f"d4sumo: error: {field}: got {exc.given!r}; allowed: {exc.allowed}", file=sys.stderr)
         return EXIT_USAGE

@@ -87,3 +87,50 @@ def test_a_missing_sumo_binary_is_one_clear_line(tmp_path, monkeypatch, capsys):
 def test_an_unknown_flag_is_exit_2():
     result = run("simulate", "--setpoitn", "3")
     assert result.returncode == 2 and "unrecognized arguments" in result.stderr
+
+
+@pytest.mark.sumo
+def test_falsify_then_export_and_replay_a_stored_sample(tmp_path, capsys):
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--optimizer", "random", "--samples", "6", "--seed", "2", "--db", str(db), "--quiet", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["samples"] == 6 and sum(s["outcomes"].values()) == 6
+    best = s["best"]["sample_id"]
+
+    csv_path = tmp_path / "r.csv"
+    assert main(["export", str(db), "--out", str(csv_path)]) == 0
+    lines = csv_path.read_text().splitlines()
+    assert len(lines) == 7 and lines[0].startswith("sample_id,campaign_id,index,network") and lines[0].endswith(",m8")
+
+    fcd = tmp_path / "best.xml"
+    assert main(["replay", str(db), str(best), "--fcd", str(fcd), "--json"]) == 0
+    replay = json.loads(capsys.readouterr().out)
+    assert replay["reproduced"] is True and replay["robustness"] == s["best"]["robustness"]
+    assert fcd.is_file()
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--samples", "0"], "--samples (samples): got 0"),
+        (["--formula", "eventually(foo < 1)"], "unknown: foo"),
+        (["--formula", "always(gap_1 >"], "rtamt can parse"),
+        (["--attack", "knots", "--delta", "5"], "--horizon (attack.horizon_s)"),
+        (["--seed", "-2"], "--seed (seed)"),
+    ],
+)
+def test_bad_falsify_input_is_one_line_and_writes_nothing(argv, expected, tmp_path, capsys):
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--db", str(db), "--quiet", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and expected in err
+    assert not db.exists()
+
+
+def test_a_database_that_is_not_ours_is_refused(tmp_path, capsys):
+    db = tmp_path / "notes.sqlite"
+    db.write_text("not a database")
+    assert main(["falsify", "--db", str(db), "--quiet"]) == 2
+    assert "not a d4sumo results database" in capsys.readouterr().err
+    assert db.read_text() == "not a database"
+    assert main(["export", str(tmp_path / "missing.sqlite")]) == 2
