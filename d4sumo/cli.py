@@ -371,6 +371,35 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .sweep import Sweep, run_sweep
+
+    sweep = Sweep.load(args.sweep)
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers", args.workers, "a whole number >= 1")
+    bar = tqdm(total=sweep.samples, desc=f"sweep {sweep.name}", unit="sample", disable=args.quiet, file=sys.stderr,
+               dynamic_ncols=True)
+
+    def progress(done: int, total: int, successes: int) -> None:
+        bar.update(done - bar.n)
+        bar.set_postfix(success=successes, refresh=False)
+
+    try:
+        result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, progress=progress)
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"d4sumo: sweep interrupted; every finished sample is in {args.db}: run the same command to resume",
+              file=sys.stderr)
+        return 130
+    bar.close()
+    print(f"sweep {sweep.name}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
+          f"in {result.wall_s:.1f} s -> {args.db}")
+    print(f"  report: d4sumo report {args.db} --out report/")
+    return 0
+
+
 # --- entry point ---------------------------------------------------------------------------------
 
 
@@ -407,6 +436,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
     p.set_defaults(func=cmd_falsify)
+
+    p = sub.add_parser("sweep", help="run a grid of campaigns (local processes or a Dask cluster); resumable")
+    p.add_argument("sweep", type=Path, help="sweep file (TOML: [grid] of lists, [search] samples, fixed tables)")
+    p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database [results.sqlite]")
+    p.add_argument("--workers", type=int, help="local worker processes [number of cores]")
+    p.add_argument("--dask", metavar="ADDRESS", help="run on this Dask distributed scheduler (e.g. tcp://10.0.0.5:8786)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("replay", help="re-simulate one stored sample exactly (FCD, sumo-gui)")
     p.add_argument("db", type=Path, help="results database")
