@@ -387,7 +387,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         bar.set_postfix(success=successes, refresh=False)
 
     try:
-        result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, progress=progress)
+        result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
+                           progress=progress)
     except KeyboardInterrupt:
         bar.close()
         print(f"d4sumo: sweep interrupted; every finished sample is in {args.db}: run the same command to resume",
@@ -442,6 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database [results.sqlite]")
     p.add_argument("--workers", type=int, help="local worker processes [number of cores]")
     p.add_argument("--dask", metavar="ADDRESS", help="run on this Dask distributed scheduler (e.g. tcp://10.0.0.5:8786)")
+    p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 

@@ -195,6 +195,7 @@ def run_sweep(
     *,
     workers: int | None = None,
     dask_address: str | None = None,
+    dask_timeout_s: float = 30.0,
     progress: Callable[[int, int, int], None] | None = None,
     poll_s: float = 0.5,
 ) -> SweepResult:
@@ -222,7 +223,7 @@ def run_sweep(
         if todo:
             log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
             if dask_address:
-                _run_dask(todo, db_path, sweep.name, dask_address, report, poll_s)
+                _run_dask(todo, db_path, sweep.name, dask_address, dask_timeout_s, report, poll_s)
             else:
                 _run_local(todo, db_path, sweep.name, workers or os.cpu_count() or 1, report, poll_s)
         done, successes = report()
@@ -252,13 +253,13 @@ def _run_local(todo, db_path, name, workers, report, poll_s) -> None:
             raise
 
 
-def _run_dask(todo, db_path, name, address, report, poll_s) -> None:
+def _run_dask(todo, db_path, name, address, timeout_s, report, poll_s) -> None:
     try:
         from distributed import Client
     except ImportError:  # pragma: no cover - a core dependency
         raise D4sumoError("--dask needs the distributed package (pip install 'dask[distributed]')") from None
     try:
-        client = Client(address, timeout=30)
+        client = Client(address, timeout=timeout_s)
     except (OSError, TimeoutError) as exc:
         raise D4sumoError(f"--dask: no Dask scheduler answered at {address} ({exc})") from None
     with client:

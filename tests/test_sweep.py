@@ -1,0 +1,135 @@
+"""Sweeps: validation before running, parallel and Dask execution, kill -9 and resume."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+from d4sumo.cli import main
+from d4sumo.errors import ConfigError
+from d4sumo.store import Store, StoreError
+from d4sumo.sweep import Sweep, run_sweep
+
+TINY = """
+name = "tiny"
+[grid]
+setpoint_m = [5.0, 7.0]
+start = ["rest", "steady"]
+optimizer = ["random"]
+seed = [0]
+[search]
+samples = 6
+"""
+
+
+def write(tmp_path, text, name="sweep.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def outcomes(db):
+    with Store(db, create=False) as store:
+        by_key = {c.id: c.key for c in store.campaigns()}
+        return sorted((by_key[s.campaign_id], s.index, s.params, s.robustness, s.outcome) for s in store.samples())
+
+
+def test_a_sweep_is_the_product_of_its_grid(tmp_path):
+    sweep = Sweep.load(write(tmp_path, TINY))
+    assert sweep.name == "tiny" and len(sweep.campaigns) == 4 and sweep.samples == 24
+    assert {(c.config.setpoint_m, c.config.start) for c in sweep.campaigns} == {(5, "rest"), (5, "steady"), (7, "rest"), (7, "steady")}
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (TINY.replace("setpoint_m", "setpoint"), "grid.setpoint"),
+        (TINY.replace("[5.0, 7.0]", "[]"), "non-empty list"),
+        (TINY.replace("[5.0, 7.0]", "[5.0, -7.0]"), "scenario.setpoint_m"),
+        (TINY.replace('["random"]', '["anneal"]'), "optimizer"),
+        (TINY.replace("samples = 6", "samples = 0"), "samples"),
+        (TINY + "\n[scenario]\nspeed_mps = 45.0\n", "speed limit"),
+        ("name = 'x'\n", "[grid]"),
+        ("[grid\n", "valid TOML"),
+    ],
+)
+def test_a_bad_sweep_file_is_refused_before_anything_runs(tmp_path, text, message, capsys):
+    db = tmp_path / "r.sqlite"
+    assert main(["sweep", str(write(tmp_path, text)), "--db", str(db), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and err.count("\n") == 0
+    assert not db.exists()
+
+
+@pytest.mark.sumo
+def test_local_workers_run_every_campaign_once_and_match_a_single_worker(tmp_path):
+    sweep = Sweep.load(write(tmp_path, TINY))
+    one = run_sweep(sweep, tmp_path / "one.sqlite", workers=1)
+    two = run_sweep(sweep, tmp_path / "two.sqlite", workers=2)
+    assert one.samples == two.samples == 24
+    assert outcomes(tmp_path / "one.sqlite") == outcomes(tmp_path / "two.sqlite")
+    again = run_sweep(sweep, tmp_path / "two.sqlite", workers=2)  # complete: nothing to do, nothing added
+    assert again.samples == 24 and len(outcomes(tmp_path / "two.sqlite")) == 24
+
+
+@pytest.mark.sumo
+def test_a_database_of_another_sweep_is_refused_untouched(tmp_path):
+    db = tmp_path / "r.sqlite"
+    run_sweep(Sweep.load(write(tmp_path, TINY)), db, workers=1)
+    other = Sweep.load(write(tmp_path, TINY.replace("[5.0, 7.0]", "[6.0]"), "other.toml"))
+    before = outcomes(db)
+    with pytest.raises(StoreError, match="holds sweep 'tiny'"):
+        run_sweep(other, db, workers=1)
+    assert outcomes(db) == before
+
+
+@pytest.mark.sumo
+def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path):
+    text = TINY.replace("samples = 6", "samples = 40")
+    path = write(tmp_path, text)
+    db = tmp_path / "r.sqlite"
+    cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    stored = 0
+    while time.time() < deadline and stored < 30:
+        time.sleep(0.2)
+        if db.exists():
+            try:
+                stored = sqlite3.connect(db, timeout=5).execute("SELECT COUNT(*) FROM sample").fetchone()[0]
+            except sqlite3.OperationalError:
+                stored = 0
+    os.killpg(proc.pid, signal.SIGKILL)  # the whole sweep: parent and workers
+    proc.wait()
+    assert 30 <= stored < 160, "the sweep should have been killed midway"
+    assert subprocess.run(cmd, timeout=300).returncode == 0
+    rows = outcomes(db)
+    assert len(rows) == 160 and len({(r[0], r[1]) for r in rows}) == 160  # every sample exactly once
+    reference = tmp_path / "ref.sqlite"
+    run_sweep(Sweep.load(path), reference, workers=1)
+    assert rows == outcomes(reference)
+
+
+@pytest.mark.sumo
+def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    sweep = Sweep.load(write(tmp_path, TINY))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        result = run_sweep(sweep, tmp_path / "dask.sqlite", dask_address=cluster.scheduler_address)
+    assert result.samples == 24
+    run_sweep(sweep, tmp_path / "local.sqlite", workers=1)
+    assert outcomes(tmp_path / "dask.sqlite") == outcomes(tmp_path / "local.sqlite")
+
+
+def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
+    path = write(tmp_path, TINY)
+    assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "2", "--quiet"]) == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
