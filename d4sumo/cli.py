@@ -401,6 +401,64 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .report import build_report
+
+    steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
+    with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
+        def progress(what: str) -> None:
+            if bar.n or what != steps[0]:
+                bar.update(1)
+            bar.set_postfix_str(what)
+
+        index = build_report(args.db, args.out, severe=args.severe, progress=progress)
+        bar.update(bar.total - bar.n)
+    print(f"report written to {index}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from . import figures
+    from .analysis import cluster_knots, load_records
+
+    records = load_records(args.db)
+    if args.kind in ("time-space", "accel"):
+        if args.sample is None:
+            raise ConfigError("--sample", None, f"a sample id for a {args.kind} plot")
+        from .report import collision_of, describe, replay_to_fcd
+
+        matches = [r for r in records if r.sample_id == args.sample]
+        if not matches:
+            raise ConfigError("--sample", args.sample, f"a sample id of {', '.join(map(str, args.db))}")
+        r = matches[0]
+        fcd_path = args.out.with_suffix(".fcd.xml")
+        fcd = replay_to_fcd(r, fcd_path)
+        title = describe(r) if r.pair else f"sample {r.sample_id}: {r.outcome}"
+        if args.kind == "time-space":
+            figures.time_space(fcd, title, args.out, collision_of(r))
+        else:
+            figures.accelerations(fcd, title, args.out, collision_of(r))
+        print(f"{args.kind} plot written to {args.out} (FCD: {fcd_path})")
+        return 0
+    filters = {"attack": args.attack, "optimizer": args.optimizer, "start": args.start,
+               "setpoint_m": args.setpoint, "speed_mps": args.speed}
+    chosen = [r for r in records if all(v is None or getattr(r, k) == v for k, v in filters.items())]
+    if not chosen:
+        raise ConfigError("filters", {k: v for k, v in filters.items() if v is not None}, "values that match stored samples")
+    label = ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{v}" for k, v in filters.items() if v is not None) or "all samples"
+    if args.kind == "heatmap":
+        figures.heatmap(chosen, f"successes: {label}", args.out)
+    else:
+        clustering = cluster_knots(chosen, label)
+        if clustering is None:
+            raise ConfigError("filters", label, "a selection with at least 4 successful knot attacks")
+        figures.clusters(clustering, args.out)
+    print(f"{args.kind} plot written to {args.out}")
+    return 0
+
+
 # --- entry point ---------------------------------------------------------------------------------
 
 
@@ -446,6 +504,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("report", help="HTML report: the paper's tables, heatmaps, time-space diagrams, clusters")
+    p.add_argument("db", type=Path, nargs="+", help="results database(s)")
+    p.add_argument("--out", type=Path, default=Path("report"), help="folder for index.html and figures [report]")
+    p.add_argument("--severe", type=int, default=3, help="time-space diagrams of the N most severe attacks [3]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("plot", help="draw one figure: time-space, accel, heatmap or clusters")
+    p.add_argument("kind", choices=("time-space", "accel", "heatmap", "clusters"))
+    p.add_argument("db", type=Path, nargs="+", help="results database(s)")
+    p.add_argument("--out", type=Path, required=True, help="image file (.png, .pdf, .svg)")
+    p.add_argument("--sample", type=int, help="sample id (time-space, accel)")
+    p.add_argument("--attack", help="only this attack family (heatmap, clusters)")
+    p.add_argument("--optimizer", help="only this optimiser")
+    p.add_argument("--start", choices=START_MODES, help="only this start mode")
+    p.add_argument("--setpoint", type=float, help="only this setpoint in m")
+    p.add_argument("--speed", type=float, help="only this target speed in m/s")
+    p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser("replay", help="re-simulate one stored sample exactly (FCD, sumo-gui)")
     p.add_argument("db", type=Path, help="results database")

@@ -23,3 +23,30 @@ def road():
     from d4sumo.scenarios import build_road
 
     return build_road("highway_4lane")
+
+
+SMALL_SWEEP = """
+name = "fixture"
+[grid]
+setpoint_m = [5.0, 7.0]
+speed_mps = [20.0, 25.0]
+start = ["rest", "steady"]
+attack = ["knots"]
+optimizer = ["random"]
+seed = [0]
+[search]
+samples = 12
+"""
+
+
+@pytest.fixture(scope="session")
+def small_db(tmp_path_factory):
+    """A small real results database: 8 knot campaigns of 12 samples, simulated in SUMO."""
+    from d4sumo.sweep import Sweep, run_sweep
+
+    folder = tmp_path_factory.mktemp("small_db")
+    path = folder / "sweep.toml"
+    path.write_text(SMALL_SWEEP)
+    db = folder / "results.sqlite"
+    run_sweep(Sweep.load(path), db, workers=1)
+    return db
