@@ -106,18 +106,18 @@ def table_success_statistics(records: Sequence[Record]) -> Table:
 
 
 def table_attacker_crashes(records: Sequence[Record]) -> Table:
-    """The paper's Table 2: attacker crashes and no-crash samples per setpoint."""
-    setpoints = sorted({r.setpoint_m for r in records})
-    header = ["attack"] + [f"{label} {d:g} m" for d in setpoints for label in ("attacker crash", "no crash")]
+    """The paper's Table 2: per setpoint, attacker crashes / no-crash samples of each attack and optimiser."""
+    groups = group(records, "attack", "optimizer")
     rows = []
-    for (attack, optimizer), rs in group(records, "attack", "optimizer").items():
-        by_d = group(rs, "setpoint_m")
-        cells = [f"{attack} {optimizer}"]
-        for d in setpoints:
-            sub = by_d.get((d,), [])
-            cells += [str(sum(r.outcome == "attacker_crash" for r in sub)), str(sum(r.outcome == "no_crash" for r in sub))]
+    for d in sorted({r.setpoint_m for r in records}):
+        cells = [f"{d:g} m"]
+        for rs in groups.values():
+            sub = [r for r in rs if r.setpoint_m == d]
+            crashes = sum(r.outcome == "attacker_crash" for r in sub)
+            cells.append(f"{crashes} / {sum(r.outcome == 'no_crash' for r in sub)}" if sub else "-")
         rows.append(tuple(cells))
-    return Table("Table 2: attacker crashes and no-crash samples per setpoint", tuple(header), tuple(rows))
+    header = ("setpoint", *[f"{a} {o}" for a, o in groups])
+    return Table("Table 2: attacker crashes / no-crash samples per setpoint", header, tuple(rows))
 
 
 def table_by_speed(records: Sequence[Record]) -> Table:

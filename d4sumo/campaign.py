@@ -172,6 +172,15 @@ def run_campaign(
     campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep) if store else None
     results: list[SampleResult] = []
     scores: list[float] = []
+
+    def record(x: np.ndarray, r: SampleResult) -> None:
+        score = _score(r, scores)
+        optimizer.tell(x, score)
+        scores.append(score)
+        results.append(r)
+        if on_sample:
+            on_sample(r)
+
     if store is not None:
         for row in store.samples(campaign_id)[: campaign.samples]:
             x = optimizer.ask()
@@ -180,15 +189,8 @@ def run_campaign(
                     f"{store.path}: stored sample {row.index} of campaign {campaign_id} is not what this seed asks for; "
                     "it was written by another d4sumo version or changed: use a new database"
                 )
-            r = SampleResult(row.index, row.params, row.robustness, row.outcome,
-                             {"pair": row.pair, "time_s": row.time_s, "position_m": row.position_m, "speed_diff_kmh": row.speed_diff_kmh} if row.pair else None,
-                             row.min_gaps, row.wall_s, row.error, row.id)
-            score = _score(r, scores)
-            optimizer.tell(x, score)
-            scores.append(score)
-            results.append(r)
-            if on_sample:
-                on_sample(r)
+            record(x, SampleResult(row.index, row.params, row.robustness, row.outcome, row.collision, row.min_gaps,
+                                   row.wall_s, row.error, row.id))
         if results:
             log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
     for index in range(len(results), campaign.samples):
@@ -197,11 +199,6 @@ def run_campaign(
         if store is not None:
             row_id = store.add_sample(campaign_id, index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps, r.wall_s, r.error)
             r = dataclasses.replace(r, id=row_id)
-        score = _score(r, scores)
-        optimizer.tell(x, score)
-        scores.append(score)
-        results.append(r)
-        if on_sample:
-            on_sample(r)
+        record(x, r)
     return CampaignSummary(campaign_id, results)
 

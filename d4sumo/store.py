@@ -69,6 +69,13 @@ class SampleRow:
     wall_s: float
     error: str | None
 
+    @property
+    def collision(self) -> dict | None:
+        """The first collision as the runner reports it, or None."""
+        if self.pair is None:
+            return None
+        return {"pair": self.pair, "time_s": self.time_s, "position_m": self.position_m, "speed_diff_kmh": self.speed_diff_kmh}
+
 
 @dataclass(frozen=True)
 class CampaignRow:

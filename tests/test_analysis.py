@@ -30,8 +30,10 @@ def test_tables_count_what_the_database_holds(small_db):
     v12 = sum(r.pair == "v1-v2" for r in wins)
     assert t1.rows[0][3].startswith(f"{v12} (")
     t2 = table_attacker_crashes(records)
-    assert t2.header[1:] == ("attacker crash 5 m", "no crash 5 m", "attacker crash 7 m", "no crash 7 m")
-    assert int(t2.rows[0][1]) == sum(r.outcome == "attacker_crash" and r.setpoint_m == 5.0 for r in records)
+    assert t2.header == ("setpoint", "knots random") and [row[0] for row in t2.rows] == ["5 m", "7 m"]
+    crashes, no_crash = (int(v) for v in t2.rows[0][1].split(" / "))
+    assert crashes == sum(r.outcome == "attacker_crash" and r.setpoint_m == 5.0 for r in records)
+    assert no_crash == sum(r.outcome == "no_crash" and r.setpoint_m == 5.0 for r in records)
     t3 = table_by_speed(records)
     assert [row[0] for row in t3.rows] == ["knots random rest", "knots random steady"]
     assert sum(int(row[1]) for row in t3.rows) == len(wins)
