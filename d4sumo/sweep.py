@@ -174,8 +174,13 @@ def stored_counts(store: Store, sweep_name: str) -> tuple[int, int]:
 
 
 def run_one(campaign: Campaign, db_path: str, sweep_name: str) -> tuple[int, int]:
-    """Worker task: run or resume one campaign into the database; returns (campaign id, successes)."""
-    with Store(db_path) as store:
+    """Worker task: run or resume one campaign into the database; returns (campaign id, successes).
+
+    One BLAS thread per task: the GP's matrices are small, and a BLAS pool per worker process
+    oversubscribes the cores (two workers on two cores ran no faster than one)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1), Store(db_path) as store:
         summary = run_campaign(campaign, store, sweep=sweep_name)
     return summary.campaign_id, summary.count("success")
 

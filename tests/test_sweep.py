@@ -133,3 +133,29 @@ def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
     path = write(tmp_path, TINY)
     assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "2", "--quiet"]) == 2
     assert "no Dask scheduler answered" in capsys.readouterr().err
+
+
+def test_campaign_tasks_run_with_one_blas_thread(tmp_path, monkeypatch):
+    """Regression: each worker's BLAS pool used every core, so two workers ran no faster than one."""
+    import numpy  # noqa: F401  (loads the BLAS library threadpoolctl inspects)
+    from threadpoolctl import threadpool_info
+
+    import d4sumo.sweep as sweep_module
+
+    seen = []
+
+    def fake_run_campaign(campaign, store, sweep):
+        seen.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
+
+        class Summary:
+            campaign_id = 1
+
+            @staticmethod
+            def count(outcome):
+                return 0
+
+        return Summary()
+
+    monkeypatch.setattr(sweep_module, "run_campaign", fake_run_campaign)
+    sweep_module.run_one(Sweep.load(write(tmp_path, TINY)).campaigns[0], str(tmp_path / "r.sqlite"), "tiny")
+    assert seen and all(n == 1 for n in seen)
