@@ -68,8 +68,12 @@ def _add_attack_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--params", help="comma-separated parameter values of the family")
     g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s)")
     g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from t = 0")
+    _add_knot_options(g)
+
+
+def _add_knot_options(g) -> None:
     g.add_argument("--delta", type=float, help="knot spacing Delta in s [6]")
-    g.add_argument("--horizon", type=float, help="last knot time in s [48]; set with --knots to the knots' span by default")
+    g.add_argument("--horizon", type=float, help="last knot time in s [48; with --knots, the knots' span]")
 
 
 def _parse_value(text: str) -> Any:
@@ -484,8 +488,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_episode_options(p)
     g = p.add_argument_group("search")
     g.add_argument("--attack", choices=[f for f in FAMILIES if f != "constant"], help="attack family [knots]")
-    g.add_argument("--delta", type=float, help="knot spacing Delta in s [6]")
-    g.add_argument("--horizon", type=float, help="last knot time in s [48]")
+    _add_knot_options(g)
     g.add_argument("--optimizer", choices=OPTIMIZERS, help="bo, ce, random or halton [bo]")
     g.add_argument("--samples", type=int, help="budget: episodes to simulate [100]")
     g.add_argument("--seed", type=int, help="seed: the same seed repeats the campaign exactly [0]")
