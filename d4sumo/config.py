@@ -86,9 +86,6 @@ class EpisodeConfig:
     def vehicle_ids(self) -> tuple[str, ...]:
         return tuple(f"v{i}" for i in range(self.followers + 1))
 
-    def replace(self, **changes: Any) -> "EpisodeConfig":
-        return dataclasses.replace(self, **changes)
-
     # --- TOML/JSON round trip -----------------------------------------------------------------
 
     def to_dict(self) -> dict:
@@ -119,17 +116,21 @@ class EpisodeConfig:
         return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), controller=controller)
 
 
+def read_toml(path: str | Path, field: str = "--config") -> dict:
+    """Parse a TOML file; an unreadable or malformed file is a ConfigError naming ``field``."""
+    p = Path(path)
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(field, str(p), f"a readable TOML file ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(field, str(p), f"valid TOML ({exc})") from None
+
+
 def load_toml(path: str | Path) -> dict:
     """Read a config file, refusing unknown tables; errors name the file and what is wrong."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError("--config", str(p), f"a readable TOML file ({exc.strerror})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("--config", str(p), f"valid TOML ({exc})") from None
+    doc = read_toml(p)
     for key, value in doc.items():
         if key not in SECTIONS or not isinstance(value, dict):
             raise ConfigError(f"{p.name}: [{key}]", value if not isinstance(value, dict) else "table", f"tables {', '.join(SECTIONS)}")

@@ -23,7 +23,7 @@ from .analysis import (
 )
 from .campaign import Campaign, Evaluator
 from .simulation import simulate
-from .store import Store
+from .store import Store, collision_dict
 
 log = logging.getLogger(__name__)
 
@@ -39,9 +39,7 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
 
 
 def collision_of(record: Record) -> dict | None:
-    if record.pair is None:
-        return None
-    return {"pair": record.pair, "time_s": record.time_s, "position_m": record.position_m, "speed_diff_kmh": record.speed_diff_kmh}
+    return collision_dict(record.pair, record.time_s, record.position_m, record.speed_diff_kmh)
 
 
 def describe(record: Record) -> str:

@@ -71,10 +71,7 @@ class SampleRow:
 
     @property
     def collision(self) -> dict | None:
-        """The first collision as the runner reports it, or None."""
-        if self.pair is None:
-            return None
-        return {"pair": self.pair, "time_s": self.time_s, "position_m": self.position_m, "speed_diff_kmh": self.speed_diff_kmh}
+        return collision_dict(self.pair, self.time_s, self.position_m, self.speed_diff_kmh)
 
 
 @dataclass(frozen=True)
@@ -86,6 +83,13 @@ class CampaignRow:
     version: str
     created_at: str
     sweep: str | None
+
+
+def collision_dict(pair: str | None, time_s, position_m, speed_diff_kmh) -> dict | None:
+    """A stored first collision as the runner reports it, or None when there was none."""
+    if pair is None:
+        return None
+    return {"pair": pair, "time_s": time_s, "position_m": position_m, "speed_diff_kmh": speed_diff_kmh}
 
 
 def campaign_key(definition: dict[str, Any]) -> str:

@@ -35,10 +35,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .campaign import Campaign, run_campaign
-from .config import EpisodeConfig, load_toml
+from .config import EpisodeConfig, read_toml
 from .errors import ConfigError, D4sumoError
 from .scenarios import build_road
 from .simulation import check_road
+from .spec import Specification
 from .store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
@@ -65,7 +66,7 @@ class Sweep:
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":
         path = Path(path)
-        doc = load_toml_sweep(path)
+        doc = read_toml(path, "SWEEP")
         return cls.from_dict(doc, default_name=path.stem, source=path.name)
 
     @classmethod
@@ -124,22 +125,8 @@ class Sweep:
             if c.config.network not in roads:
                 roads[c.config.network] = build_road(c.config.network)
             check_road(c.config, roads[c.config.network])
-        for formula_key in {(c.config.followers, c.config.step_s, c.formula, c.d_safe_m) for c in self.campaigns}:
-            followers, step_s, formula, d_safe = formula_key
-            from .spec import Specification
-
+        for followers, step_s, formula, d_safe in {(c.config.followers, c.config.step_s, c.formula, c.d_safe_m) for c in self.campaigns}:
             Specification(followers=followers, step_s=step_s, formula=formula, d_safe_m=d_safe)
-
-
-def load_toml_sweep(path: Path) -> dict:
-    import tomllib
-
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError("SWEEP", str(path), f"a readable sweep file ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("SWEEP", str(path), f"valid TOML ({exc})") from None
 
 
 # --- running ---------------------------------------------------------------------------------
