@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
-from .errors import ConfigError
+from .errors import ConfigError, check_number
 
 
 @dataclass(frozen=True)
@@ -158,10 +158,8 @@ class Knots(AttackFamily):
     INTERPOLATIONS = ("pchip", "spline")
 
     def __init__(self, delta_s: float = 6.0, horizon_s: float = 48.0, interpolation: str = "pchip"):
-        if not (isinstance(delta_s, (int, float)) and 0.05 <= delta_s <= 600):
-            raise ConfigError("attack.delta_s", delta_s, "a number in [0.05, 600] seconds")
-        if not (isinstance(horizon_s, (int, float)) and delta_s <= horizon_s <= 3600):
-            raise ConfigError("attack.horizon_s", horizon_s, f"a number in [delta_s={delta_s:g}, 3600] seconds")
+        delta_s = check_number("attack.delta_s", delta_s, 0.05, 600.0, "seconds")
+        horizon_s = check_number("attack.horizon_s", horizon_s, delta_s, 3600.0, f"seconds (at least delta_s = {delta_s:g})")
         count = horizon_s / delta_s
         if abs(count - round(count)) > 1e-9:
             raise ConfigError("attack.horizon_s", horizon_s, f"a whole multiple of delta_s={delta_s:g} s")
@@ -200,3 +198,15 @@ def make_attack(name: str, *, delta_s: float = 6.0, horizon_s: float = 48.0) -> 
     if name not in simple:
         raise ConfigError("attack", name, f"one of {', '.join(FAMILIES)}")
     return simple[name]()
+
+
+def attack_signal(family: AttackFamily | None, params: Sequence[float] | None, *, steps: int, step_s: float,
+                  start_step: int = 0) -> np.ndarray:
+    """The attacker's command at each step's start, for an attack that begins at step ``start_step``
+    (after a warm-up); NaN where the attacker cruises (before the attack, or with no attack at all)."""
+    u = np.full(steps, np.nan)
+    if family is None:
+        return u
+    times = np.arange(steps - start_step) * step_s  # since the attack's start: exact at its first step
+    u[start_step:] = family.signal(params, times)
+    return u

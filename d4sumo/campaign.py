@@ -14,14 +14,15 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from pathlib import Path
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .attacks import AttackFamily, make_attack
+from .attacks import AttackFamily, attack_signal, make_attack
 from .config import EpisodeConfig
-from .errors import ConfigError, SumoError, check_number
-from .optimizers import OPTIMIZERS, make_optimizer
+from .errors import ConfigError, SumoError, check_int, check_number
+from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
 from .scenarios import Road, build_road
 from .simulation import check_road, simulate
 from .spec import Specification
@@ -43,16 +44,26 @@ class Campaign:
     formula: str | None = None
     delta_s: float = 6.0  # knot spacing (knots/spline)
     horizon_s: float = 48.0  # last knot (knots/spline)
+    optimizer_options: tuple[tuple[str, Any], ...] = ()  # the [search.<optimizer>] table, resolved
 
     def __post_init__(self) -> None:
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        if not isinstance(self.config, EpisodeConfig):
+            raise ConfigError("config", self.config, "an EpisodeConfig")
+        fix("delta_s", check_number("attack.delta_s", self.delta_s, 0.05, 600.0, "seconds"))
+        fix("horizon_s", check_number("attack.horizon_s", self.horizon_s, 0.05, 3600.0, "seconds"))
         self.family()  # validates attack, delta_s, horizon_s
         if self.optimizer not in OPTIMIZERS:
             raise ConfigError("optimizer", self.optimizer, f"one of {', '.join(OPTIMIZERS)}")
-        if not isinstance(self.samples, int) or isinstance(self.samples, bool) or not 1 <= self.samples <= MAX_SAMPLES:
-            raise ConfigError("samples", self.samples, f"a whole number in [1, {MAX_SAMPLES}]")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            raise ConfigError("seed", self.seed, "a whole number >= 0")
-        check_number("spec.d_safe_m", self.d_safe_m, -1e3, 1e3, "m")
+        fix("samples", check_int("samples", self.samples, 1, MAX_SAMPLES))
+        fix("seed", check_int("seed", self.seed, 0, 2**63 - 1))
+        fix("d_safe_m", check_number("spec.d_safe_m", self.d_safe_m, -1e3, 1e3, "m"))
+        if self.formula is not None and not isinstance(self.formula, str):
+            raise ConfigError("spec.formula", self.formula, "an STL formula in rtamt syntax (a string)")
+        options = self.optimizer_options
+        if isinstance(options, dict):
+            options = tuple(options.items())
+        fix("optimizer_options", tuple(resolve_options(self.optimizer, dict(options)).items()))
 
     def family(self) -> AttackFamily:
         return make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s)
@@ -69,6 +80,7 @@ class Campaign:
             "config": self.config.to_dict(),
             "attack": attack,
             "optimizer": self.optimizer,
+            "optimizer_options": dict(self.optimizer_options),
             "seed": self.seed,
             "spec": {"formula": self.formula, "d_safe_m": self.d_safe_m},
         }
@@ -86,9 +98,12 @@ class Campaign:
             formula=definition["spec"]["formula"],
             delta_s=attack.get("delta_s", 6.0),
             horizon_s=attack.get("horizon_s", 48.0),
+            optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
         )
 
     def replace(self, **changes: Any) -> "Campaign":
+        if "optimizer" in changes and "optimizer_options" not in changes:  # another optimiser: its own defaults
+            changes["optimizer_options"] = ()
         return dataclasses.replace(self, **changes)
 
 
@@ -128,24 +143,25 @@ class Evaluator:
         self.spec = campaign.specification()
         self.road = road or build_road(campaign.config.network)
         check_road(campaign.config, self.road)
-        config = campaign.config
-        self.times_s = np.arange(config.steps) * config.step_s
 
     def signal(self, params) -> np.ndarray:
-        return self.family.signal(params, self.times_s)
+        c = self.campaign.config
+        return attack_signal(self.family, params, steps=c.steps, step_s=c.step_s, start_step=c.attack_start_step)
 
-    def __call__(self, index: int, params: np.ndarray) -> SampleResult:
+    def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
         t0 = time.perf_counter()
         x = tuple(float(v) for v in params)
         try:
-            episode = simulate(self.campaign.config, self.signal(x), road=self.road)
+            episode = simulate(self.campaign.config, self.signal(x), road=self.road, fcd_path=fcd_path)
             rho = self.spec.robustness(episode.trace)
-        except (SumoError, ValueError) as exc:
-            log.warning("sample %d failed: %s", index, exc)
-            return SampleResult(index, x, None, "error", None, None, time.perf_counter() - t0, str(exc))
+            if not math.isfinite(rho):
+                raise ValueError(f"robustness is {rho}")
+        except Exception as exc:  # SUMO, a user's controller or formula: store the sample as errored, go on
+            message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
+            log.warning("sample %d failed: %s", index, message)
+            return SampleResult(index, x, None, "error", None, None, time.perf_counter() - t0, message)
         collision = episode.first_collision.to_dict() if episode.first_collision else None
-        gaps = {k: round(v, 6) for k, v in episode.min_gaps_m().items()}
-        return SampleResult(index, x, rho, episode.outcome, collision, gaps, time.perf_counter() - t0)
+        return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
 
 
 def _score(result: SampleResult, history: list[float]) -> float:
@@ -153,6 +169,66 @@ def _score(result: SampleResult, history: list[float]) -> float:
     if result.robustness is not None and math.isfinite(result.robustness):
         return result.robustness
     return min(history) if history else -1.0
+
+
+class CampaignRunner:
+    """The ask-simulate-score-tell loop of one campaign, without storage.
+
+    Built from the samples stored so far (re-told to the optimiser, whose asks must match them
+    exactly) or from the ``state`` a previous runner of the same campaign handed over; ``state`` is
+    plain picklable data (the optimiser and the scores told), so a campaign can move between
+    processes or machines between steps and still end as if it had run in one piece.
+    """
+
+    def __init__(self, campaign: Campaign, evaluator: Evaluator, *, stored: Sequence[SampleResult] = (),
+                 state: tuple | None = None, where: str = "the database"):
+        if evaluator.campaign.definition() != campaign.definition():
+            raise ValueError("the evaluator was built for another campaign")
+        self.campaign = campaign
+        self.evaluate = evaluator
+        if state is not None:
+            self.optimizer, self.scores = state
+            return
+        rng = np.random.default_rng(campaign.seed)
+        family = evaluator.family
+        self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
+                                        options=dict(campaign.optimizer_options))
+        self.scores: list[float] = []
+        for i, r in enumerate(stored):
+            if r.index != i:
+                raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} at position {i})")
+            x = self.optimizer.ask()
+            if not np.allclose(x, r.params, rtol=0, atol=1e-12):
+                raise StoreError(f"{where}: stored sample {r.index} is not what this seed asks for; "
+                                 "it was written by another d4sumo version or changed: use a new database")
+            self._tell(x, r)
+
+    @property
+    def done(self) -> int:
+        return len(self.scores)
+
+    @property
+    def state(self) -> tuple:
+        return self.optimizer, self.scores
+
+    def _tell(self, x: np.ndarray, r: SampleResult) -> None:
+        score = _score(r, self.scores)
+        self.optimizer.tell(x, score)
+        self.scores.append(score)
+
+    def step(self) -> SampleResult:
+        """Ask for the next attack, play and score it, tell the optimiser; the sample's result."""
+        if self.done >= self.campaign.samples:
+            raise ValueError(f"the campaign's budget of {self.campaign.samples} samples is spent")
+        x = self.optimizer.ask()
+        r = self.evaluate(self.done, x)
+        self._tell(x, r)
+        return r
+
+
+def stored_results(store: Store, campaign_id: int, limit: int) -> list[SampleResult]:
+    return [SampleResult(row.index, row.params, row.robustness, row.outcome, row.collision, row.min_gaps, row.wall_s,
+                         row.error, row.id) for row in store.samples(campaign_id)[:limit]]
 
 
 def run_campaign(
@@ -167,38 +243,22 @@ def run_campaign(
 
     Pass an ``evaluator`` built beforehand to have every input checked before anything is written."""
     evaluate = evaluator or Evaluator(campaign)
-    rng = np.random.default_rng(campaign.seed)
-    optimizer = make_optimizer(campaign.optimizer, evaluate.family.lower, evaluate.family.upper, budget=campaign.samples, rng=rng)
+    if evaluate.campaign.definition() != campaign.definition():  # before anything is written
+        raise ValueError("run_campaign: the evaluator was built for another campaign than the one to run")
     campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep) if store else None
-    results: list[SampleResult] = []
-    scores: list[float] = []
-
-    def record(x: np.ndarray, r: SampleResult) -> None:
-        score = _score(r, scores)
-        optimizer.tell(x, score)
-        scores.append(score)
+    results = stored_results(store, campaign_id, campaign.samples) if store else []
+    runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}")
+    if results:
+        log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
+    if on_sample:
+        for r in results:
+            on_sample(r)
+    while runner.done < campaign.samples:
+        r = runner.step()
+        if store is not None:
+            r = dataclasses.replace(r, id=store.add_sample(campaign_id, r.index, r.params, r.robustness, r.outcome,
+                                                           r.collision, r.min_gaps, r.wall_s, r.error))
         results.append(r)
         if on_sample:
             on_sample(r)
-
-    if store is not None:
-        for row in store.samples(campaign_id)[: campaign.samples]:
-            x = optimizer.ask()
-            if not np.allclose(x, row.params, rtol=0, atol=1e-12):
-                raise StoreError(
-                    f"{store.path}: stored sample {row.index} of campaign {campaign_id} is not what this seed asks for; "
-                    "it was written by another d4sumo version or changed: use a new database"
-                )
-            record(x, SampleResult(row.index, row.params, row.robustness, row.outcome, row.collision, row.min_gaps,
-                                   row.wall_s, row.error, row.id))
-        if results:
-            log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
-    for index in range(len(results), campaign.samples):
-        x = optimizer.ask()
-        r = evaluate(index, x)
-        if store is not None:
-            row_id = store.add_sample(campaign_id, index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps, r.wall_s, r.error)
-            r = dataclasses.replace(r, id=row_id)
-        record(x, r)
     return CampaignSummary(campaign_id, results)
-

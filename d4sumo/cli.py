@@ -8,7 +8,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
+import threading
 import tomllib
 from pathlib import Path
 from typing import Any, Sequence
@@ -16,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import __version__
-from .attacks import FAMILIES, make_attack
+from .attacks import FAMILIES, attack_signal, make_attack
 from .config import START_MODES, EpisodeConfig, load_toml
 from .errors import ConfigError, D4sumoError, check_number
 from .optimizers import OPTIMIZERS
@@ -30,6 +32,7 @@ EPISODE_FLAGS = {
     "setpoint": "scenario.setpoint_m",
     "speed": "scenario.speed_mps",
     "start": "scenario.start",
+    "warmup": "scenario.warmup_s",
     "step": "scenario.step_s",
     "duration": "scenario.duration_s",
     "length": "vehicle.length_m",
@@ -48,7 +51,10 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--followers", type=int, help="followers behind the attacker, 1..10 [3]")
     g.add_argument("--setpoint", type=float, help="bumper-to-bumper setpoint distance d in m [7]")
     g.add_argument("--speed", type=float, help="target speed in m/s [25]")
-    g.add_argument("--start", choices=START_MODES, help="rest: all at 0 m/s; steady: all at the target speed [rest]")
+    g.add_argument("--start", choices=START_MODES,
+                   help="rest: all at 0 m/s; steady: all at the target speed; warmup: drive from rest for --warmup s, "
+                        "attack after [rest]")
+    g.add_argument("--warmup", type=float, help="seconds driven from rest before the attack with --start warmup [15]")
     g.add_argument("--step", type=float, help="simulation step in s [0.05]")
     g.add_argument("--duration", type=float, help="episode length in s [60]")
     g.add_argument("--length", type=float, help="vehicle length in m [4.5]")
@@ -140,12 +146,9 @@ def attack_choice(args: argparse.Namespace, doc: dict):
     return family, family.check(values, "--params")
 
 
-def attack_signal(family, params, config: EpisodeConfig) -> np.ndarray:
-    """The attacker's command at every step's start; NaN (cruise) when no attack is given."""
-    times = np.arange(config.steps) * config.step_s
-    if family is None:
-        return np.full(config.steps, np.nan)
-    return family.signal(params, times)
+def episode_signal(family, params, config: EpisodeConfig) -> np.ndarray:
+    """The attacker's command at every step's start; NaN (cruise) before the attack or with none."""
+    return attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
 
 
 # --- commands ------------------------------------------------------------------------------------
@@ -174,7 +177,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     family, params = attack_choice(args, doc)
     d_safe = check_number("--d-safe", args.d_safe if args.d_safe is not None else doc.get("spec", {}).get("d_safe_m", 0.0), -1e3, 1e3, "m")
     road = build_road(config.network)
-    episode = simulate(config, attack_signal(family, params, config), road=road, fcd_path=args.fcd, gui=args.gui)
+    episode = simulate(config, episode_signal(family, params, config), road=road, fcd_path=args.fcd, gui=args.gui)
     robustness = psi_robustness(episode.trace, d_safe) if config.followers >= 2 else None
     _report(episode_summary(config, family, params, episode, robustness, d_safe, args.fcd), road.name, args.json)
     return 0
@@ -395,9 +398,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                            progress=progress)
     except KeyboardInterrupt:
         bar.close()
-        print(f"d4sumo: sweep interrupted; every finished sample is in {args.db}: run the same command to resume",
+        print(f"d4sumo: sweep interrupted; every sample it finished is in {args.db}: run the same command to resume",
               file=sys.stderr)
-        return 130
+        raise
     bar.close()
     print(f"sweep {sweep.name}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
           f"in {result.wall_s:.1f} s -> {args.db}")
@@ -543,7 +546,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM: stop as on Ctrl-C (workers stopped, nothing half-written), exit code 143."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
@@ -557,9 +570,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except D4sumoError as exc:
         print(f"d4sumo: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("d4sumo: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        if not isinstance(exc, Terminated):
+            print("d4sumo: interrupted", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
 
 
 if __name__ == "__main__":

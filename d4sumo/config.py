@@ -2,7 +2,7 @@
 
 A config file is TOML with these tables (every key optional; defaults from SPEC section 1):
 
-    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s
+    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
     [controller] class = "switching" (or "package.module:ClassName") and the class's parameters
     [attack]     family, params, delta_s, horizon_s        (read by the commands that take an attack)
@@ -19,9 +19,12 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .control import VehicleParams, build_params, resolve_controller
-from .errors import ConfigError, check_number
+from .errors import ConfigError, check_int, check_number
 
-START_MODES = ("rest", "steady")
+#: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
+#: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium); warmup: the paper's
+#: steady-state procedure, drive from rest for warmup_s with the attacker cruising, attack after.
+START_MODES = ("rest", "steady", "warmup")
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
 MAX_FOLLOWERS = 10
 
@@ -55,32 +58,49 @@ class EpisodeConfig:
     followers: int = 3  # N followers behind the attacker: ids v1..vN
     setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
     speed_mps: float = 25.0  # target speed v_d of every car
-    start: str = "rest"  # rest: all at 0 m/s; steady: all at the target speed
+    start: str = "rest"  # see START_MODES
     step_s: float = 0.05
-    duration_s: float = 60.0
+    duration_s: float = 60.0  # from the attack's start to the episode's end
+    warmup_s: float = 15.0  # start = "warmup": seconds driven from rest before the attack starts
     vehicle: VehicleParams = field(default_factory=VehicleParams)
     controller: ControllerConfig = field(default_factory=ControllerConfig)
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
             raise ConfigError("scenario.network", self.network, "a scenario name (see `d4sumo scenarios`) or a folder")
-        if not _is_int(self.followers) or not (1 <= self.followers <= MAX_FOLLOWERS):
-            raise ConfigError("scenario.followers", self.followers, f"a whole number in [1, {MAX_FOLLOWERS}]")
-        check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True)
-        check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True)
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        fix("followers", check_int("scenario.followers", self.followers, 1, MAX_FOLLOWERS))
+        fix("setpoint_m", check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True))
+        fix("speed_mps", check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True))
         if self.start not in START_MODES:
             raise ConfigError("scenario.start", self.start, f"one of {', '.join(START_MODES)}")
-        check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds")
-        check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds")
+        fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
+        fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
+        fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
+        if not _on_grid(self.warmup_s, self.step_s):
+            raise ConfigError("scenario.warmup_s", self.warmup_s, f"a whole number of steps of {self.step_s:g} s")
         if not isinstance(self.vehicle, VehicleParams):
             raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
         if not isinstance(self.controller, ControllerConfig):
             raise ConfigError("controller", self.controller, "a [controller] table")
 
     @property
+    def attack_start_step(self) -> int:
+        """The step at which the attack starts (0 except after a warm-up)."""
+        return int(round(self.warmup_s / self.step_s)) if self.start == "warmup" else 0
+
+    @property
+    def attack_start_s(self) -> float:
+        return self.attack_start_step * self.step_s
+
+    @property
     def steps(self) -> int:
-        """Number of simulation steps in a full episode."""
-        return int(round(self.duration_s / self.step_s))
+        """Number of simulation steps in a full episode (warm-up included)."""
+        return self.attack_start_step + int(round(self.duration_s / self.step_s))
+
+    @property
+    def total_s(self) -> float:
+        return self.steps * self.step_s
 
     @property
     def vehicle_ids(self) -> tuple[str, ...]:
@@ -90,6 +110,8 @@ class EpisodeConfig:
 
     def to_dict(self) -> dict:
         scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("vehicle", "controller")}
+        if self.start != "warmup":  # no effect: not part of what identifies the episode
+            del scenario["warmup_s"]
         return {
             "scenario": scenario,
             "vehicle": dataclasses.asdict(self.vehicle),
@@ -150,6 +172,7 @@ def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> N
             raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")
 
 
-def _is_int(value: object) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
+def _on_grid(value: float, step: float) -> bool:
+    count = value / step
+    return abs(count - round(count)) <= 1e-9 * max(1.0, count)
 

@@ -20,6 +20,12 @@ from .errors import ConfigError, check_number
 MODE_CC = 0.0
 MODE_ACC = 1.0
 
+#: Tolerances of the mode switch's comparisons. Gaps are differences of positions of some tens or
+#: hundreds of metres, so a platoon spaced exactly at its setpoint measures a gap a few 1e-14 m off;
+#: within these tolerances a value counts as at the threshold, so no mode decision hinges on rounding.
+GAP_TOLERANCE_M = 1e-6
+SPEED_TOLERANCE_MPS = 1e-6
+
 
 @dataclass(frozen=True)
 class VehicleParams:
@@ -31,10 +37,9 @@ class VehicleParams:
     actuator_lag_s: float = 0.5  # first-order lag between command and acceleration
 
     def __post_init__(self) -> None:
-        check_number("vehicle.length_m", self.length_m, 0.5, 30.0, "metres")
-        check_number("vehicle.max_accel_mps2", self.max_accel_mps2, 0.1, 20.0, "m/s^2")
-        check_number("vehicle.max_decel_mps2", self.max_decel_mps2, 0.1, 20.0, "m/s^2 (positive)")
-        check_number("vehicle.actuator_lag_s", self.actuator_lag_s, 0.0, 5.0, "seconds")
+        for name, low, high, unit in (("length_m", 0.5, 30.0, "metres"), ("max_accel_mps2", 0.1, 20.0, "m/s^2"),
+                                      ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds")):
+            object.__setattr__(self, name, check_number(f"vehicle.{name}", getattr(self, name), low, high, unit))
 
 
 def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:
@@ -72,8 +77,15 @@ class Actuator:
         self.accel_mps2 += (target - self.accel_mps2) * self.alpha
         v = speed_mps + self.accel_mps2 * self.step_s
         if v < 0.0:  # brakes stop the car, they never reverse it
-            return 0.0
-        return self.max_speed_mps if v > self.max_speed_mps else v
+            v = 0.0
+        elif v > self.max_speed_mps:
+            v = self.max_speed_mps
+        else:
+            return v
+        # Clamped: the drivetrain's acceleration is what the car actually did, so the lag does not
+        # wind up while the car stands still or rides the speed limit.
+        self.accel_mps2 = (v - speed_mps) / self.step_s
+        return v
 
 
 @dataclass(frozen=True)
@@ -92,13 +104,8 @@ class SwitchingParams:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not value == value:
-                raise ConfigError(f"controller.{f.name}", value, "a number")
-            if value < 0:
-                raise ConfigError(f"controller.{f.name}", value, "a number >= 0")
-        if self.eps_x_m <= 0 or self.eps_v_mps <= 0:
-            raise ConfigError("controller.eps_x_m/eps_v_mps", (self.eps_x_m, self.eps_v_mps), "numbers > 0")
+            low = 1e-3 if f.name in ("eps_x_m", "eps_v_mps") else 0.0  # hysteresis wider than the tolerances
+            object.__setattr__(self, f.name, check_number(f"controller.{f.name}", getattr(self, f.name), low, 1e6))
 
 
 class CruiseControl:
@@ -116,6 +123,11 @@ class CruiseControl:
         self.prev_error: float | None = None  # None: no derivative kick on (re)engagement
 
     def disengage(self) -> None:
+        self.prev_error = None
+
+    def reset(self) -> None:
+        """Start afresh: no integrated error, no derivative kick."""
+        self.integral = 0.0
         self.prev_error = None
 
     def acceleration(self, speed_mps: float) -> float:
@@ -145,7 +157,8 @@ class SwitchingController:
     """The paper's switching policy (Eq. 1): cruise control (PID) or ACC, with hysteresis.
 
     CC when gap >= d + eps_x or v >= v_d + eps_v; ACC when gap <= d and v <= v_d; otherwise the mode
-    stays. ACC: a = Kp (gap - d) + Kv (v_lead - v).
+    stays (every comparison within GAP_TOLERANCE_M / SPEED_TOLERANCE_MPS of its threshold counts as
+    reaching it). ACC: a = Kp (gap - d) + Kv (v_lead - v).
     """
 
     Params = SwitchingParams
@@ -166,15 +179,17 @@ class SwitchingController:
         self.cruise = CruiseControl(params, target_speed_mps, step_s)
         self.mode = MODE_CC
         self._mode_known = False
-        self._cc_gap = setpoint_m + params.eps_x_m
-        self._cc_speed = target_speed_mps + params.eps_v_mps
+        self._cc_gap = setpoint_m + params.eps_x_m - GAP_TOLERANCE_M
+        self._cc_speed = target_speed_mps + params.eps_v_mps - SPEED_TOLERANCE_MPS
+        self._acc_gap = setpoint_m + GAP_TOLERANCE_M
+        self._acc_speed = target_speed_mps + SPEED_TOLERANCE_MPS
         self._acc_kp, self._acc_kv = params.acc_kp, params.acc_kv
         self._accel_max, self._decel_max = vehicle.max_accel_mps2, vehicle.max_decel_mps2
 
     def select_mode(self, gap_m: float, speed_mps: float) -> float:
         if gap_m >= self._cc_gap or speed_mps >= self._cc_speed:
             mode = MODE_CC
-        elif gap_m <= self.setpoint_m and speed_mps <= self.target_speed_mps:
+        elif gap_m <= self._acc_gap and speed_mps <= self._acc_speed:
             mode = MODE_ACC
         elif self._mode_known:
             mode = self.mode

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import numbers
+
+import numpy as np
 
 
 class D4sumoError(Exception):
@@ -23,11 +26,31 @@ class SumoError(D4sumoError):
     """SUMO could not be found, could not build a network, or failed during an episode."""
 
 
+def is_number(value: object) -> bool:
+    """A real number (Python's or numpy's), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 def check_number(field: str, value: object, low: float, high: float, unit: str = "", *, low_open: bool = False) -> float:
-    """``value`` if it is a finite number in the range, else a ConfigError saying what is allowed."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """``value`` as a float if it is a finite number in the range, else a ConfigError saying what is allowed.
+
+    numpy scalars are accepted; the result is always a Python float, so 7, 7.0 and np.float32(7) are
+    the same value wherever it is stored or hashed."""
+    ok = is_number(value) and math.isfinite(float(value))
     ok = ok and (low < value if low_open else low <= value) and value <= high
     if not ok:
         bracket = "(" if low_open else "["
-        raise ConfigError(field, value, f"a number in {bracket}{low:g}, {high:g}] {unit}".rstrip())
+        raise ConfigError(field, _plain(value), f"a number in {bracket}{low:g}, {high:g}] {unit}".rstrip())
     return float(value)
+
+
+def check_int(field: str, value: object, low: int, high: int, what: str = "") -> int:
+    """``value`` as an int if it is a whole number in [low, high] (numpy integers too), else a ConfigError."""
+    if not (isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and low <= value <= high):
+        raise ConfigError(field, _plain(value), f"a whole number in [{low}, {high}] {what}".rstrip())
+    return int(value)
+
+
+def _plain(value: object) -> object:
+    """numpy scalars shown as Python values in messages."""
+    return value.item() if isinstance(value, np.generic) else value

@@ -13,7 +13,10 @@
   and kept in between (the GP is still conditioned on every sample): this keeps BO's own time per
   sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell.
 
-Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly.
+Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly. Options
+(``OPTIONS`` of each class) come from a config's ``[search.<optimizer>]`` table, validated by
+`resolve_options`. A score that is NaN or infinite counts as the worst score told so far: one failed
+sample never breaks later proposals. No optimiser proposes past its budget.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from typing import Callable
 import numpy as np
 from scipy.stats import qmc, truncnorm
 
-from .errors import ConfigError
+from .errors import ConfigError, check_int, check_number
 
 OPTIMIZERS = ("bo", "ce", "random", "halton")
 
@@ -33,22 +36,36 @@ class Optimizer:
     """Ask for a point in [lower, upper], tell its score (higher is better)."""
 
     name = ""
+    #: option -> (default, low, high); an int default means a whole number
+    OPTIONS: dict[str, tuple[float, float, float]] = {}
 
-    def __init__(self, lower: np.ndarray, upper: np.ndarray, budget: int, rng: np.random.Generator):
+    def __init__(self, lower: np.ndarray, upper: np.ndarray, budget: int, rng: np.random.Generator, **options):
         self.lower = np.asarray(lower, dtype=float)
         self.upper = np.asarray(upper, dtype=float)
         self.dimension = self.lower.size
         self.budget = budget
         self.rng = rng
+        self.options = resolve_options(self.name, options)
+        self.asked = 0
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
 
     def ask(self) -> np.ndarray:
+        if self.asked >= self.budget:
+            raise ValueError(f"{self.name}: the budget of {self.budget} samples is spent")
+        self.asked += 1
+        return self._ask()
+
+    def _ask(self) -> np.ndarray:
         raise NotImplementedError
 
     def tell(self, x: np.ndarray, score: float) -> None:
+        score = float(score)
+        if not np.isfinite(score):
+            finite = [v for v in self.y if np.isfinite(v)]
+            score = min(finite) if finite else 0.0
         self.X.append(np.asarray(x, dtype=float))
-        self.y.append(float(score))
+        self.y.append(score)
 
     def _unit_to_box(self, z: np.ndarray) -> np.ndarray:
         return self.lower + z * (self.upper - self.lower)
@@ -61,7 +78,7 @@ class Optimizer:
 class RandomSearch(Optimizer):
     name = "random"
 
-    def ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray:
         return self._unit_to_box(self.rng.random(self.dimension))
 
 
@@ -72,7 +89,7 @@ class Halton(Optimizer):
         super().__init__(*args, **kwargs)
         self._sequence = qmc.Halton(d=self.dimension, scramble=True, seed=self.rng)
 
-    def ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray:
         return self._unit_to_box(self._sequence.random(1)[0])
 
 
@@ -85,21 +102,23 @@ class CrossEntropy(Optimizer):
     """
 
     name = "ce"
+    OPTIONS = {"batch_size": (10, 2, 10_000), "elite_fraction": (0.2, 0.01, 1.0), "smoothing": (0.7, 0.01, 1.0),
+               "min_std_fraction": (0.02, 0.0, 1.0)}
 
-    def __init__(self, *args, batch_size: int = 10, elite_fraction: float = 0.2, smoothing: float = 0.7,
-                 min_std_fraction: float = 0.02, **kwargs):
+    def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.batch_size = batch_size
-        self.elite_count = max(1, int(round(elite_fraction * batch_size)))
-        self.smoothing = smoothing
+        o = self.options
+        self.batch_size = o["batch_size"]
+        self.elite_count = max(1, int(round(o["elite_fraction"] * self.batch_size)))
+        self.smoothing = o["smoothing"]
         span = self.upper - self.lower
         self.mean = self.lower + span / 2.0
         self.std = span / 2.0
-        self.min_std = min_std_fraction * span
+        self.min_std = o["min_std_fraction"] * span
         self._pending: list[np.ndarray] = []
         self._batch: list[tuple[np.ndarray, float]] = []
 
-    def ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray:
         if not self._pending:
             self._pending = list(self._sample(self.batch_size))
         return self._pending.pop(0)
@@ -112,7 +131,7 @@ class CrossEntropy(Optimizer):
 
     def tell(self, x: np.ndarray, score: float) -> None:
         super().tell(x, score)
-        self._batch.append((np.asarray(x, dtype=float), float(score)))
+        self._batch.append((self.X[-1], self.y[-1]))
         if len(self._batch) >= self.batch_size:
             self._refit()
 
@@ -129,21 +148,24 @@ class CrossEntropy(Optimizer):
 
 class BayesianOptimization(Optimizer):
     name = "bo"
+    OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
+               "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0)}
 
-    def __init__(self, *args, initial_points: int = 10, refit_every: int = 10, candidates: int = 500,
-                 local_fraction: float = 0.8, local_scale: float = 0.1, xi: float = 0.01, **kwargs):
+    def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.initial_points = min(initial_points, self.budget)
-        self.refit_every = refit_every
-        self.candidates = candidates
-        self.local_fraction = local_fraction
-        self.local_scale = local_scale
-        self.xi = xi
+        o = self.options
+        self.initial_points = min(o["initial_points"], self.budget)
+        self.refit_every = o["refit_every"]
+        self.candidates = o["candidates"]
+        self.local_fraction = o["local_fraction"]
+        self.local_scale = o["local_scale"]
+        self.xi = o["xi"]
         self._initial = qmc.Halton(d=self.dimension, scramble=True, seed=self.rng)
-        self._kernel = None
+        self._kernel = None  # the learned covariance (amplitude x Matern), without the noise term
+        self._noise = 1.0  # the learned noise variance, in units of the normalised scores
         self._gp = None
 
-    def ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray:
         if len(self.y) < self.initial_points or self._gp is None:
             return self._unit_to_box(self._initial.random(1)[0])
         from skopt.acquisition import gaussian_ei
@@ -168,7 +190,7 @@ class BayesianOptimization(Optimizer):
         if n < self.initial_points:
             return
         from skopt.learning import GaussianProcessRegressor
-        from skopt.learning.gaussian_process.kernels import ConstantKernel, Matern
+        from skopt.learning.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
         relearn = self._kernel is None or (n - self.initial_points) % self.refit_every == 0
         kernel = self._kernel
@@ -176,8 +198,11 @@ class BayesianOptimization(Optimizer):
             kernel = ConstantKernel(1.0, (0.01, 1000.0)) * Matern(
                 length_scale=np.ones(self.dimension), length_scale_bounds=(0.01, 100.0), nu=2.5
             )
+        # The noise term is explicit, so that between re-learnings the GP keeps the learned noise
+        # (skopt zeroes the white kernel in kernel_ after a fit, for noise-free predictions).
+        noise = WhiteKernel(noise_level=float(np.clip(self._noise, 1e-5, 1e5)), noise_level_bounds=(1e-5, 1e5))
         gp = GaussianProcessRegressor(
-            kernel=kernel,
+            kernel=kernel + noise,
             normalize_y=True,
             noise="gaussian",
             n_restarts_optimizer=0,
@@ -187,7 +212,8 @@ class BayesianOptimization(Optimizer):
         with warnings.catch_warnings():  # hyperparameters at their bounds are expected early on
             warnings.simplefilter("ignore")
             gp.fit(np.asarray(self.X_unit), -np.asarray(self.y))
-        self._kernel = gp.kernel_
+        self._kernel = gp.kernel_.k1
+        self._noise = float(gp.noise_) if gp.noise_ is not None else self._noise
         self._gp = gp
 
 
@@ -199,7 +225,25 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 }
 
 
-def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Generator) -> Optimizer:
+def resolve_options(name: str, options: dict | None) -> dict:
+    """Every option of optimiser ``name``, defaults filled in, each value checked."""
+    if name not in _FACTORIES:
+        raise ConfigError("search.optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
+    spec = _FACTORIES[name].OPTIONS
+    options = dict(options or {})
+    for key in options:
+        if key not in spec:
+            allowed = f"a key of [search.{name}]: {', '.join(spec)}" if spec else f"nothing: {name} has no options"
+            raise ConfigError(f"search.{name}.{key}", options[key], allowed)
+    resolved = {}
+    for key, (default, low, high) in spec.items():
+        value = options.get(key, default)
+        field = f"search.{name}.{key}"
+        resolved[key] = check_int(field, value, low, high) if isinstance(default, int) else check_number(field, value, low, high)
+    return resolved
+
+
+def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Generator, options: dict | None = None) -> Optimizer:
     if name not in _FACTORIES:
         raise ConfigError("optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
-    return _FACTORIES[name](np.asarray(lower, float), np.asarray(upper, float), budget, rng)
+    return _FACTORIES[name](np.asarray(lower, float), np.asarray(upper, float), budget, rng, **(options or {}))

@@ -13,7 +13,12 @@ import numpy as np
 
 from .config import EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
+from .errors import D4sumoError
 from .trace import Collision, Episode, Trace
+
+class ControllerError(D4sumoError, ValueError):
+    """A follower controller returned something that is not a command."""
+
 
 #: The rearmost car's front bumper starts this far from the road's start [m].
 REAR_START_M = 10.0
@@ -25,13 +30,27 @@ def initial_state(config: EpisodeConfig) -> tuple[list[float], list[float]]:
     spacing = config.vehicle.length_m + config.setpoint_m
     rear = config.vehicle.length_m + REAR_START_M
     positions = [rear + spacing * (n - 1 - i) for i in range(n)]
-    speed = config.speed_mps if config.start == "steady" else 0.0
+    speed = config.speed_mps if config.start == "steady" else 0.0  # rest and warmup start standing
     return positions, [speed] * n
 
 
 def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
     """Road length an episode may use: the attacker, clamped to the limit, is always in front."""
-    return initial_state(config)[0][0] + speed_limit_mps * config.duration_s
+    return initial_state(config)[0][0] + speed_limit_mps * config.total_s
+
+
+def collisions_at(time_s: float, positions: list[float], speeds: list[float], length_m: float) -> tuple[Collision, ...]:
+    """Every bumper overlap (gap < 0) at the end of a step, frontmost pair first.
+
+    This is the definition of a collision, whether SUMO reports it or not (SUMO ignores overlaps up to
+    1 mm). The gap is computed with the trace's arithmetic, so the outcome, the collision record and
+    the trace's minimum gaps always agree. The position is the follower's front bumper, where it hit.
+    """
+    return tuple(
+        Collision(f"v{i}", f"v{i + 1}", time_s, positions[i + 1], (speeds[i + 1] - speeds[i]) * 3.6)
+        for i in range(len(positions) - 1)
+        if positions[i] - length_m - positions[i + 1] < 0.0
+    )
 
 
 class Platoon:
@@ -56,18 +75,27 @@ class Platoon:
         self.actuators = [Actuator(vehicle, dt, attacker_max_speed_mps)]
         self.actuators += [Actuator(vehicle, dt, float("inf")) for _ in range(config.followers)]
         self.records_modes = all(hasattr(f, "mode") for f in self.followers)
+        self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
 
     def advance(self, k: int, positions: list[float], speeds: list[float]) -> list[float]:
         """Commands for step k from the sensed state; returns each car's speed at the step's end."""
         u = self.attack_u[k]
-        if u != u:  # NaN: no attack yet, the attacker cruises like everyone else
+        if u != u:  # NaN: no attack here, the attacker cruises like everyone else
+            if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
+                self.attacker_cruise.reset()
+                self._attacking = False
             u = acceleration_to_command(self.attacker_cruise.acceleration(speeds[0]), self.config.vehicle)
+        else:
+            self._attacking = True
         commands = [u]
         length = self.length_m
         for i, follower in enumerate(self.followers, start=1):
-            commands.append(follower.command(positions[i - 1] - length - positions[i], speeds[i], speeds[i - 1]))
+            c = follower.command(positions[i - 1] - length - positions[i], speeds[i], speeds[i - 1])
+            if not -1.0 <= c <= 1.0:  # NaN fails too: a user's controller must not corrupt the trace
+                raise ControllerError(f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
+            commands.append(c)
         self.commands.append(commands)
         if self.records_modes:
             self.modes.append([f.mode for f in self.followers])
@@ -88,7 +116,7 @@ class Platoon:
             signals[f"speed_v{i}"] = speeds[:, i]
             signals[f"accel_v{i}"] = accel[:, i]
             signals[f"cmd_v{i}"] = cmds[:n_samples, i]
-        for i in range(n - 1):
+        for i in range(n - 1):  # the same arithmetic as collisions_at: verdicts and trace agree exactly
             signals[f"gap_{i}"] = positions[:, i] - self.length_m - positions[:, i + 1]
         if self.records_modes and self.modes:
             modes = np.array(self.modes, dtype=float)
@@ -106,17 +134,14 @@ def integrate(config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mp
     positions, speeds = initial_state(config)
     dt, length = config.step_s, config.vehicle.length_m
     rows_x, rows_v = [positions], [speeds]
-    collisions: list[Collision] = []
+    collisions: tuple[Collision, ...] = ()
     for k in range(config.steps):
         new_speeds = platoon.advance(k, positions, speeds)
         positions = [x + 0.5 * (v + w) * dt for x, v, w in zip(positions, speeds, new_speeds)]
         speeds = new_speeds
         rows_x.append(positions)
         rows_v.append(speeds)
-        for i in range(config.followers):
-            gap = positions[i] - length - positions[i + 1]
-            if gap < 0.0:
-                collisions.append(Collision(f"v{i}", f"v{i + 1}", (k + 1) * dt, positions[i], (speeds[i + 1] - speeds[i]) * 3.6))
+        collisions = collisions_at((k + 1) * dt, positions, speeds, length)
         if collisions:
             break
     times = np.arange(len(rows_x)) * dt

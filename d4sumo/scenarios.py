@@ -1,13 +1,17 @@
 """Road network variants: plain SUMO node/edge XML in ``sumo_scenarios/<name>/``, built with netconvert.
 
 A variant is a folder holding one ``*.nod.xml`` and one ``*.edg.xml`` that describe a straight one-way
-road (one edge, or a chain of edges). The ``.net.xml`` is built on first use and cached under the
-user's cache folder, keyed by a hash of the inputs, so editing a variant rebuilds it.
+road (one edge, or a chain of edges). The shipped variants live in the ``sumo_scenarios`` package
+(installed with d4sumo); a user's own folder works the same way. The ``.net.xml`` is built on first use
+and cached under the user's cache folder, keyed by a hash of the inputs, so editing a variant rebuilds
+it. A `NetworkSource` carries a variant's XML itself, so a worker on another machine builds the same
+road without seeing the client's disk.
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib.resources
 import json
 import logging
 import os
@@ -21,8 +25,8 @@ from .errors import ConfigError, SumoError
 
 log = logging.getLogger(__name__)
 
-#: The variants shipped with d4sumo (beside the package in a source checkout).
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "sumo_scenarios"
+#: The variants shipped with d4sumo: the ``sumo_scenarios`` package (a folder of data).
+SCENARIOS_DIR = Path(str(importlib.resources.files("sumo_scenarios")))
 
 
 @dataclass(frozen=True)
@@ -91,21 +95,50 @@ def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | None:
     return None
 
 
-def build_road(name: str, *, root: Path | None = None, cache_dir: Path | None = None, netconvert: str | None = None) -> Road:
-    """Build (or take from the cache) the network of a variant and describe its road."""
+@dataclass(frozen=True)
+class NetworkSource:
+    """A variant's node and edge XML, by value: what a road is built from, anywhere."""
+
+    name: str
+    nodes_xml: bytes
+    edges_xml: bytes
+
+    @property
+    def digest(self) -> str:
+        return hashlib.sha256(self.nodes_xml + b"\0" + self.edges_xml).hexdigest()[:16]
+
+
+def network_source(name: str, root: Path | None = None) -> NetworkSource:
+    """The XML of a named variant, or of a folder given directly."""
     folder = scenario_folder(name, root)
     nodes, edges = _inputs(folder)
-    digest = hashlib.sha256(nodes.read_bytes() + b"\0" + edges.read_bytes()).hexdigest()[:16]
+    try:
+        return NetworkSource(folder.name, nodes.read_bytes(), edges.read_bytes())
+    except OSError as exc:
+        raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
+
+
+def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
+               netconvert: str | None = None) -> Road:
+    """Build (or take from the cache) the network of a variant and describe its road."""
+    source = name if isinstance(name, NetworkSource) else network_source(name, root)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
-    net_file = cache / f"{folder.name}-{digest}.net.xml"
+    net_file = cache / f"{source.name}-{source.digest}.net.xml"
     info_file = net_file.with_suffix(".json")
     if not (net_file.is_file() and info_file.is_file()):
-        cache.mkdir(parents=True, exist_ok=True)
-        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file)
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SumoError(f"cannot create the network cache {cache} ({exc.strerror})") from None
+        with tempfile.TemporaryDirectory(dir=cache) as tmp:
+            nodes, edges = Path(tmp) / "road.nod.xml", Path(tmp) / "road.edg.xml"
+            nodes.write_bytes(source.nodes_xml)
+            edges.write_bytes(source.edges_xml)
+            _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
         _write_atomic(info_file, json.dumps(_describe(net_file)))
     info = json.loads(info_file.read_text())
     return Road(
-        name=folder.name,
+        name=source.name,
         net_file=net_file,
         route_edges=tuple(info["route_edges"]),
         length_m=info["length_m"],
@@ -114,7 +147,7 @@ def build_road(name: str, *, root: Path | None = None, cache_dir: Path | None = 
     )
 
 
-def _netconvert(binary: str, nodes: Path, edges: Path, out: Path) -> None:
+def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> None:
     # Build into a temporary file and rename, so parallel workers never read a half-written net.
     fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".net.xml")
     os.close(fd)
@@ -127,7 +160,7 @@ def _netconvert(binary: str, nodes: Path, edges: Path, out: Path) -> None:
         raise SumoError(f"netconvert could not run ({binary}): {exc}") from None
     if result.returncode != 0:
         os.unlink(tmp)
-        raise SumoError(f"netconvert failed on {nodes.parent}: {(result.stderr or result.stdout).strip()[-500:]}")
+        raise SumoError(f"netconvert failed on {name}: {(result.stderr or result.stdout).strip()[-500:]}")
     os.replace(tmp, out)
 
 

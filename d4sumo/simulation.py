@@ -1,9 +1,10 @@
 """The SUMO co-simulation: the only module that talks to SUMO (libsumo, or traci for sumo-gui).
 
 Each step Python commands every car's speed (SUMO's car-following, lane changing and speed checks are
-off: speed mode 32, lane-change mode 0), SUMO moves the cars (ballistic update) and detects collisions
-(`--collision.action warn`, no minimum gap). The episode ends at the first collision: SUMO lets the
-cars drive through each other afterwards, so later data are not physical.
+off: speed mode 32, lane-change mode 0) and SUMO moves the cars (ballistic update). A collision is any
+bumper overlap at the end of a step, measured on SUMO's positions (`platoon.collisions_at`): SUMO's own
+reports miss overlaps of 1 mm or less. The episode ends at the first one: SUMO lets the cars drive
+through each other afterwards, so later data are not physical.
 """
 
 from __future__ import annotations
@@ -15,9 +16,9 @@ import numpy as np
 
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError
-from .platoon import Platoon, initial_state, road_needed_m
+from .platoon import Platoon, collisions_at, initial_state, road_needed_m
 from .scenarios import Road, build_road, sumo_binary
-from .trace import Collision, Episode
+from .trace import Episode
 
 log = logging.getLogger(__name__)
 
@@ -129,8 +130,8 @@ def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
     get_speed = api.vehicle.getSpeed
     set_speed = api.vehicle.setSpeed
     step = api.simulationStep
-    get_collisions = api.simulation.getCollisions
     advance = platoon.advance
+    length, dt = config.vehicle.length_m, config.step_s
     positions = [get_position(v) for v in ids]
     speeds = [get_speed(v) for v in ids]
     rows_x, rows_v = [positions], [speeds]
@@ -144,24 +145,9 @@ def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
         speeds = [get_speed(v) for v in ids]
         rows_x.append(positions)
         rows_v.append(speeds)
-        reported = get_collisions()
-        if reported:
-            collisions = _collisions(reported, (k + 1) * config.step_s)
+        collisions = collisions_at((k + 1) * dt, positions, speeds, length)
+        if collisions:
             break
     times = np.arange(len(rows_x)) * config.step_s
     return Episode(platoon.trace(times, np.array(rows_x), np.array(rows_v)), collisions)
 
-
-def _collisions(reported, time_s: float) -> tuple[Collision, ...]:
-    """SUMO's collision reports as records, the frontmost pair first."""
-    out = [
-        Collision(
-            leader=c.victim,
-            follower=c.collider,
-            time_s=time_s,
-            position_m=float(c.pos),
-            speed_diff_kmh=(c.colliderSpeed - c.victimSpeed) * 3.6,
-        )
-        for c in reported
-    ]
-    return tuple(sorted(out, key=lambda c: int(c.leader[1:])))

@@ -3,28 +3,39 @@
 Every sample is committed as soon as it finishes; (campaign, index) is unique, so a resumed
 campaign never counts a sample twice. A campaign is identified by a hash of its definition
 (configuration, attack, optimiser, seed, specification), not by its budget: running it again with
-the same or a larger budget resumes it. Several processes may write to one file (WAL journal).
+the same or a larger budget resumes it.
+
+One process writes a database at a time: a writer holds an exclusive lock on the file for as long as
+it has it open (released by the system if the process dies), so a second writer is refused clearly.
+Readers (`Store(path, create=False)`) open it read-only and leave no side files. The schema is
+created in one transaction, so a kill while creating leaves an empty file that the next run fills.
 """
 
 from __future__ import annotations
 
+import fcntl
+import functools
 import hashlib
 import json
+import math
+import os
 import sqlite3
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
+from urllib.parse import quote
 
 from . import __version__
 from .errors import D4sumoError
 
 APP_ID = "d4sumo"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: collisions are any overlap, actuator without wind-up; no WAL journal
+OUTCOMES = ("success", "attacker_crash", "no_crash", "error")
 
 SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS campaign (
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE campaign (
     id INTEGER PRIMARY KEY,
     key TEXT NOT NULL UNIQUE,
     definition TEXT NOT NULL,          -- JSON: config, attack, optimizer, seed, spec
@@ -33,7 +44,7 @@ CREATE TABLE IF NOT EXISTS campaign (
     created_at TEXT NOT NULL,
     sweep TEXT                         -- name of the sweep that owns it, if any
 );
-CREATE TABLE IF NOT EXISTS sample (
+CREATE TABLE sample (
     id INTEGER PRIMARY KEY,
     campaign_id INTEGER NOT NULL REFERENCES campaign(id),
     idx INTEGER NOT NULL,              -- 0-based order within the campaign
@@ -47,6 +58,7 @@ CREATE TABLE IF NOT EXISTS sample (
     UNIQUE (campaign_id, idx)
 );
 """
+TABLES = {"meta", "campaign", "sample"}
 
 
 class StoreError(D4sumoError):
@@ -96,27 +108,78 @@ def campaign_key(definition: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:20]
 
 
+def _guarded(method):
+    """sqlite's errors on a damaged file become one clear StoreError, whatever the method."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path}: damaged or unreadable results database ({exc})") from None
+
+    return wrapper
+
+
 class Store:
+    """A results database. ``Store(path)`` opens it for writing (created if new; one writer at a
+    time); ``Store(path, create=False)`` opens an existing one read-only."""
+
     def __init__(self, path: str | Path, *, create: bool = True):
         self.path = Path(path)
-        exists = self.path.exists() and self.path.stat().st_size > 0
-        if not exists and not create:
-            raise StoreError(f"{self.path}: no such results database")
+        self.readonly = not create
+        self._lock_fd: int | None = None
         if self.path.is_dir():
             raise StoreError(f"{self.path}: is a folder, not a results database")
+        if self.readonly and not self.path.is_file():
+            raise StoreError(f"{self.path}: no such results database")
+        if not self.readonly and not self.path.parent.is_dir():
+            raise StoreError(f"{self.path}: the folder {self.path.parent} does not exist")
         try:
-            self.db = sqlite3.connect(self.path, timeout=60.0, isolation_level=None)
-            self.db.execute("PRAGMA busy_timeout = 60000")
-            if exists:
-                self._check_ours()
+            if self.readonly:
+                uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"
+                self.db = sqlite3.connect(uri, uri=True, timeout=60.0, isolation_level=None)
             else:
-                self._create()
-            self.db.execute("PRAGMA journal_mode = WAL")
+                self._lock()
+                self.db = sqlite3.connect(self.path, timeout=60.0, isolation_level=None)
+            self.db.execute("PRAGMA busy_timeout = 60000")
+            tables = self._tables()
+            if not tables and not self.readonly:
+                self._create()  # new, empty, or left empty by a kill during creation
+            else:
+                self._check_ours(tables)
         except sqlite3.DatabaseError as exc:
+            self.close()
             raise StoreError(f"{self.path}: not a d4sumo results database ({exc})") from None
+        except BaseException:
+            self.close()
+            raise
+
+    def _lock(self) -> None:
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise StoreError(f"{self.path}: cannot open for writing ({exc.strerror})") from None
+        try:
+            # flock, not fcntl byte-range locks: those are SQLite's own and do not interact with flock
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise StoreError(f"{self.path}: another d4sumo command is writing to it; nothing was changed. "
+                             "Wait for it to finish, or use another --db") from None
+        self._lock_fd = fd
+
+    def _tables(self) -> set[str]:
+        return {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
 
     def close(self) -> None:
-        self.db.close()
+        db = getattr(self, "db", None)
+        if db is not None:
+            db.close()
+            self.db = None
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # releases the lock
+            self._lock_fd = None
 
     def __enter__(self) -> "Store":
         return self
@@ -125,24 +188,41 @@ class Store:
         self.close()
 
     def _create(self) -> None:
-        self.db.executescript(SCHEMA)  # idempotent; executescript commits on its own
-        with self._transaction():
-            self.db.execute("INSERT OR IGNORE INTO meta VALUES ('app', ?), ('schema_version', ?), ('created_by', ?)",
-                            (APP_ID, str(SCHEMA_VERSION), __version__))
+        # One transaction: a kill part-way leaves a hot journal that SQLite rolls back on the next
+        # open, back to an empty file that the next writer creates afresh.
+        statements = [f"{st.strip()};" for st in SCHEMA.split(";") if st.strip()]
+        script = "BEGIN IMMEDIATE;\n" + "\n".join(statements) + "\n" + (
+            "INSERT INTO meta VALUES ('app', {}), ('schema_version', {}), ('created_by', {});\nCOMMIT;".format(
+                *(_sql_string(v) for v in (APP_ID, str(SCHEMA_VERSION), __version__))))
+        try:
+            self.db.executescript(script)
+        except BaseException:
+            if self.db.in_transaction:
+                self.db.execute("ROLLBACK")
+            raise
 
-    def _check_ours(self) -> None:
-        tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    def _check_ours(self, tables: set[str]) -> None:
         if "meta" not in tables:
             raise StoreError(f"{self.path}: not a d4sumo results database (tables: {', '.join(sorted(tables)) or 'none'})")
         meta = dict(self.db.execute("SELECT key, value FROM meta"))
         if meta.get("app") != APP_ID:
             raise StoreError(f"{self.path}: not a d4sumo results database (app {meta.get('app')!r})")
-        version = int(meta.get("schema_version", "0"))
+        raw = meta.get("schema_version")
+        try:
+            version = int(raw)
+        except (TypeError, ValueError):
+            raise StoreError(f"{self.path}: damaged results database (schema version {raw!r} is not a number)") from None
         if version != SCHEMA_VERSION:
             raise StoreError(
                 f"{self.path}: written with results schema {version}, this d4sumo ({__version__}) reads schema "
                 f"{SCHEMA_VERSION}; nothing was changed. Use the d4sumo version that wrote it, or a new database"
             )
+        missing = TABLES - tables
+        if missing:
+            raise StoreError(f"{self.path}: damaged results database (missing tables: {', '.join(sorted(missing))})")
+        problem = self.db.execute("PRAGMA quick_check").fetchone()[0]
+        if problem != "ok":
+            raise StoreError(f"{self.path}: damaged results database ({problem})")
 
     def _transaction(self):
         db = self.db
@@ -158,6 +238,7 @@ class Store:
 
     # --- campaigns ------------------------------------------------------------------------------
 
+    @_guarded
     def open_campaign(self, definition: dict[str, Any], budget: int, sweep: str | None = None) -> int:
         """The id of the campaign with this definition, created if new; its budget grows to ``budget``."""
         key = campaign_key(definition)
@@ -173,10 +254,20 @@ class Store:
                 self.db.execute("UPDATE campaign SET budget = ? WHERE id = ?", (budget, row[0]))
             return int(row[0])
 
+    @_guarded
     def campaigns(self, sweep: str | None = None) -> list[CampaignRow]:
         query = "SELECT id, key, definition, budget, version, created_at, sweep FROM campaign"
         rows = self.db.execute(query + (" WHERE sweep = ?" if sweep else "") + " ORDER BY id", (sweep,) if sweep else ())
-        return [CampaignRow(r[0], r[1], json.loads(r[2]), r[3], r[4], r[5], r[6]) for r in rows]
+        return [self._campaign_row(r) for r in rows]
+
+    def _campaign_row(self, r) -> CampaignRow:
+        definition = _json(r[2], dict)
+        if definition is None or not {"config", "attack", "optimizer", "seed", "spec"} <= set(definition):
+            raise StoreError(f"{self.path}: damaged results database (campaign {r[0]}: its definition is not valid JSON "
+                             "with config, attack, optimizer, seed and spec)")
+        if not isinstance(r[3], int) or r[3] < 0:
+            raise StoreError(f"{self.path}: damaged results database (campaign {r[0]}: budget {r[3]!r})")
+        return CampaignRow(r[0], r[1], definition, r[3], r[4], r[5], r[6])
 
     def campaign(self, campaign_id: int) -> CampaignRow:
         for row in self.campaigns():
@@ -184,9 +275,11 @@ class Store:
                 return row
         raise StoreError(f"{self.path}: no campaign {campaign_id}")
 
+    @_guarded
     def meta(self) -> dict[str, str]:
         return dict(self.db.execute("SELECT key, value FROM meta"))
 
+    @_guarded
     def set_meta(self, key: str, value: str) -> None:
         with self._transaction():
             self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, value))
@@ -195,39 +288,103 @@ class Store:
 
     def add_sample(self, campaign_id: int, index: int, params, robustness: float | None, outcome: str,
                    collision: dict | None, min_gaps: dict | None, wall_s: float, error: str | None = None) -> int:
-        c = collision or {}
-        try:
-            cur = self.db.execute(
-                "INSERT INTO sample (campaign_id, idx, params, robustness, outcome, pair, time_s, position_m, "
-                "speed_diff_kmh, min_gaps, wall_s, error) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (campaign_id, index, json.dumps([float(v) for v in params]), robustness, outcome, c.get("pair"),
-                 c.get("time_s"), c.get("position_m"), c.get("speed_diff_kmh"),
-                 json.dumps(min_gaps) if min_gaps is not None else None, wall_s, error),
-            )
-        except sqlite3.IntegrityError:
-            raise StoreError(f"{self.path}: campaign {campaign_id} already has sample {index}") from None
-        return int(cur.lastrowid)
+        return self.add_samples(campaign_id, [(index, params, robustness, outcome, collision, min_gaps, wall_s, error)])[0]
 
-    _SAMPLE_COLUMNS = ("SELECT id, campaign_id, idx, params, robustness, outcome, pair, time_s, position_m, "
-                       "speed_diff_kmh, min_gaps, wall_s, error FROM sample")
+    @_guarded
+    def add_samples(self, campaign_id: int, samples: list[tuple]) -> list[int]:
+        """Store samples (index, params, robustness, outcome, collision, min_gaps, wall_s, error) of one
+        campaign in one transaction: all or none; returns their row ids."""
+        ids = []
+        with self._transaction():
+            for index, params, robustness, outcome, collision, min_gaps, wall_s, error in samples:
+                c = collision or {}
+                try:
+                    cur = self.db.execute(
+                        "INSERT INTO sample (campaign_id, idx, params, robustness, outcome, pair, time_s, position_m, "
+                        "speed_diff_kmh, min_gaps, wall_s, error) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        (campaign_id, index, json.dumps([float(v) for v in params]), robustness, outcome, c.get("pair"),
+                         c.get("time_s"), c.get("position_m"), c.get("speed_diff_kmh"),
+                         json.dumps(min_gaps) if min_gaps is not None else None, wall_s, error),
+                    )
+                except sqlite3.IntegrityError:
+                    raise StoreError(f"{self.path}: campaign {campaign_id} already has sample {index}") from None
+                ids.append(int(cur.lastrowid))
+        return ids
 
-    @staticmethod
-    def _sample_row(r) -> SampleRow:
-        return SampleRow(r[0], r[1], r[2], tuple(json.loads(r[3])), r[4], r[5], r[6], r[7], r[8], r[9],
-                         json.loads(r[10]) if r[10] else {}, r[11], r[12])
+    _SAMPLE_COLUMNS = ("SELECT s.id, s.campaign_id, s.idx, s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m, "
+                       "s.speed_diff_kmh, s.min_gaps, s.wall_s, s.error, c.id FROM sample s LEFT JOIN campaign c ON c.id = s.campaign_id")
+
+    def _sample_row(self, r) -> SampleRow:
+        """A stored row, checked: a damaged one is a clear error, never a wrong result."""
+        def bad(what: str) -> StoreError:
+            return StoreError(f"{self.path}: damaged results database (sample {r[0]}: {what})")
+
+        if r[13] is None:
+            raise bad(f"it belongs to no campaign (campaign_id {r[1]!r})")
+        params = _json(r[3], list)
+        if params is None or not params or not all(_finite(v) for v in params):
+            raise bad(f"parameters {r[3]!r} are not a JSON list of numbers")
+        if r[5] not in OUTCOMES:
+            raise bad(f"unknown outcome {r[5]!r}")
+        if r[5] == "error":
+            if r[4] is not None:
+                raise bad("an errored sample with a robustness")
+        elif not _finite(r[4]):
+            raise bad(f"robustness {r[4]!r}")
+        min_gaps = {} if r[10] is None else _json(r[10], dict)
+        if min_gaps is None or not all(_finite(v) for v in min_gaps.values()):
+            raise bad(f"minimum gaps {r[10]!r} are not a JSON object of numbers")
+        if (r[6] is None) != (r[5] in ("no_crash", "error")):
+            raise bad(f"outcome {r[5]} with collision {r[6]!r}")
+        if r[6] is not None and not all(_finite(v) for v in r[7:10]):
+            raise bad("a collision without time, position or speed difference")
+        if not _finite(r[11]) or not isinstance(r[2], int):
+            raise bad("index or wall time")
+        return SampleRow(r[0], r[1], r[2], tuple(float(v) for v in params), r[4], r[5], r[6], r[7], r[8], r[9],
+                         min_gaps, r[11], r[12])
 
     def samples(self, campaign_id: int | None = None) -> list[SampleRow]:
         return list(self.iter_samples(campaign_id))
 
     def iter_samples(self, campaign_id: int | None = None) -> Iterator[SampleRow]:
-        if campaign_id is None:
-            rows = self.db.execute(self._SAMPLE_COLUMNS + " ORDER BY campaign_id, idx")
-        else:
-            rows = self.db.execute(self._SAMPLE_COLUMNS + " WHERE campaign_id = ? ORDER BY idx", (campaign_id,))
-        return (self._sample_row(r) for r in rows)
+        try:
+            if campaign_id is None:
+                rows = self.db.execute(self._SAMPLE_COLUMNS + " ORDER BY s.campaign_id, s.idx")
+            else:
+                rows = self.db.execute(self._SAMPLE_COLUMNS + " WHERE s.campaign_id = ? ORDER BY s.idx", (campaign_id,))
+            for r in rows:
+                yield self._sample_row(r)
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path}: damaged or unreadable results database ({exc})") from None
 
+    @_guarded
     def sample(self, sample_id: int) -> SampleRow:
-        row = self.db.execute(self._SAMPLE_COLUMNS + " WHERE id = ?", (sample_id,)).fetchone()
+        row = self.db.execute(self._SAMPLE_COLUMNS + " WHERE s.id = ?", (sample_id,)).fetchone()
         if row is None:
-            raise StoreError(f"{self.path}: no sample {sample_id}")
+            last = self.db.execute("SELECT MIN(id), MAX(id) FROM sample").fetchone()
+            held = f"it holds sample ids {last[0]}..{last[1]}" if last[0] is not None else "it holds no samples"
+            raise StoreError(f"{self.path}: no sample {sample_id} ({held})")
         return self._sample_row(row)
+
+    @_guarded
+    def count_samples(self, campaign_id: int) -> int:
+        return int(self.db.execute("SELECT COUNT(*) FROM sample WHERE campaign_id = ?", (campaign_id,)).fetchone()[0])
+
+
+def _json(text: Any, kind: type) -> Any:
+    """JSON text decoded if it is of ``kind``, else None."""
+    if not isinstance(text, str):
+        return None
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return None
+    return value if isinstance(value, kind) else None
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _sql_string(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"

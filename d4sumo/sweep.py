@@ -14,9 +14,9 @@ A sweep file is TOML:
     [search]  samples = 100
     [scenario], [vehicle], [controller], [attack], [spec]: fixed values, as in a config file
 
-Every campaign is built and checked before anything runs. Each worker runs whole campaigns and
-commits every sample to the database itself (SQLite, WAL), so killing the sweep loses nothing
-finished; running it again skips complete campaigns and resumes the others.
+Every campaign is built and checked before anything runs. Workers send every few samples back to
+the client, which alone writes the database, so killing the sweep loses nothing it stored; running
+it again skips complete campaigns and resumes the others.
 """
 
 from __future__ import annotations
@@ -26,18 +26,21 @@ import itertools
 import json
 import logging
 import os
+import re
+import signal
+import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
 
-from .campaign import Campaign, run_campaign
+from .campaign import Campaign, CampaignRunner, Evaluator, SampleResult, stored_results
 from .config import EpisodeConfig, read_toml
 from .errors import ConfigError, D4sumoError
-from .scenarios import build_road
+from .scenarios import NetworkSource, build_road, network_source
 from .simulation import check_road
 from .spec import Specification
 from .store import Store, StoreError, campaign_key
@@ -130,14 +133,24 @@ class Sweep:
 
 
 # --- running ---------------------------------------------------------------------------------
-
+#
+# The client (the process that runs `d4sumo sweep`) is the only process that opens the database.
+# Workers, local processes or Dask workers, run a campaign a chunk of samples at a time: a chunk
+# task carries the campaign, its road's XML and the optimiser's state, and returns the chunk's
+# samples and the new state. The client stores each chunk in one transaction and sends the next
+# chunk. A worker that dies loses only its unfinished chunk, which the client sends again; workers
+# need nothing but the installed package.
 
 def claim(store: Store, sweep: Sweep) -> None:
     """Mark the database as this sweep's, refusing one written by anything else."""
     meta = store.meta()
     mine = {"name": sweep.name, "fingerprint": sweep.fingerprint()}
     if "sweep" in meta:
-        theirs = json.loads(meta["sweep"])
+        try:
+            theirs = json.loads(meta["sweep"])
+            theirs["name"], theirs["fingerprint"]
+        except (ValueError, TypeError, KeyError):
+            raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
@@ -160,16 +173,46 @@ def stored_counts(store: Store, sweep_name: str) -> tuple[int, int]:
     return int(row[0]), int(row[1])
 
 
-def run_one(campaign: Campaign, db_path: str, sweep_name: str) -> tuple[int, int]:
-    """Worker task: run or resume one campaign into the database; returns (campaign id, successes).
+CHUNK_SAMPLES = 10  # at most this many samples per task ...
+CHUNK_WALL_S = 2.0  # ... and a task returns after this long, so results reach the client often
+MAX_TASK_FAILURES = 3  # a chunk that fails this often (a bug, not a lost worker) stops the sweep
 
-    One BLAS thread per task: the GP's matrices are small, and a BLAS pool per worker process
-    oversubscribes the cores (two workers on two cores ran no faster than one)."""
+
+@dataclass(frozen=True)
+class Chunk:
+    """A task: continue ``campaign`` from ``state`` (None: from the ``stored`` samples) for a chunk."""
+
+    campaign: Campaign
+    network: NetworkSource
+    stored: tuple[SampleResult, ...]
+    state: tuple | None
+
+
+_EVALUATORS: dict[str, Evaluator] = {}  # per worker process: roads built and formulas parsed once
+
+
+def run_chunk(chunk: Chunk) -> tuple[list[SampleResult], tuple]:
+    """Worker task: the next samples of a campaign (at least one), and the optimiser's state after them."""
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1), Store(db_path) as store:
-        summary = run_campaign(campaign, store, sweep=sweep_name)
-    return summary.campaign_id, summary.count("success")
+    key = campaign_key(chunk.campaign.definition())
+    evaluator = _EVALUATORS.get(key)
+    if evaluator is None:
+        if len(_EVALUATORS) >= 16:
+            _EVALUATORS.clear()
+        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network))
+    # One BLAS thread per task: the GP's matrices are small, and a BLAS pool per worker process
+    # oversubscribes the cores (two workers on two cores ran no faster than one).
+    with threadpool_limits(limits=1):
+        runner = CampaignRunner(chunk.campaign, evaluator, stored=chunk.stored, state=chunk.state,
+                                where=f"campaign {key}")
+        results: list[SampleResult] = []
+        t0 = time.monotonic()
+        while runner.done < chunk.campaign.samples and len(results) < CHUNK_SAMPLES:
+            results.append(runner.step())
+            if time.monotonic() - t0 > CHUNK_WALL_S:
+                break
+    return results, runner.state
 
 
 @dataclass
@@ -178,7 +221,23 @@ class SweepResult:
     samples: int
     successes: int
     wall_s: float
-    interrupted: bool = False
+
+
+@dataclass
+class _Active:
+    """The client's view of one running campaign."""
+
+    campaign: Campaign
+    campaign_id: int
+    network: NetworkSource
+    stored: tuple[SampleResult, ...]
+    state: tuple | None = None
+    done: int = 0
+    failures: int = 0
+
+    def chunk(self) -> Chunk:
+        # the stored samples travel only until a state exists
+        return Chunk(self.campaign, self.network, self.stored if self.state is None else (), self.state)
 
 
 def run_sweep(
@@ -189,78 +248,210 @@ def run_sweep(
     dask_address: str | None = None,
     dask_timeout_s: float = 30.0,
     progress: Callable[[int, int, int], None] | None = None,
-    poll_s: float = 0.5,
 ) -> SweepResult:
     """Run every campaign of the sweep not yet complete in ``db_path``. ``progress(done, total, successes)``
-    is called as samples land in the database."""
+    is called as samples are stored. ``dask_address``: a scheduler's address, or "local" for a local
+    Dask cluster of ``workers`` processes."""
     sweep.check()
-    db_path = str(Path(db_path).resolve())
+    if dask_address is not None:
+        dask_address = check_dask_address(dask_address)
+    workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
+    sources: dict[str, NetworkSource] = {}
     with Store(db_path) as store:
         claim(store, sweep)
-        todo = []
+        todo: list[_Active] = []
         for c in sweep.campaigns:
             cid = store.open_campaign(c.definition(), c.samples, sweep.name)
-            if len(store.samples(cid)) < c.samples:
-                todo.append(c)
+            stored = stored_results(store, cid, c.samples)
+            if len(stored) < c.samples:
+                if c.config.network not in sources:
+                    sources[c.config.network] = network_source(c.config.network)
+                todo.append(_Active(c, cid, sources[c.config.network], tuple(stored), done=len(stored)))
         total = sweep.samples
+        counts = list(stored_counts(store, sweep.name))
 
-        def report() -> tuple[int, int]:
-            done, successes = stored_counts(store, sweep.name)
+        def store_results(active: _Active, results: list[SampleResult]) -> None:
+            store.add_samples(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
+                                                    r.wall_s, r.error) for r in results])
+            active.done += len(results)
+            counts[0] += len(results)
+            counts[1] += sum(r.outcome == "success" for r in results)
             if progress:
-                progress(min(done, total), total, successes)
-            return done, successes
+                progress(min(counts[0], total), total, counts[1])
 
-        report()
+        if progress:
+            progress(min(counts[0], total), total, counts[1])
         if todo:
             log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
             if dask_address:
-                _run_dask(todo, db_path, sweep.name, dask_address, dask_timeout_s, report, poll_s)
+                _run_dask(todo, store_results, dask_address, dask_timeout_s, workers)
+            elif workers == 1:
+                _run_inline(todo, store_results)
             else:
-                _run_local(todo, db_path, sweep.name, workers or os.cpu_count() or 1, report, poll_s)
-        done, successes = report()
-    return SweepResult(len(sweep.campaigns), done, successes, time.perf_counter() - t0)
+                _run_local(todo, store_results, workers)
+    return SweepResult(len(sweep.campaigns), counts[0], counts[1], time.perf_counter() - t0)
 
 
-def _run_local(todo, db_path, name, workers, report, poll_s) -> None:
-    if workers == 1:
-        for c in todo:
-            run_one(c, db_path, name)
-            report()
-        return
-    # spawn: workers start clean (libsumo keeps one simulation per process)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        pending = {pool.submit(run_one, c, db_path, name) for c in todo}
-        try:
-            while pending:
-                finished, pending = wait(pending, timeout=poll_s, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    f.result()
-                report()
-        except BrokenProcessPool:
-            raise D4sumoError("a worker process died; every sample it had finished is stored: run the same command to resume") from None
-        except BaseException:
-            for f in pending:
-                f.cancel()
-            raise
+def _accept(active: _Active, chunk_result: tuple[list[SampleResult], tuple], store_results) -> bool:
+    """Store a finished chunk; True when its campaign is complete."""
+    results, state = chunk_result
+    if [r.index for r in results] != list(range(active.done, active.done + len(results))):
+        raise D4sumoError(f"campaign {active.campaign_id}: a worker returned samples out of order; nothing of them was stored")
+    store_results(active, results)
+    active.state = state
+    active.failures = 0
+    return active.done >= active.campaign.samples
 
 
-def _run_dask(todo, db_path, name, address, timeout_s, report, poll_s) -> None:
+def _run_inline(todo: list[_Active], store_results) -> None:
+    for active in todo:
+        while active.done < active.campaign.samples:
+            _accept(active, run_chunk(active.chunk()), store_results)
+
+
+def _run_local(todo: list[_Active], store_results, workers: int) -> None:
+    """Chunks on local worker processes (spawned clean: libsumo keeps one simulation per process).
+    Campaigns run a few at a time, so an interrupted sweep leaves few of them half done."""
+    queue = list(todo)
+    running: dict[Future, _Active] = {}
+    pool = _new_pool(workers)
     try:
-        from distributed import Client
+        while queue or running:
+            while queue and len(running) < workers + 1:
+                active = queue.pop(0)
+                running[pool.submit(run_chunk, active.chunk())] = active
+            finished, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
+            for future in finished:
+                active = running.pop(future)
+                try:
+                    chunk_result = future.result()
+                except BrokenProcessPool:
+                    # a worker died (killed, out of memory): its chunk and the others in flight run again
+                    _check_failures(active, "its worker process died")
+                    for other in running.values():
+                        queue.insert(0, other)
+                    queue.insert(0, active)
+                    running.clear()
+                    _kill_pool(pool)
+                    pool = _new_pool(workers)
+                    break
+                if not _accept(active, chunk_result, store_results):
+                    running[pool.submit(run_chunk, active.chunk())] = active
+    finally:
+        _kill_pool(pool)
+
+
+def _check_failures(active: _Active, why: str) -> None:
+    active.failures += 1
+    if active.failures >= MAX_TASK_FAILURES:
+        raise D4sumoError(f"campaign {active.campaign_id} failed {active.failures} times ({why}); every finished sample "
+                          "is stored: run the same command to resume")
+    log.warning("campaign %d: %s; running its chunk again", active.campaign_id, why)
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                               initargs=(os.getpid(),))
+
+
+def _kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool now: queued chunks are dropped and running ones killed (workers never write, so
+    nothing half-written is left); waits until the processes are gone."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        if p.is_alive():
+            p.kill()
+    for p in processes:
+        p.join(timeout=5)
+
+
+def _worker_init(parent_pid: int) -> None:
+    """A local worker: Ctrl-C is the client's to handle, and the worker dies with the client."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:  # Linux: the kernel kills the worker when its parent dies, even by kill -9
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+    def watch() -> None:  # everywhere else: notice within a second
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+# --- Dask --------------------------------------------------------------------------------------
+
+_DASK_ADDRESS = re.compile(r"^(?:(tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
+
+
+def check_dask_address(address: str) -> str:
+    """``local``, or a scheduler address such as tcp://10.0.0.5:8786; anything else is a ConfigError."""
+    if address == "local":
+        return address
+    m = _DASK_ADDRESS.match(address.strip()) if isinstance(address, str) else None
+    if not m or not 1 <= int(m.group(3)) <= 65535:
+        raise ConfigError("--dask", address, "'local' or a scheduler address PROTOCOL://HOST:PORT, e.g. tcp://10.0.0.5:8786")
+    return address.strip() if m.group(1) else f"tcp://{address.strip()}"
+
+
+def _run_dask(todo: list[_Active], store_results, address: str, timeout_s: float, workers: int) -> None:
+    try:
+        from distributed import Client, LocalCluster, as_completed
     except ImportError:  # pragma: no cover - a core dependency
         raise D4sumoError("--dask needs the distributed package (pip install 'dask[distributed]')") from None
+    cluster = None
     try:
-        client = Client(address, timeout=timeout_s)
-    except (OSError, TimeoutError) as exc:
-        raise D4sumoError(f"--dask: no Dask scheduler answered at {address} ({exc})") from None
-    with client:
-        # pure=False: a resubmitted campaign runs again (it resumes from the database)
-        futures = [client.submit(run_one, c, db_path, name, pure=False, retries=1) for c in todo]
-        pending = list(futures)
-        while pending:
-            time.sleep(poll_s)
-            for f in [f for f in pending if f.done()]:
-                f.result()  # re-raises a campaign's error here
-                pending.remove(f)
-            report()
+        if address == "local":
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            log.warning("local Dask cluster: dashboard at %s", cluster.dashboard_link)
+            address = cluster.scheduler_address
+        try:
+            client = Client(address, timeout=timeout_s)
+        except (OSError, TimeoutError) as exc:
+            raise D4sumoError(f"--dask: no Dask scheduler answered at {address} within {timeout_s:g} s ({exc})") from None
+        with client:
+            slots = max(1, sum(client.nthreads().values()))
+            queue = list(todo)
+            running: dict = {}
+            futures = as_completed()
+
+            def submit(active: _Active) -> None:
+                # pure=False: the same chunk sent again after a failure is run again, not looked up
+                future = client.submit(run_chunk, active.chunk(), pure=False)
+                running[future] = active
+                futures.add(future)
+
+            while queue and len(running) < slots + 1:
+                submit(queue.pop(0))
+            for future in futures:
+                active = running.pop(future)
+                if future.status == "error":
+                    exc = future.exception()
+                    if isinstance(exc, D4sumoError):
+                        raise exc
+                    _check_failures(active, f"{type(exc).__name__}: {exc}")
+                    submit(active)
+                    continue
+                result = future.result()
+                future.release()
+                if not _accept(active, result, store_results):
+                    submit(active)
+                elif queue:
+                    submit(queue.pop(0))
+                while queue and len(running) < max(1, sum(client.nthreads().values())) + 1:
+                    submit(queue.pop(0))
+    finally:
+        if cluster is not None:
+            cluster.close()

@@ -47,7 +47,7 @@ class Collision:
     leader: str
     follower: str
     time_s: float
-    position_m: float  # along the road, where SUMO saw the overlap
+    position_m: float  # along the road: the follower's front bumper
     speed_diff_kmh: float  # follower speed minus leader speed at the collision
 
     @property
@@ -59,12 +59,10 @@ class Collision:
         return "v0" in (self.leader, self.follower)
 
     def to_dict(self) -> dict:
-        return {
-            "pair": self.pair,
-            "time_s": round(self.time_s, 6),
-            "position_m": round(self.position_m, 4),
-            "speed_diff_kmh": round(self.speed_diff_kmh, 4),
-        }
+        # Full precision (the time only loses the step count's float noise): what is stored must
+        # agree with the trace exactly, and printing rounds anyway.
+        return {"pair": self.pair, "time_s": round(self.time_s, 9), "position_m": self.position_m,
+                "speed_diff_kmh": self.speed_diff_kmh}
 
 
 @dataclass(frozen=True)

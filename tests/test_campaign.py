@@ -20,8 +20,9 @@ def signature(summary):
 
 
 def test_one_seed_reproduces_a_campaign_exactly(tmp_path):
-    a = run_campaign(SMALL, Store(tmp_path / "a.sqlite"))
-    b = run_campaign(SMALL, Store(tmp_path / "b.sqlite"))
+    with Store(tmp_path / "a.sqlite") as sa, Store(tmp_path / "b.sqlite") as sb:
+        a = run_campaign(SMALL, sa)
+        b = run_campaign(SMALL, sb)
     assert signature(a) == signature(b)
     c = run_campaign(SMALL.replace(seed=4))
     assert signature(c) != signature(a)
@@ -38,8 +39,8 @@ def test_an_interrupted_campaign_resumes_with_nothing_lost_or_counted_twice(tmp_
         if sample.index == 10:
             raise Interrupt
 
-    with pytest.raises(Interrupt):
-        run_campaign(SMALL, Store(path), on_sample=stop_after_eleven)
+    with pytest.raises(Interrupt), Store(path) as store:
+        run_campaign(SMALL, store, on_sample=stop_after_eleven)
     with Store(path) as store:
         assert len(store.samples()) == 11
         resumed = run_campaign(SMALL, store)
@@ -104,3 +105,54 @@ def test_bad_campaigns_name_the_field(changes, field):
     with pytest.raises(ConfigError) as info:
         Campaign(**changes)
     assert info.value.field == field
+
+
+class Raising:
+    """A user's follower controller with a bug: it raises on a gap below 3 m."""
+
+    from d4sumo.control import SwitchingParams as Params
+
+    def __init__(self, params, **kwargs):
+        from d4sumo.control import SwitchingController
+
+        self.inner = SwitchingController(params, **kwargs)
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if gap_m < 3.0:
+            raise ZeroDivisionError("too close")
+        return self.inner.command(gap_m, speed_mps, lead_speed_mps)
+
+
+def test_a_users_controller_that_raises_is_an_errored_sample_and_the_campaign_goes_on(tmp_path):
+    from d4sumo.config import ControllerConfig, EpisodeConfig
+
+    config = EpisodeConfig(controller=ControllerConfig(cls="test_campaign:Raising"), setpoint_m=4.0)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_campaign(Campaign(config=config, optimizer="random", samples=6, seed=0), store)
+        rows = store.samples()
+    assert len(rows) == 6 and summary.count("error") >= 1
+    errored = [r for r in rows if r.outcome == "error"]
+    assert all("ZeroDivisionError: too close" in r.error and r.robustness is None for r in errored)
+
+
+def test_an_evaluator_of_another_campaign_is_refused_before_anything_is_written(tmp_path):
+    """Regression: run_campaign stored another campaign's results under this campaign, silently."""
+    from d4sumo.campaign import Evaluator
+
+    path = tmp_path / "r.sqlite"
+    other = Evaluator(SMALL.replace(seed=9))
+    with Store(path) as store:
+        with pytest.raises(ValueError, match="another campaign"):
+            run_campaign(SMALL, store, evaluator=other)
+        assert store.campaigns() == [] and store.samples() == []
+
+
+def test_numpy_scalars_are_accepted_and_7_and_7_0_are_the_same_campaign():
+    from d4sumo.config import EpisodeConfig
+    from d4sumo.store import campaign_key
+
+    a = Campaign(config=EpisodeConfig(setpoint_m=7, followers=np.int64(3), speed_mps=np.float32(25.0)), samples=np.int64(5),
+                 seed=np.int32(1), delta_s=np.float64(6))
+    b = Campaign(config=EpisodeConfig(setpoint_m=7.0, followers=3, speed_mps=25.0), samples=5, seed=1, delta_s=6.0)
+    assert campaign_key(a.definition()) == campaign_key(b.definition())
+    assert type(a.config.setpoint_m) is float and type(a.seed) is int

@@ -67,7 +67,7 @@ def test_cross_entropy_refits_its_distribution_on_the_elite():
 
 
 def test_cross_entropy_samples_stay_in_the_box_near_its_edges():
-    ce = CrossEntropy(LOWER, UPPER, 10, np.random.default_rng(1))
+    ce = CrossEntropy(LOWER, UPPER, 50, np.random.default_rng(1))
     ce.mean = UPPER.copy()  # mass at the corner: truncation must keep samples inside
     for _ in range(50):
         x = ce.ask()
@@ -77,3 +77,54 @@ def test_cross_entropy_samples_stay_in_the_box_near_its_edges():
 def test_unknown_optimizer_lists_the_allowed_ones():
     with pytest.raises(ConfigError, match="bo, ce, random, halton"):
         make_optimizer("annealing", LOWER, UPPER, budget=10, rng=np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("name", OPTIMIZERS)
+def test_nothing_is_proposed_past_the_budget(name):
+    opt = make_optimizer(name, LOWER, UPPER, budget=12, rng=np.random.default_rng(0))
+    for _ in range(12):
+        x = opt.ask()
+        opt.tell(x, bowl(x))
+    with pytest.raises(ValueError, match="budget of 12 samples is spent"):
+        opt.ask()
+
+
+@pytest.mark.parametrize("name", OPTIMIZERS)
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_nan_or_infinite_score_does_not_break_later_proposals(name, bad):
+    """Regression: an errored sample told as NaN/inf made the GP's fit fail or its proposals NaN."""
+    opt = make_optimizer(name, LOWER, UPPER, budget=30, rng=np.random.default_rng(0))
+    for i in range(30):
+        x = opt.ask()
+        assert np.all(np.isfinite(x)) and np.all(x >= LOWER) and np.all(x <= UPPER)
+        opt.tell(x, bad if i in (3, 12, 17) else bowl(x))
+    assert all(np.isfinite(opt.y)) and opt.y[12] == min(opt.y[:12])
+
+
+def test_bo_keeps_the_learned_noise_between_relearnings():
+    """Regression: between re-learnings the GP was refit with noise 0 (skopt zeroes the white kernel
+    in kernel_ after a fit, and the next fit reused that kernel_)."""
+    rng = np.random.default_rng(3)
+    opt = make_optimizer("bo", LOWER, UPPER, budget=40, rng=np.random.default_rng(0), options={"refit_every": 10})
+    for i in range(25):
+        x = opt.ask()
+        opt.tell(x, rng.normal(0, 1.0))  # pure noise: the GP must learn a noise level
+        if i == 19:  # re-learned at 20 samples
+            learned = opt._noise
+    assert learned > 1e-4
+    assert opt._noise == learned and opt._gp.noise_ == pytest.approx(learned)
+
+
+def test_optimizer_options_are_checked_and_defaults_filled():
+    from d4sumo.optimizers import resolve_options
+
+    assert resolve_options("ce", {"batch_size": np.int64(20)}) == {"batch_size": 20, "elite_fraction": 0.2, "smoothing": 0.7,
+                                                                   "min_std_fraction": 0.02}
+    with pytest.raises(ConfigError, match="search.ce.batchsize"):
+        resolve_options("ce", {"batchsize": 20})
+    with pytest.raises(ConfigError, match="search.bo.xi"):
+        resolve_options("bo", {"xi": float("nan")})
+    with pytest.raises(ConfigError, match="random has no options"):
+        resolve_options("random", {"x": 1})
+    ce = make_optimizer("ce", LOWER, UPPER, budget=40, rng=np.random.default_rng(0), options={"batch_size": 20})
+    assert ce.batch_size == 20 and ce.elite_count == 4

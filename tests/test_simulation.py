@@ -116,3 +116,27 @@ def test_a_road_too_short_or_too_slow_is_refused(road):
     with pytest.raises(ConfigError, match="fits on"):
         cfg = EpisodeConfig(duration_s=200.0)
         simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+
+
+def test_an_overlap_sumo_does_not_report_ends_the_episode_at_once(road):
+    """Regression: SUMO ignores overlaps up to 1 mm, so this 0.23 mm overlap at 3.85 s was missed and
+    the episode ran on (outcome, collision time and minimum gaps disagreed)."""
+    config = EpisodeConfig(setpoint_m=6.118633151283105, start="steady")
+    values = [-0.7434975895033542, -0.00799454828211621, -0.7807212009393558, -0.3290245197619086, 0.6116075492610233,
+              -0.45921552198458704, 0.7687692730609377, -0.051854840905022126, -0.23664748282734083]
+    episode = simulate(config, knots_signal(values, config), road=road)
+    gap = episode.trace["gap_2"][-1]
+    assert -1e-3 < gap < 0
+    assert episode.outcome == "success" and episode.first_collision.pair == "v2-v3"
+    assert episode.first_collision.time_s == pytest.approx(3.85)
+    assert episode.min_gaps_m()["v2-v3"] == gap
+
+
+def test_warmup_episodes_in_sumo_match_the_reference_integration(road):
+    config = EpisodeConfig(start="warmup", setpoint_m=9.3)
+    u = np.full(config.steps, np.nan)
+    u[config.attack_start_step:] = knots_signal(ATTACKER_CRASH_KNOTS, EpisodeConfig())
+    episode = simulate(config, u, road=road)
+    reference = integrate(config, u, road.speed_limit_mps)
+    assert episode.outcome == reference.outcome and episode.collisions[0].pair == reference.collisions[0].pair
+    assert episode.trace.times_s[-1] == reference.trace.times_s[-1] > config.warmup_s

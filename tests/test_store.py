@@ -47,6 +47,7 @@ def test_another_programs_sqlite_is_refused_untouched(tmp_path):
 
 
 def test_a_database_from_another_schema_version_is_refused_untouched(tmp_path):
+    """Version 1 databases (WAL journal, collisions as SUMO reported them) are refused, not mixed in."""
     path = tmp_path / "old.sqlite"
     Store(path).close()
     db = sqlite3.connect(path)
@@ -63,3 +64,107 @@ def test_opening_a_missing_database_for_reading_is_an_error(tmp_path):
     with pytest.raises(StoreError, match="no such results database"):
         Store(tmp_path / "nope.sqlite", create=False)
     assert not (tmp_path / "nope.sqlite").exists()
+
+
+def test_a_kill_in_the_middle_of_creating_the_schema_leaves_a_database_the_next_run_creates(tmp_path):
+    """Regression: kills in the first milliseconds left tables without the meta row, refused ever after."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "r.sqlite"
+    code = f"""
+import os, d4sumo.store as st
+real = st.Store._create
+def dying(self):
+    self.db.executescript("BEGIN IMMEDIATE; CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL); "
+                          "CREATE TABLE campaign (id INTEGER PRIMARY KEY);")
+    os._exit(9)  # killed: schema half made, not committed
+st.Store._create = dying
+st.Store({str(path)!r})
+"""
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 9
+    assert path.exists()
+    with Store(path) as store:  # rolled back and created afresh
+        assert store.meta()["schema_version"] == str(SCHEMA_VERSION)
+        assert store.campaigns() == []
+
+
+def test_a_second_writer_is_refused_and_readers_are_not(tmp_path):
+    path = tmp_path / "r.sqlite"
+    with Store(path) as writer:
+        writer.open_campaign(DEFINITION, 10)
+        with pytest.raises(StoreError, match="another d4sumo command is writing to it"):
+            Store(path)
+        with Store(path, create=False) as reader:
+            assert len(reader.campaigns()) == 1
+    with Store(path):  # released on close
+        pass
+
+
+def test_readers_open_read_only_and_leave_no_side_files(tmp_path):
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        store.add_sample(store.open_campaign(DEFINITION, 10), 0, [0.1], -0.5, "no_crash", None, {"v0-v1": 3.0}, 0.01)
+    before = path.read_bytes()
+    with Store(path, create=False) as reader:
+        assert len(reader.samples()) == 1
+        with pytest.raises(sqlite3.OperationalError, match="readonly"):
+            reader.db.execute("DELETE FROM sample")
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
+
+
+def damage(path, sql, *params):
+    db = sqlite3.connect(path)
+    db.execute(sql, params)
+    db.commit()
+    db.close()
+
+
+@pytest.fixture
+def one_sample(tmp_path):
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        cid = store.open_campaign(DEFINITION, 10)
+        store.add_sample(cid, 0, [0.1, 0.2], 0.3, "success",
+                         {"pair": "v1-v2", "time_s": 3.0, "position_m": 50.0, "speed_diff_kmh": 9.0}, {"v0-v1": 1.0}, 0.01)
+    return path
+
+
+@pytest.mark.parametrize(
+    "sql, message",
+    [
+        ("UPDATE sample SET params = '[0.1, '", "parameters"),
+        ("UPDATE sample SET params = '[\"a\"]'", "parameters"),
+        ("UPDATE sample SET outcome = 'victory'", "unknown outcome 'victory'"),
+        ("UPDATE sample SET min_gaps = '{bad json'", "minimum gaps"),
+        ("UPDATE sample SET pair = NULL", "outcome success with collision None"),
+        ("UPDATE sample SET robustness = NULL", "robustness None"),
+        ("UPDATE sample SET campaign_id = 7", "belongs to no campaign"),
+        ("UPDATE campaign SET definition = '{\"config\": 1'", "definition is not valid JSON"),
+        ("UPDATE meta SET value = 'two' WHERE key = 'schema_version'", "schema version 'two' is not a number"),
+        ("DROP TABLE sample", "missing tables: sample"),
+    ],
+)
+def test_a_damaged_row_or_table_is_a_clear_error_when_read(one_sample, sql, message):
+    damage(one_sample, sql)
+    before = one_sample.read_bytes()
+    with pytest.raises(StoreError, match=message):
+        with Store(one_sample, create=False) as store:
+            store.campaigns()
+            store.samples()
+    with pytest.raises(StoreError, match=message):
+        with Store(one_sample) as store:
+            store.campaigns()
+            store.samples()
+    assert one_sample.read_bytes() == before
+
+
+def test_a_malformed_page_is_a_clear_error(one_sample):
+    data = bytearray(one_sample.read_bytes())
+    page = 4096
+    data[2 * page + 10: 2 * page + 400] = b"\xff" * 390  # garble the second page's cells
+    one_sample.write_bytes(bytes(data))
+    with pytest.raises(StoreError, match="damaged|not a d4sumo"):
+        with Store(one_sample, create=False) as store:
+            store.samples()

@@ -135,27 +135,141 @@ def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
     assert "no Dask scheduler answered" in capsys.readouterr().err
 
 
-def test_campaign_tasks_run_with_one_blas_thread(tmp_path, monkeypatch):
+def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
     """Regression: each worker's BLAS pool used every core, so two workers ran no faster than one."""
     import numpy  # noqa: F401  (loads the BLAS library threadpoolctl inspects)
     from threadpoolctl import threadpool_info
 
     import d4sumo.sweep as sweep_module
+    from d4sumo.scenarios import network_source
 
     seen = []
 
-    def fake_run_campaign(campaign, store, sweep):
+    def fake_step(self):
         seen.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
+        raise StopIteration
 
-        class Summary:
-            campaign_id = 1
-
-            @staticmethod
-            def count(outcome):
-                return 0
-
-        return Summary()
-
-    monkeypatch.setattr(sweep_module, "run_campaign", fake_run_campaign)
-    sweep_module.run_one(Sweep.load(write(tmp_path, TINY)).campaigns[0], str(tmp_path / "r.sqlite"), "tiny")
+    monkeypatch.setattr(sweep_module.CampaignRunner, "step", fake_step)
+    campaign = Sweep.load(write(tmp_path, TINY)).campaigns[0]
+    with pytest.raises(StopIteration):
+        sweep_module.run_chunk(sweep_module.Chunk(campaign, network_source("highway_4lane"), (), None))
     assert seen and all(n == 1 for n in seen)
+
+
+# --- processes: nothing outlives the command, nothing is lost or doubled -----------------------
+
+
+def children(pid):
+    """Processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    fields = fh.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def alive(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def count_samples(db):
+    try:
+        return sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5).execute("SELECT COUNT(*) FROM sample").fetchone()[0]
+    except sqlite3.Error:
+        return 0
+
+
+def start_sweep(path, db, *extra):
+    cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "2", "--quiet", *extra]
+    return cmd, subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def wait_for_samples(db, n, timeout=90):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        if count_samples(db) >= n:
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"fewer than {n} samples in {timeout} s")
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGINT to the group", "kill -9 of the parent alone"])
+def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_path, how):
+    """Regression: in 7 of 7 kills both workers and the resource tracker lived on and wrote hundreds
+    more samples."""
+    path = write(tmp_path, TINY.replace("samples = 6", "samples = 40"))
+    db = tmp_path / "r.sqlite"
+    cmd, proc = start_sweep(path, db)
+    wait_for_samples(db, 20)
+    workers = [p for p in children(proc.pid)]
+    assert len(workers) >= 2  # the pool's processes (and the resource tracker)
+    t0 = time.time()
+    if how == "SIGTERM":
+        proc.send_signal(signal.SIGTERM)
+    elif how == "SIGINT to the group":
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+    else:
+        proc.kill()
+    proc.wait(timeout=10)
+    while any(alive(p) for p in workers) and time.time() - t0 < 10:
+        time.sleep(0.1)
+    assert not any(alive(p) for p in workers), "a worker outlived its sweep"
+    assert time.time() - t0 < 6
+    err = proc.stderr.read().decode()
+    assert "Traceback" not in err
+    if how != "kill -9 of the parent alone":
+        assert proc.returncode in (130, 143) and "resume" in err
+    stored = count_samples(db)
+    time.sleep(1.5)
+    assert count_samples(db) == stored, "samples were written after the sweep was killed"
+    assert subprocess.run(cmd, timeout=300, capture_output=True).returncode == 0
+    rows = outcomes(db)
+    assert len(rows) == 160 and len({(r[0], r[1]) for r in rows}) == 160
+    reference = tmp_path / "ref.sqlite"
+    run_sweep(Sweep.load(path), reference, workers=1)
+    assert rows == outcomes(reference)
+
+
+@pytest.mark.sumo
+def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp_path):
+    """Regression: two runs of one sweep on one database both crashed part-way ("already has sample 0")."""
+    path = write(tmp_path, TINY.replace("samples = 6", "samples = 30"))
+    db = tmp_path / "r.sqlite"
+    cmd, first = start_sweep(path, db)
+    wait_for_samples(db, 5)
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert second.returncode == 2 and second.stderr.count("\n") == 1
+    assert "another d4sumo command is writing to it" in second.stderr
+    assert first.wait(timeout=300) == 0
+    rows = outcomes(db)
+    assert len(rows) == 120 and len({(r[0], r[1]) for r in rows}) == 120
+
+
+@pytest.mark.sumo
+def test_a_kill_while_the_database_is_created_never_leaves_one_the_next_run_refuses(tmp_path):
+    """Regression: kills in the first milliseconds left tables without the meta row."""
+    db = tmp_path / "r.sqlite"
+    cmd = [sys.executable, "-m", "d4sumo.cli", "falsify", "--optimizer", "random", "--samples", "2", "--db", str(db), "--quiet"]
+    for delay in (0.3, 0.45, 0.6, 0.75, 0.9, 1.1):
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        proc.kill()
+        proc.wait()
+        from d4sumo.store import Store as S
+
+        if db.exists() and db.stat().st_size:
+            with S(db):  # opens (and if needed, creates) cleanly
+                pass
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr

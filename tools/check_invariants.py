@@ -1,0 +1,146 @@
+"""Verdict invariants over many random episodes, checked against SUMO's own FCD output.
+
+Plays N random episodes (every attack family, every start mode, setpoints with and without fractional
+metres, 1-10 followers, three target speeds), each scored and stored exactly as a campaign stores a
+sample, and counts the samples where any of these disagree:
+
+- outcome and collision record: no collision <=> no_crash; a collision involving v0 <=> attacker_crash;
+- outcome and the stored minimum gaps: no_crash <=> every minimum gap >= 0; success <=> v0-v1 >= 0 and
+  some other pair < 0; attacker_crash <=> v0-v1 < 0;
+- outcome and the sign of the stored robustness (the paper's psi, d_safe 0): success <=> rho > 0;
+  rtamt's robustness and a direct numpy evaluation of psi agree;
+- the collision time is the last simulated step, and the collision pair has a negative gap there;
+- the FCD file SUMO wrote: every car's position at every step agrees with the trace to the FCD's
+  precision (6 decimals), and no gap recomputed from the FCD is negative (beyond that precision)
+  before the stored collision time, nor is the collision pair's FCD gap positive at it.
+
+Usage: python tools/check_invariants.py [N] [--seed S]. Prints the counts; exits 1 if any is non-zero.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from sumolib.xml import parse_fast_nested
+
+from d4sumo.attacks import FAMILIES
+from d4sumo.campaign import Campaign, Evaluator
+from d4sumo.config import START_MODES, EpisodeConfig
+from d4sumo.scenarios import build_road
+from d4sumo.simulation import simulate
+from d4sumo.spec import psi_robustness
+from d4sumo.store import Store
+
+FCD_TOLERANCE_M = 1.5e-6  # two positions rounded to 6 decimals
+
+
+def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
+    setpoint = float(rng.choice([rng.integers(2, 16), round(rng.uniform(2, 15), 1), rng.uniform(2, 15)]))
+    config = EpisodeConfig(
+        followers=int(rng.integers(1, 11)),
+        setpoint_m=setpoint,
+        speed_mps=float(rng.choice([20.0, 25.0, 30.0])),
+        start=str(rng.choice(START_MODES)),
+    )
+    family = str(rng.choice(FAMILIES))
+    # with one follower the paper's psi is undefined: score the attacker's gap instead
+    formula = None if config.followers >= 2 else "always(gap_0 > 0)"
+    campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
+    f = campaign.family()
+    return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
+
+
+def read_fcd_positions(path: Path, ids: tuple[str, ...]) -> np.ndarray:
+    rows: dict[float, dict[str, float]] = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "pos"]):
+        rows.setdefault(float(step.time), {})[v.id] = float(v.pos)
+    return np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
+
+
+def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: Store, campaign_id: int, index: int,
+          fcd: Path) -> list[str]:
+    """The names of the invariants this sample breaks."""
+    config = campaign.config
+    r = evaluator(index, params, fcd_path=fcd)
+    if r.outcome == "error":
+        return [f"error: {r.error}"]
+    store.add_sample(campaign_id, index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps, r.wall_s, r.error)
+    row = store.samples(campaign_id)[-1]  # what a reader of the database sees
+    broken = []
+    gaps = [row.min_gaps[f"v{i}-v{i + 1}"] for i in range(config.followers)]
+    c = row.collision
+    if (c is None) != (row.outcome == "no_crash"):
+        broken.append("outcome/collision")
+    if c is not None and ("v0" in c["pair"].split("-")) != (row.outcome == "attacker_crash"):
+        broken.append("outcome/collision pair")
+    expected = "attacker_crash" if gaps[0] < 0 else ("success" if min(gaps[1:], default=0.0) < 0 else "no_crash")
+    if expected != row.outcome:
+        broken.append("outcome/min gaps")
+    if config.followers >= 2:
+        if (row.robustness > 0) != (row.outcome == "success"):
+            broken.append("outcome/robustness sign")
+    # an independent look: SUMO's FCD file
+    episode = simulate(config, evaluator.signal(row.params), road=evaluator.road)
+    if config.followers >= 2 and abs(psi_robustness(episode.trace) - row.robustness) > 1e-9:
+        broken.append("rtamt/numpy psi")
+    positions = read_fcd_positions(fcd, config.vehicle_ids)
+    trace_positions = np.column_stack([episode.trace[f"pos_v{i}"] for i in range(config.followers + 1)])
+    if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > 0.6e-6:
+        broken.append("FCD/trace positions")
+        return broken
+    fcd_gaps = positions[:, :-1] - config.vehicle.length_m - positions[:, 1:]
+    if np.any(fcd_gaps[:-1] < -FCD_TOLERANCE_M):
+        broken.append("FCD overlap before the end")
+    if c is not None:
+        if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
+            broken.append("collision time/end of episode")
+        i = int(c["pair"].split("-")[0][1:])
+        if fcd_gaps[-1, i] > FCD_TOLERANCE_M or episode.trace[f"gap_{i}"][-1] >= 0:
+            broken.append("collision pair/gap")
+    elif len(episode.trace) != config.steps + 1:
+        broken.append("no collision but the episode ended early")
+    return broken
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("n", type=int, nargs="?", default=2000, help="episodes [2000]")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    road = build_road("highway_4lane")
+    outcomes: Counter[str] = Counter()
+    broken: Counter[str] = Counter()
+    examples: dict[str, str] = {}
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        store = Store(Path(tmp) / "invariants.sqlite")
+        fcd = Path(tmp) / "fcd.xml"
+        for index in range(args.n):
+            campaign, params = random_episode(rng)
+            evaluator = Evaluator(campaign, road=road)
+            cid = store.open_campaign(campaign.definition(), 1)
+            problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
+            outcomes[store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"] += 1
+            for p in problems:
+                broken[p] += 1
+                examples.setdefault(p, f"{campaign.definition()} params {list(params)}")
+            if (index + 1) % 100 == 0:
+                print(f"{index + 1} episodes, {sum(broken.values())} disagreements, {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr)
+        store.close()
+    print(f"episodes: {args.n} (seed {args.seed}); outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    print(f"disagreements: {sum(broken.values())}")
+    for name, count in sorted(broken.items()):
+        print(f"  {name}: {count}  e.g. {examples[name][:400]}")
+    return 1 if broken else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
