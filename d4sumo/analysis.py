@@ -39,6 +39,23 @@ class Record:
     time_s: float | None
     position_m: float | None
     speed_diff_kmh: float | None
+    attack_start_s: float = 0.0  # simulation time at which the attack starts (after a warm-up, else 0)
+
+    @property
+    def time_from_attack_start_s(self) -> float | None:
+        """The collision time counted from the attack's start: what the attack had to cause it."""
+        return None if self.time_s is None else self.time_s - self.attack_start_s
+
+    @property
+    def configuration(self) -> tuple:
+        """What makes two campaigns different experiments (the seed does not)."""
+        return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,
+                self.attack, self.optimizer)
+
+
+def attack_start_s(scenario: dict) -> float:
+    """When the attack starts in a stored scenario: after the warm-up drive, else at once."""
+    return float(scenario.get("warmup_s", 15.0)) if scenario.get("start") == "warmup" else 0.0
 
 
 def load_records(paths: Sequence[str | Path]) -> list[Record]:
@@ -53,7 +70,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     str(path), s.id, s.campaign_id, sc["network"], sc["followers"], float(sc["setpoint_m"]),
                     float(sc["speed_mps"]), sc["start"], d["attack"]["family"], d["optimizer"], d["seed"],
                     d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
-                    s.speed_diff_kmh,
+                    s.speed_diff_kmh, attack_start_s(sc),
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
@@ -65,6 +82,11 @@ def group(records: Iterable[Record], *fields: str) -> dict[tuple, list[Record]]:
     for r in records:
         out[tuple(getattr(r, f) for f in fields)].append(r)
     return dict(sorted(out.items(), key=lambda kv: tuple(str(k) for k in kv[0])))
+
+
+def count_noun(count: int, singular: str, plural: str | None = None) -> str:
+    """'1 cluster', '2 clusters', '0 successes': the count with the noun in the right number."""
+    return f"{count} {singular if count == 1 else plural or singular + 's'}"
 
 
 def _mean_std(values: list[float]) -> str:
@@ -94,12 +116,12 @@ def table_success_statistics(records: Sequence[Record]) -> Table:
         rows.append((
             f"{attack} {optimizer}", str(len(rs)), str(len(wins)),
             f"{v12} ({100 * v12 / len(wins):.0f}%)" if wins else "0",
-            _mean_std([r.time_s for r in wins]), _mean_std([r.position_m for r in wins]),
+            _mean_std([r.time_from_attack_start_s for r in wins]), _mean_std([r.position_m for r in wins]),
             _mean_std([r.speed_diff_kmh for r in wins]),
         ))
     return Table(
         "Table 1: successful attacks (followers collide, attacker untouched)",
-        ("attack", "samples", "successes", "v1-v2 crashes", "time to collision s, mean (std)",
+        ("attack", "samples", "successes", "v1-v2 crashes", "time from attack start to collision s, mean (std)",
          "collision location m, mean (std)", "speed difference km/h, mean (std)"),
         tuple(rows),
     )
@@ -134,10 +156,11 @@ def table_by_speed(records: Sequence[Record]) -> Table:
     return Table("Table 3: successes by target speed", ("attack", "successes", *[f"{v:g} m/s" for v in speeds]), tuple(rows))
 
 
-def success_grid(records: Sequence[Record]) -> tuple[list[float], list[float], np.ndarray]:
-    """Successes over setpoint (rows) x speed (columns)."""
-    setpoints = sorted({r.setpoint_m for r in records})
-    speeds = sorted({r.speed_mps for r in records})
+def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = None,
+                 speeds: Sequence[float] | None = None) -> tuple[list[float], list[float], np.ndarray]:
+    """Successes over setpoint (rows) x speed (columns); the axes default to the values in ``records``."""
+    setpoints = sorted({r.setpoint_m for r in records}) if setpoints is None else list(setpoints)
+    speeds = sorted({r.speed_mps for r in records}) if speeds is None else list(speeds)
     grid = np.zeros((len(setpoints), len(speeds)), dtype=int)
     for r in records:
         if r.outcome == "success":
@@ -146,33 +169,102 @@ def success_grid(records: Sequence[Record]) -> tuple[list[float], list[float], n
 
 
 def most_severe(records: Sequence[Record], count: int = 3) -> list[Record]:
-    """The successes with the largest speed difference at collision."""
+    """The successes with the largest speed difference at the first collision, at most one per
+    configuration (network, followers, setpoint, speed, start, attack, optimiser), so that one
+    campaign's near-copies of its best attack do not fill the list."""
     wins = [r for r in records if r.outcome == "success" and r.speed_diff_kmh is not None]
-    return sorted(wins, key=lambda r: (-r.speed_diff_kmh, r.sample_id))[:count]
+    chosen: dict[tuple, Record] = {}
+    for r in sorted(wins, key=lambda r: (-r.speed_diff_kmh, r.db, r.sample_id)):
+        if len(chosen) == count:
+            break
+        chosen.setdefault(r.configuration, r)
+    return list(chosen.values())
 
 
 # --- clusters of successful knot vectors ---------------------------------------------------------
 
 
+#: A knot's per-cluster statistic resting on fewer attacks than this is drawn greyed out.
+FEW_ATTACKS = 3
+
+
+def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "knots") -> np.ndarray:
+    """Which knots can have shaped the attack before its collision (True); ``collision_s`` is t_c, the
+    collision time counted from the attack's start, and knot k sits at t_k = k * delta.
+
+    Only commands before t_c matter: a step's command acts during that step, so none given at t >= t_c
+    can have caused the collision. PCHIP (``knots``) takes the slope at a knot from that knot and its
+    two neighbours (at the ends, scipy's slope uses the first or last three knots), so the cubic on
+    [t_j, t_{j+1}] depends on knots j-1 .. j+2, and knot k shapes u(t) only on (t_{k-2}, t_{k+2}) (the
+    last knot also holds u after the horizon, which only lengthens its reach). The attack starts at
+    t = 0, so knot k is irrelevant iff max(t_{k-2}, 0) >= t_c; for t_c > 0 that is k >= 2 and
+    t_{k-2} >= t_c. The clipped global cubic spline (``spline``) lets every knot shape u at every time,
+    so there no knot is masked (unless the collision came before the attack started). Commands are
+    sampled once a step, so the rule may keep a knot whose reach before t_c is shorter than a step.
+    """
+    knot_times_s = np.asarray(knot_times_s, dtype=float)
+    if attack == "spline" or knot_times_s.size < 2:
+        return np.full(knot_times_s.shape, collision_s > 0.0)
+    delta_s = knot_times_s[1] - knot_times_s[0]
+    return np.maximum(knot_times_s - 2.0 * delta_s, 0.0) < collision_s
+
+
+@dataclass(frozen=True)
+class ClusterStats:
+    """One k-means cluster: its knots' mean and std over the members whose knot mattered, and its
+    members' collision times (from the attack's start)."""
+
+    label: int
+    size: int
+    mean: np.ndarray  # per knot; NaN where no member's knot mattered
+    std: np.ndarray
+    counts: np.ndarray  # per knot: the members whose knot mattered, what mean and std rest on
+    collision_times_s: np.ndarray
+
+    @property
+    def median_collision_s(self) -> float:
+        return float(np.median(self.collision_times_s))
+
+    @property
+    def collision_quartiles_s(self) -> tuple[float, float]:
+        q1, q3 = np.percentile(self.collision_times_s, [25, 75])
+        return float(q1), float(q3)
+
+
 @dataclass(frozen=True)
 class Clustering:
     condition: str
-    knot_times_s: np.ndarray
-    vectors: np.ndarray  # successes x knots
-    collision_times_s: np.ndarray
-    inertias: tuple[float, ...]  # k-means inertia for k = 1..
+    knot_times_s: np.ndarray  # from the attack's start
+    vectors: np.ndarray  # successes x knots, as searched
+    relevant: np.ndarray  # successes x knots: the knot came early enough to shape the attack (relevant_knots)
+    collision_times_s: np.ndarray  # from the attack's start
+    inertias: tuple[float, ...]  # k-means inertia over the relevant knots for k = 1..
     k: int  # chosen by the elbow rule
     labels: np.ndarray  # k-means labels
-    dbscan_clusters: int
-    dbscan_noise: int
+    dbscan_labels: np.ndarray  # -1: noise
 
-    def cluster_stats(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
-        """(size, mean, std) per k-means cluster, largest first."""
+    @property
+    def dbscan_clusters(self) -> int:
+        return int(len(set(self.dbscan_labels.tolist()) - {-1}))
+
+    @property
+    def dbscan_noise(self) -> int:
+        return int(np.sum(self.dbscan_labels == -1))
+
+    def cluster_stats(self) -> list[ClusterStats]:
+        """Per k-means cluster, largest first; each knot's statistic over its relevant values only."""
         stats = []
+        masked = np.where(self.relevant, self.vectors, np.nan)
         for c in range(self.k):
-            members = self.vectors[self.labels == c]
-            stats.append((len(members), members.mean(axis=0), members.std(axis=0)))
-        return sorted(stats, key=lambda s: -s[0])
+            members = masked[self.labels == c]
+            counts = np.sum(~np.isnan(members), axis=0)
+            some = counts > 0
+            mean = np.full(members.shape[1], np.nan)
+            std = np.full(members.shape[1], np.nan)
+            mean[some] = np.nanmean(members[:, some], axis=0)
+            std[some] = np.nanstd(members[:, some], axis=0)
+            stats.append(ClusterStats(c, len(members), mean, std, counts, self.collision_times_s[self.labels == c]))
+        return sorted(stats, key=lambda s: (-s.size, s.label))
 
 
 def elbow(inertias: Sequence[float]) -> int:
@@ -188,34 +280,65 @@ def elbow(inertias: Sequence[float]) -> int:
     return int(x[int(np.argmax(distance))])
 
 
-def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, seed: int = 0) -> Clustering | None:
-    """Cluster the successful knot vectors of one condition (k-means with the elbow rule, and DBSCAN)."""
-    from sklearn.cluster import DBSCAN, KMeans
-    from sklearn.neighbors import NearestNeighbors
+def kmeans_masked(X: np.ndarray, relevant: np.ndarray, k: int, seed: int = 0,
+                  max_iter: int = 100) -> tuple[np.ndarray, np.ndarray, float]:
+    """k-means that ignores the masked entries (k-POD): fill them from the centroid their vector is
+    assigned to and refit until the assignment stops changing. A filled entry equals its centroid, so it
+    adds nothing to the inertia and does not move the centroid. Returns labels, centroids and the
+    inertia over the relevant entries."""
+    from sklearn.cluster import KMeans
 
-    wins = [r for r in records if r.outcome == "success" and r.attack in ("knots", "spline")]
-    if len(wins) < 4 or len({len(r.params) for r in wins}) != 1:
+    masked = np.where(relevant, X, np.nan)
+    counts = relevant.sum(axis=0)
+    column_mean = np.divide(np.nansum(masked, axis=0), counts, out=np.zeros(X.shape[1]), where=counts > 0)
+    fit = KMeans(n_clusters=k, n_init=10, random_state=seed).fit(np.where(relevant, X, column_mean))
+    labels = fit.labels_
+    for _ in range(max_iter):
+        fit = KMeans(n_clusters=k, init=fit.cluster_centers_, n_init=1).fit(np.where(relevant, X, fit.cluster_centers_[labels]))
+        if np.array_equal(fit.labels_, labels):
+            break
+        labels = fit.labels_
+    centers = fit.cluster_centers_
+    inertia = float(np.sum(np.where(relevant, X - centers[labels], 0.0) ** 2))
+    return labels, centers, inertia
+
+
+def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, seed: int = 0) -> Clustering | None:
+    """Cluster the successful knot vectors of one condition (k-means with the elbow rule, and DBSCAN),
+    each on the knots that can have shaped the attack before its collision only (relevant_knots)."""
+    from sklearn.cluster import DBSCAN
+    from sklearn.metrics.pairwise import nan_euclidean_distances
+
+    wins = [r for r in records if r.outcome == "success" and r.attack in ("knots", "spline")
+            and r.time_from_attack_start_s is not None and r.time_from_attack_start_s > 0]  # else no knot mattered
+    if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s) for r in wins}) != 1:
         return None
-    X = np.array([r.params for r in wins])
-    delta = wins[0].delta_s or 6.0
+    X = np.array([r.params for r in wins], dtype=float)
+    delta_s = wins[0].delta_s or 6.0
+    knot_times_s = np.arange(X.shape[1]) * delta_s
+    collision_times_s = np.array([r.time_from_attack_start_s for r in wins], dtype=float)
+    relevant = np.array([relevant_knots(knot_times_s, t, wins[0].attack) for t in collision_times_s])
     ks = range(1, min(max_k, len(wins) - 1) + 1)
-    fits = [KMeans(n_clusters=k, n_init=10, random_state=seed).fit(X) for k in ks]
-    inertias = tuple(float(f.inertia_) for f in fits)
+    fits = [kmeans_masked(X, relevant, k, seed) for k in ks]
+    inertias = tuple(f[2] for f in fits)
     k = elbow(inertias)
+    # DBSCAN on distances over the knots relevant to both vectors (scaled up for the ones left out)
+    distances = nan_euclidean_distances(np.where(relevant, X, np.nan))
+    finite = np.isfinite(distances)
+    distances[~finite] = 10.0 * (distances[finite].max() + 1.0)  # no knot in common: never neighbours
     min_samples = min(4, len(wins) - 1)
-    distances, _ = NearestNeighbors(n_neighbors=min_samples).fit(X).kneighbors(X)
-    eps = float(np.median(distances[:, -1])) or 1e-3
-    db_labels = DBSCAN(eps=eps, min_samples=min_samples).fit(X).labels_
+    eps = float(np.median(np.sort(distances, axis=1)[:, min_samples - 1])) or 1e-3  # self is the first neighbour
+    db_labels = DBSCAN(eps=eps, min_samples=min_samples, metric="precomputed").fit(distances).labels_
     return Clustering(
         condition=condition,
-        knot_times_s=np.arange(X.shape[1]) * delta,
+        knot_times_s=knot_times_s,
         vectors=X,
-        collision_times_s=np.array([r.time_s for r in wins]),
+        relevant=relevant,
+        collision_times_s=collision_times_s,
         inertias=inertias,
         k=k,
-        labels=fits[k - 1].labels_,
-        dbscan_clusters=int(len(set(db_labels) - {-1})),
-        dbscan_noise=int(np.sum(db_labels == -1)),
+        labels=fits[k - 1][0],
+        dbscan_labels=db_labels,
     )
 
 

@@ -54,9 +54,9 @@ class Campaign:
         fix("horizon_s", check_number("attack.horizon_s", self.horizon_s, 0.05, 3600.0, "seconds"))
         self.family()  # validates attack, delta_s, horizon_s
         if self.optimizer not in OPTIMIZERS:
-            raise ConfigError("optimizer", self.optimizer, f"one of {', '.join(OPTIMIZERS)}")
-        fix("samples", check_int("samples", self.samples, 1, MAX_SAMPLES))
-        fix("seed", check_int("seed", self.seed, 0, 2**63 - 1))
+            raise ConfigError("search.optimizer", self.optimizer, f"one of {', '.join(OPTIMIZERS)}")
+        fix("samples", check_int("search.samples", self.samples, 1, MAX_SAMPLES))
+        fix("seed", check_int("search.seed", self.seed, 0, 2**63 - 1))
         fix("d_safe_m", check_number("spec.d_safe_m", self.d_safe_m, -1e3, 1e3, "m"))
         if self.formula is not None and not isinstance(self.formula, str):
             raise ConfigError("spec.formula", self.formula, "an STL formula in rtamt syntax (a string)")
@@ -69,7 +69,8 @@ class Campaign:
         return make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s)
 
     def specification(self) -> Specification:
-        return Specification(followers=self.config.followers, step_s=self.config.step_s, formula=self.formula, d_safe_m=self.d_safe_m)
+        return Specification(followers=self.config.followers, step_s=self.config.step_s, formula=self.formula,
+                             d_safe_m=self.d_safe_m, duration_s=self.config.total_s)
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""
@@ -86,20 +87,24 @@ class Campaign:
         }
 
     @classmethod
-    def from_definition(cls, definition: dict[str, Any], samples: int = 100) -> "Campaign":
-        attack = definition["attack"]
-        return cls(
-            config=EpisodeConfig.from_dict(definition["config"]),
-            attack=attack["family"],
-            optimizer=definition["optimizer"],
-            samples=samples,
-            seed=definition["seed"],
-            d_safe_m=definition["spec"]["d_safe_m"],
-            formula=definition["spec"]["formula"],
-            delta_s=attack.get("delta_s", 6.0),
-            horizon_s=attack.get("horizon_s", 48.0),
-            optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
-        )
+    def from_definition(cls, definition: dict[str, Any], samples: int = 100, where: str = "the database") -> "Campaign":
+        """The campaign a stored definition describes; a damaged one is a StoreError naming ``where``."""
+        try:
+            attack = definition["attack"]
+            return cls(
+                config=EpisodeConfig.from_dict(definition["config"]),
+                attack=attack["family"],
+                optimizer=definition["optimizer"],
+                samples=samples,
+                seed=definition["seed"],
+                d_safe_m=definition["spec"]["d_safe_m"],
+                formula=definition["spec"]["formula"],
+                delta_s=attack.get("delta_s", 6.0),
+                horizon_s=attack.get("horizon_s", 48.0),
+                optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
+            )
+        except (KeyError, TypeError, AttributeError, ConfigError) as exc:
+            raise StoreError(f"{where}: damaged results database (a campaign definition: {exc})") from None
 
     def replace(self, **changes: Any) -> "Campaign":
         if "optimizer" in changes and "optimizer_options" not in changes:  # another optimiser: its own defaults
@@ -245,9 +250,12 @@ def run_campaign(
     evaluate = evaluator or Evaluator(campaign)
     if evaluate.campaign.definition() != campaign.definition():  # before anything is written
         raise ValueError("run_campaign: the evaluator was built for another campaign than the one to run")
-    campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep) if store else None
-    results = stored_results(store, campaign_id, campaign.samples) if store else []
+    # read and check what is stored before writing anything
+    campaign_id = store.find_campaign(campaign.definition()) if store else None
+    results = stored_results(store, campaign_id, campaign.samples) if campaign_id is not None else []
     runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}")
+    if store is not None:
+        campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep)
     if results:
         log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
     if on_sample:

@@ -1,4 +1,5 @@
-"""Command line: parse flags and the TOML config, call the library, print. Flags override the file.
+"""Command line: parse flags, call the library, print. The CLI stays thin: flags become dotted keys
+laid over the config file (`inputs`), and the library checks the one resulting document.
 
 Every error a user can cause ends as one line `d4sumo: error: ...` and exit code 2.
 """
@@ -8,6 +9,8 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import re
 import signal
 import sys
 import threading
@@ -18,15 +21,15 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import __version__
-from .attacks import FAMILIES, attack_signal, make_attack
-from .config import START_MODES, EpisodeConfig, load_toml
+from .attacks import FAMILIES, attack_signal
+from .config import START_MODES, EpisodeConfig
 from .errors import ConfigError, D4sumoError, check_number
 from .optimizers import OPTIMIZERS
 
 EXIT_USAGE = 2
 
-# flag dest -> dotted config key: the flags that set [scenario]/[vehicle]/[controller] values
-EPISODE_FLAGS = {
+#: flag dest -> the document key it sets
+FLAG_KEYS = {
     "network": "scenario.network",
     "followers": "scenario.followers",
     "setpoint": "scenario.setpoint_m",
@@ -37,16 +40,23 @@ EPISODE_FLAGS = {
     "duration": "scenario.duration_s",
     "length": "vehicle.length_m",
     "controller": "controller.class",
+    "attack": "attack.family",
+    "params": "attack.params",
+    "delta": "attack.delta_s",
+    "horizon": "attack.horizon_s",
+    "d_safe": "spec.d_safe_m",
+    "formula": "spec.formula",
+    "optimizer": "search.optimizer",
+    "samples": "search.samples",
+    "seed": "search.seed",
 }
-
-# config fields -> flags of falsify
-SEARCH_FLAGS = {"optimizer": "--optimizer", "samples": "--samples", "seed": "--seed", "attack": "--attack",
-                "spec.formula": "--formula", "spec.d_safe_m": "--d-safe", "attack.delta_s": "--delta", "attack.horizon_s": "--horizon"}
+#: options whose value is a comma-separated list of numbers, which may start with a minus sign
+LIST_OPTIONS = ("--params", "--knots")
 
 
 def _add_episode_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("scenario (override the config file)")
-    g.add_argument("--config", help="TOML config file ([scenario], [vehicle], [controller], [attack], [spec], [search])")
+    g = p.add_argument_group("scenario (flags override the config file)")
+    g.add_argument("--config", type=Path, help="TOML config file ([scenario], [vehicle], [controller], [attack], [spec], [search])")
     g.add_argument("--network", help="scenario variant (see `d4sumo scenarios`) or a folder [highway_4lane]")
     g.add_argument("--followers", type=int, help="followers behind the attacker, 1..10 [3]")
     g.add_argument("--setpoint", type=float, help="bumper-to-bumper setpoint distance d in m [7]")
@@ -56,25 +66,21 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
                         "attack after [rest]")
     g.add_argument("--warmup", type=float, help="seconds driven from rest before the attack with --start warmup [15]")
     g.add_argument("--step", type=float, help="simulation step in s [0.05]")
-    g.add_argument("--duration", type=float, help="episode length in s [60]")
+    g.add_argument("--duration", type=float, help="seconds from the attack's start to the episode's end [60]")
     g.add_argument("--length", type=float, help="vehicle length in m [4.5]")
     g.add_argument("--controller", help="follower controller: 'switching' or 'package.module:ClassName'")
     g.add_argument(
         "--set",
         action="append",
         default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="any [scenario], [vehicle] or [controller] value, e.g. --set controller.acc_kp=1.2 (repeatable)",
+        metavar="TABLE.KEY=VALUE",
+        help="any value of the config file, e.g. --set controller.acc_kp=1.2 or --set search.ce.batch_size=20 (repeatable)",
     )
 
 
-def _add_attack_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("attack")
-    g.add_argument("--attack", choices=FAMILIES, help="attack family (with --params)")
-    g.add_argument("--params", help="comma-separated parameter values of the family")
-    g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s)")
-    g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from t = 0")
-    _add_knot_options(g)
+def _add_spec_options(g) -> None:
+    g.add_argument("--formula", help="an STL formula (rtamt syntax) over the trace's signals instead of the paper's psi")
+    g.add_argument("--d-safe", type=float, dest="d_safe", help="d_safe of the paper's psi in m [0]")
 
 
 def _add_knot_options(g) -> None:
@@ -83,7 +89,7 @@ def _add_knot_options(g) -> None:
 
 
 def _parse_value(text: str) -> Any:
-    """A --set value as TOML would read it (number, bool, quoted string), else the bare string."""
+    """A --set value as TOML would read it (number, bool, quoted string, list), else the bare string."""
     try:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
@@ -92,63 +98,84 @@ def _parse_value(text: str) -> Any:
 
 def _floats(option: str, text: str) -> list[float]:
     try:
-        return [float(v) for v in text.split(",") if v.strip()]
+        values = [float(v) for v in text.split(",")]
     except ValueError:
         raise ConfigError(option, text, "comma-separated numbers, e.g. -1,1,0.5") from None
+    return values
 
 
-def episode_config(args: argparse.Namespace, doc: dict) -> EpisodeConfig:
-    overrides: dict[str, Any] = {}
-    for dest, key in EPISODE_FLAGS.items():
+def document(args: argparse.Namespace) -> tuple[dict, dict]:
+    """The config file with the flags laid over it, and the flags' own keys (for error messages)."""
+    from .inputs import read_document, with_overrides
+
+    doc = read_document(args.config) if getattr(args, "config", None) else {}
+    flags: dict[str, Any] = {}
+    for dest, key in FLAG_KEYS.items():
         value = getattr(args, dest, None)
         if value is not None:
-            overrides[key] = value
-    for item in args.set:
+            flags[key] = _floats(f"--{dest}", value) if dest == "params" else value
+    knots, constant = getattr(args, "knots", None), getattr(args, "constant", None)
+    given = [f"--{n}" for n, v in (("knots", knots), ("constant", constant), ("attack", getattr(args, "attack", None)))
+             if v is not None]
+    if len(given) > 1 and getattr(args, "command", "") == "simulate":
+        raise ConfigError("/".join(given), "together", "one attack: --knots, --constant or --attack with --params")
+    if knots is not None:
+        values = _floats("--knots", knots)
+        delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
+        flags.update({"attack.family": "knots", "attack.params": values})
+        if "attack.horizon_s" not in flags and isinstance(delta, (int, float)):
+            flags["attack.horizon_s"] = delta * (len(values) - 1) or delta
+    if constant is not None:
+        flags.update({"attack.family": "constant", "attack.params": [constant]})
+    if "attack.params" in flags and "attack.family" not in flags and "family" not in doc.get("attack", {}):
+        raise ConfigError("--params", args.params, "an attack family with it: --attack NAME --params ...")
+    for item in getattr(args, "set", []):
         key, sep, value = item.partition("=")
-        if not sep:
-            raise ConfigError("--set", item, "SECTION.KEY=VALUE, e.g. scenario.setpoint_m=5")
-        overrides[key.strip()] = _parse_value(value.strip())
-    return EpisodeConfig.from_dict(doc, overrides)
-
-
-def attack_choice(args: argparse.Namespace, doc: dict):
-    """(family, parameter vector) from --knots / --constant / --attack --params, or the [attack] table."""
-    table = dict(doc.get("attack", {}))
-    allowed = {"family", "params", "delta_s", "horizon_s"}
-    for key in table:
-        if key not in allowed:
-            raise ConfigError(f"attack.{key}", table[key], f"a key of [attack]: {', '.join(sorted(allowed))}")
-    given = [name for name in ("knots", "constant", "attack") if getattr(args, name, None) is not None]
-    if len(given) > 1:
-        raise ConfigError("--" + "/--".join(given), "together", "one attack: --knots, --constant or --attack with --params")
-    delta = args.delta if args.delta is not None else table.get("delta_s", 6.0)
-    if args.knots is not None:
-        values = _floats("--knots", args.knots)
-        if not values:
-            raise ConfigError("--knots", args.knots, "at least one value in [-1, 1]")
-        horizon = args.horizon if args.horizon is not None else delta * (len(values) - 1) or delta
-        family = make_attack("knots", delta_s=delta, horizon_s=horizon)
-        return family, family.check(values, "--knots")
-    if args.constant is not None:
-        family = make_attack("constant")
-        return family, family.check([args.constant], "--constant")
-    name = args.attack or table.get("family")
-    if name is None:
-        return None, None
-    horizon = args.horizon if args.horizon is not None else table.get("horizon_s", 48.0)
-    family = make_attack(name, delta_s=delta, horizon_s=horizon)
-    if args.params is not None:
-        values = _floats("--params", args.params)
-    elif "params" in table:
-        values = table["params"]
-    else:
-        raise ConfigError("--params", None, f"{family.dimension} values for {family.name}: {', '.join(family.names)}")
-    return family, family.check(values, "--params")
+        if not sep or not key.strip():
+            raise ConfigError("--set", item, "TABLE.KEY=VALUE, e.g. scenario.setpoint_m=5")
+        flags[key.strip()] = _parse_value(value.strip())
+    return with_overrides(doc, flags), flags
 
 
 def episode_signal(family, params, config: EpisodeConfig) -> np.ndarray:
     """The attacker's command at every step's start; NaN (cruise) before the attack or with none."""
     return attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+
+
+def check_output_file(option: str, path: Path | None) -> Path | None:
+    """A file the command will write: its folder must exist, and it must not be a folder itself."""
+    if path is None:
+        return None
+    if path.is_dir():
+        raise ConfigError(option, str(path), "a file name (this is a folder)")
+    if path.exists() and not path.is_file():
+        raise ConfigError(option, str(path), "a regular file or a new file name")
+    folder = path.parent
+    if not folder.is_dir():
+        raise ConfigError(option, str(path), f"a file in an existing folder ({folder} does not exist)")
+    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ConfigError(option, str(path), "a file you may write (permission denied)")
+    return path
+
+
+def check_display(gui: bool) -> None:
+    """sumo-gui needs a display: say so at once instead of a minute of retries."""
+    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ConfigError("--gui", "no display", "a graphical session (DISPLAY is not set); use --fcd and `d4sumo plot` instead")
+
+
+def check_fcd_written(path: Path | None) -> None:
+    """SUMO does not fail when its output cannot be written (a full disk): check the file is whole."""
+    if path is None:
+        return
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(max(0, path.stat().st_size - 200))
+            whole = b"</fcd-export>" in fh.read()
+    except OSError:
+        whole = False
+    if not whole:
+        raise D4sumoError(f"--fcd: {path} was not written completely (is the disk full?)")
 
 
 # --- commands ------------------------------------------------------------------------------------
@@ -168,18 +195,30 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    from .inputs import attack_of, episode_config
     from .scenarios import build_road
     from .simulation import simulate
-    from .spec import psi_robustness
+    from .spec import Specification
 
-    doc = load_toml(args.config) if args.config else {}
-    config = episode_config(args, doc)
-    family, params = attack_choice(args, doc)
-    d_safe = check_number("--d-safe", args.d_safe if args.d_safe is not None else doc.get("spec", {}).get("d_safe_m", 0.0), -1e3, 1e3, "m")
+    doc, _ = document(args)
+    config = episode_config(doc)
+    family, params = attack_of(doc)
+    spec_table = doc.get("spec", {})
+    d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
+    formula = spec_table.get("formula")
+    spec = None
+    if formula is not None or config.followers >= 2:
+        spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
+                             duration_s=config.total_s)
+    fcd = check_output_file("--fcd", args.fcd)
+    check_display(args.gui)
     road = build_road(config.network)
-    episode = simulate(config, episode_signal(family, params, config), road=road, fcd_path=args.fcd, gui=args.gui)
-    robustness = psi_robustness(episode.trace, d_safe) if config.followers >= 2 else None
-    _report(episode_summary(config, family, params, episode, robustness, d_safe, args.fcd), road.name, args.json)
+    episode = simulate(config, episode_signal(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
+    check_fcd_written(fcd)
+    robustness = spec.robustness(episode.trace) if spec else None
+    summary = episode_summary(config, family, params, episode, robustness, d_safe, fcd)
+    summary["formula"] = formula
+    _report(summary, road.name, args.json)
     return 0
 
 
@@ -227,49 +266,15 @@ def _print_summary(s: dict, road_name: str) -> None:
         print(f"FCD written to {s['fcd']}")
 
 
-def _search_tables(doc: dict) -> tuple[dict, dict]:
-    search, spec = dict(doc.get("search", {})), dict(doc.get("spec", {}))
-    for table, allowed, name in ((search, ("optimizer", "samples", "seed"), "search"), (spec, ("d_safe_m", "formula"), "spec")):
-        for key in table:
-            if key not in allowed:
-                raise ConfigError(f"{name}.{key}", table[key], f"a key of [{name}]: {', '.join(allowed)}")
-    return search, spec
-
-
-def _pick(flag, table: dict, key: str, default):
-    return flag if flag is not None else table.get(key, default)
-
-
-def campaign_from(args: argparse.Namespace, doc: dict):
-    from .campaign import Campaign
-
-    config = episode_config(args, doc)
-    search, spec = _search_tables(doc)
-    attack = dict(doc.get("attack", {}))
-    for key in ("params",):
-        if key in attack:
-            raise ConfigError(f"attack.{key}", attack[key], "no fixed parameters in a campaign: the optimiser chooses them")
-    return Campaign(
-        config=config,
-        attack=_pick(args.attack, attack, "family", "knots"),
-        optimizer=_pick(args.optimizer, search, "optimizer", "bo"),
-        samples=_pick(args.samples, search, "samples", 100),
-        seed=_pick(args.seed, search, "seed", 0),
-        d_safe_m=_pick(args.d_safe, spec, "d_safe_m", 0.0),
-        formula=_pick(args.formula, spec, "formula", None),
-        delta_s=_pick(args.delta, attack, "delta_s", 6.0),
-        horizon_s=_pick(args.horizon, attack, "horizon_s", 48.0),
-    )
-
-
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from .campaign import Evaluator, run_campaign
+    from .inputs import campaign_of
     from .store import Store
 
-    doc = load_toml(args.config) if args.config else {}
-    campaign = campaign_from(args, doc)
+    doc, _ = document(args)
+    campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
@@ -317,16 +322,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from .simulation import simulate
     from .store import Store
 
+    fcd = check_output_file("--fcd", args.fcd)
+    check_display(args.gui)
     with Store(args.db, create=False) as store:
         row = store.sample(args.sample)
-        definition = store.campaign(row.campaign_id).definition
+        campaign = Campaign.from_definition(store.campaign(row.campaign_id).definition, where=str(args.db))
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
-    campaign = Campaign.from_definition(definition)
     evaluator = Evaluator(campaign)
-    episode = simulate(campaign.config, evaluator.signal(row.params), road=evaluator.road, fcd_path=args.fcd, gui=args.gui)
+    episode = simulate(campaign.config, evaluator.signal(row.params), road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    check_fcd_written(fcd)
     rho = evaluator.spec.robustness(episode.trace)
-    summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, args.fcd)
+    summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
     summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
                    stored_robustness=row.robustness, stored_outcome=row.outcome,
                    reproduced=(row.robustness == rho and row.outcome == episode.outcome))
@@ -340,7 +347,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     import csv
 
-    from .attacks import make_attack
+    from .campaign import Campaign
     from .store import Store
 
     with Store(args.db, create=False) as store:
@@ -350,13 +357,14 @@ def cmd_export(args: argparse.Namespace) -> int:
         names: dict[int, tuple[str, ...]] = {}
         columns: list[str] = []
         for cid, c in campaigns.items():
-            a = c.definition["attack"]
-            names[cid] = make_attack(a["family"], delta_s=a.get("delta_s", 6.0), horizon_s=a.get("horizon_s", 48.0)).names
+            names[cid] = Campaign.from_definition(c.definition, where=str(args.db)).family().names
             columns += [n for n in names[cid] if n not in columns]
         header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "attack",
                   "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
                   "error"] + columns
-        out = open(args.out, "w", newline="") if args.out else sys.stdout
+        out_path = check_output_file("--out", args.out)
+        tmp = out_path.with_name(f".{out_path.name}.part") if out_path else None
+        out = open(tmp, "w", newline="") if tmp else sys.stdout
         try:
             writer = csv.writer(out)
             writer.writerow(header)
@@ -370,9 +378,15 @@ def cmd_export(args: argparse.Namespace) -> int:
                                  s.time_s, s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
                                 + [params.get(n, "") for n in columns])
                 rows += 1
-        finally:
-            if args.out:
+            if tmp:
                 out.close()
+                os.replace(tmp, out_path)  # whole or not at all
+        except OSError as exc:
+            raise D4sumoError(f"--out: {out_path} could not be written ({exc.strerror}); nothing was written") from None
+        finally:
+            if tmp:
+                out.close()
+                tmp.unlink(missing_ok=True)
     if args.out:
         print(f"{rows} samples written to {args.out}", file=sys.stderr)
     return 0
@@ -381,11 +395,14 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .sweep import Sweep, run_sweep
+    from .sweep import Sweep, check_dask_address, run_sweep
 
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise ConfigError("--workers", args.workers, "a whole number in [1, 1024]")
+    if args.dask is not None:
+        check_dask_address(args.dask)
+    check_number("--dask-timeout", args.dask_timeout, 0.0, 3600.0, "seconds", low_open=True)
     sweep = Sweep.load(args.sweep)
-    if args.workers is not None and args.workers < 1:
-        raise ConfigError("--workers", args.workers, "a whole number >= 1")
     bar = tqdm(total=sweep.samples, desc=f"sweep {sweep.name}", unit="sample", disable=args.quiet, file=sys.stderr,
                dynamic_ncols=True)
 
@@ -412,7 +429,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from .report import build_report
+    from .store import Store
 
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")
+    if not args.out.parent.is_dir():
+        raise ConfigError("--out", str(args.out), f"a folder in an existing folder ({args.out.parent} does not exist)")
+    if not 0 <= args.severe <= 100:
+        raise ConfigError("--severe", args.severe, "a whole number in [0, 100]")
+    for db in args.db:  # every database readable and sound before any output
+        with Store(db, create=False) as store:
+            store.campaigns()
+            for _ in store.iter_samples():
+                pass
     steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
     with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
         def progress(what: str) -> None:
@@ -427,64 +456,46 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from . import figures
-    from .analysis import cluster_knots, load_records
+    from .report import plot_figure
 
-    records = load_records(args.db)
-    if args.kind in ("time-space", "accel"):
-        if args.sample is None:
-            raise ConfigError("--sample", None, f"a sample id for a {args.kind} plot")
-        from .report import collision_of, describe, replay_to_fcd
-
-        matches = [r for r in records if r.sample_id == args.sample]
-        if not matches:
-            raise ConfigError("--sample", args.sample, f"a sample id of {', '.join(map(str, args.db))}")
-        r = matches[0]
-        fcd_path = args.out.with_suffix(".fcd.xml")
-        fcd = replay_to_fcd(r, fcd_path)
-        title = describe(r) if r.pair else f"sample {r.sample_id}: {r.outcome}"
-        if args.kind == "time-space":
-            figures.time_space(fcd, title, args.out, collision_of(r))
-        else:
-            figures.accelerations(fcd, title, args.out, collision_of(r))
-        print(f"{args.kind} plot written to {args.out} (FCD: {fcd_path})")
-        return 0
-    filters = {"attack": args.attack, "optimizer": args.optimizer, "start": args.start,
-               "setpoint_m": args.setpoint, "speed_mps": args.speed}
-    chosen = [r for r in records if all(v is None or getattr(r, k) == v for k, v in filters.items())]
-    if not chosen:
-        raise ConfigError("filters", {k: v for k, v in filters.items() if v is not None}, "values that match stored samples")
-    label = ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{v}" for k, v in filters.items() if v is not None) or "all samples"
-    if args.kind == "heatmap":
-        figures.heatmap(chosen, f"successes: {label}", args.out)
-    else:
-        clustering = cluster_knots(chosen, label)
-        if clustering is None:
-            raise ConfigError("filters", label, "a selection with at least 4 successful knot attacks")
-        figures.clusters(clustering, args.out)
-    print(f"{args.kind} plot written to {args.out}")
+    print(plot_figure(args.db, args.kind, args.out, sample=args.sample, fcd_path=check_output_file("--fcd", args.fcd),
+                      attack=args.attack, optimizer=args.optimizer, start=args.start, setpoint_m=args.setpoint,
+                      speed_mps=args.speed))
     return 0
 
 
 # --- entry point ---------------------------------------------------------------------------------
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (and exit 2), not the whole usage."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"d4sumo: error: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="d4sumo", description="Adversarial driving maneuvers against ACC platoons, on SUMO.")
+    parser = Parser(prog="d4sumo", description="Adversarial driving maneuvers against ACC platoons, on SUMO.")
     parser.add_argument("--version", action="version", version=f"d4sumo {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
-    p = sub.add_parser("scenarios", help="list the network variants in sumo_scenarios/")
+    p = sub.add_parser("scenarios", help="list the network variants shipped with d4sumo")
     p.set_defaults(func=cmd_scenarios)
 
     p = sub.add_parser("simulate", help="play one episode and summarise it")
     _add_episode_options(p)
-    _add_attack_options(p)
-    p.add_argument("--d-safe", type=float, dest="d_safe", help="d_safe of the specification in m [0]")
-    p.add_argument("--fcd", type=Path, help="write SUMO's FCD output (with accelerations) to this file")
-    p.add_argument("--json", action="store_true", help="print a machine-readable summary")
-    p.add_argument("--gui", action="store_true", help="watch the episode in sumo-gui (needs a display)")
+    g = p.add_argument_group("attack (with none, the attacker cruises at the target speed)")
+    g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s)")
+    g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from the attack's start")
+    g.add_argument("--attack", choices=FAMILIES, help="attack family (with --params)")
+    g.add_argument("--params", help="comma-separated parameter values of the family, e.g. --params -0.5,0.2,1")
+    _add_knot_options(g)
+    g = p.add_argument_group("specification and output")
+    _add_spec_options(g)
+    g.add_argument("--fcd", type=Path, help="write SUMO's FCD output (with accelerations) to this file")
+    g.add_argument("--json", action="store_true", help="print a machine-readable summary")
+    g.add_argument("--gui", action="store_true", help="watch the episode in sumo-gui (needs a display)")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("falsify", help="run a campaign: search for attacks that make the followers crash")
@@ -495,8 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--optimizer", choices=OPTIMIZERS, help="bo, ce, random or halton [bo]")
     g.add_argument("--samples", type=int, help="budget: episodes to simulate [100]")
     g.add_argument("--seed", type=int, help="seed: the same seed repeats the campaign exactly [0]")
-    g.add_argument("--formula", help="an STL formula (rtamt syntax) over the trace's signals instead of the paper's psi")
-    g.add_argument("--d-safe", type=float, dest="d_safe", help="d_safe of the paper's psi in m [0]")
+    _add_spec_options(g)
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database (created if new) [results.sqlite]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
@@ -506,7 +516,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("sweep", type=Path, help="sweep file (TOML: [grid] of lists, [search] samples, fixed tables)")
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database [results.sqlite]")
     p.add_argument("--workers", type=int, help="local worker processes [number of cores]")
-    p.add_argument("--dask", metavar="ADDRESS", help="run on this Dask distributed scheduler (e.g. tcp://10.0.0.5:8786)")
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="run on a Dask scheduler (e.g. tcp://10.0.0.5:8786), or 'local' for a local Dask cluster of --workers")
     p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
@@ -523,6 +534,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("db", type=Path, nargs="+", help="results database(s)")
     p.add_argument("--out", type=Path, required=True, help="image file (.png, .pdf, .svg)")
     p.add_argument("--sample", type=int, help="sample id (time-space, accel)")
+    p.add_argument("--fcd", type=Path, help="also keep the replay's FCD in this file (time-space, accel)")
     p.add_argument("--attack", help="only this attack family (heatmap, clusters)")
     p.add_argument("--optimizer", help="only this optimiser")
     p.add_argument("--start", choices=START_MODES, help="only this start mode")
@@ -554,22 +566,52 @@ def _on_sigterm(signum, frame) -> None:
     raise Terminated()
 
 
+def _join_negative_lists(argv: list[str]) -> list[str]:
+    """``--params -0.5,0.2,1`` as ``--params=-0.5,0.2,1``: argparse would take the list for an option."""
+    out = []
+    i = 0
+    while i < len(argv):
+        if argv[i] in LIST_OPTIONS and i + 1 < len(argv) and re.fullmatch(r"-[0-9.][0-9.eE+\-,\s]*", argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _on_sigterm)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(_join_negative_lists(list(sys.argv[1:] if argv is None else argv)))
+    except SystemExit as exc:  # usage errors (one line, exit 2), --help, --version
+        return int(exc.code or 0)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    flags: dict[str, str] = {}
+    for dest, key in FLAG_KEYS.items():
+        if getattr(args, dest, None) is not None:
+            flags[key] = "--" + dest.replace("_", "-")
+    if getattr(args, "knots", None) is not None:
+        flags.update({"attack.params": "--knots", "attack.family": "--knots"})
+    elif getattr(args, "attack", None) is not None and args.command == "simulate":
+        flags["attack.params"] = "--params"  # named even when it is missing
     try:
         return args.func(args)
     except ConfigError as exc:
-        flag = {**{key: f"--{dest}" for dest, key in EPISODE_FLAGS.items()}, **SEARCH_FLAGS}.get(exc.field)
-        field = f"{flag} ({exc.field})" if flag else exc.field
+        flag = flags.get(exc.field) or flags.get(exc.field.split(":")[0])
+        field = f"{flag} ({exc.field})" if flag and not exc.field.startswith("--") else exc.field
         print(f"d4sumo: error: {field}: got {exc.given!r}; allowed: {exc.allowed}", file=sys.stderr)
         return EXIT_USAGE
     except D4sumoError as exc:
         print(f"d4sumo: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:
+        # the reader went away (`d4sumo export db | head`): stop quietly, as command-line tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except KeyboardInterrupt as exc:
         if not isinstance(exc, Terminated):
             print("d4sumo: interrupted", file=sys.stderr)

@@ -1,13 +1,7 @@
 """The episode configuration: frozen, validated on construction, round-trips through TOML/JSON.
 
-A config file is TOML with these tables (every key optional; defaults from SPEC section 1):
-
-    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s
-    [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
-    [controller] class = "switching" (or "package.module:ClassName") and the class's parameters
-    [attack]     family, params, delta_s, horizon_s        (read by the commands that take an attack)
-    [spec]       d_safe_m, formula                          (read by the specification)
-    [search]     optimizer, samples, seed                   (read by falsify)
+Its tables in a config file are [scenario], [vehicle] and [controller] (every key optional; defaults
+from SPEC section 1); `inputs` reads the whole file, flags included.
 """
 
 from __future__ import annotations
@@ -25,7 +19,6 @@ from .errors import ConfigError, check_int, check_number
 #: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium); warmup: the paper's
 #: steady-state procedure, drive from rest for warmup_s with the attacker cruising, attack after.
 START_MODES = ("rest", "steady", "warmup")
-SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
 MAX_FOLLOWERS = 10
 
 
@@ -119,15 +112,9 @@ class EpisodeConfig:
         }
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any], overrides: Mapping[str, Any] | None = None) -> "EpisodeConfig":
-        """Build from the [scenario], [vehicle] and [controller] tables; ``overrides`` are
-        dotted keys (``scenario.setpoint_m``) that win over the tables (command-line flags)."""
+    def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
+        """Build from the [scenario], [vehicle] and [controller] tables of a document."""
         tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle", "controller")}
-        for dotted, value in (overrides or {}).items():
-            section, _, key = dotted.partition(".")
-            if section not in tables or not key:
-                raise ConfigError(dotted, value, "a key of [scenario], [vehicle] or [controller] as section.key")
-            tables[section][key] = value
         scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in ("vehicle", "controller")]
         _check_keys("scenario", tables["scenario"], scenario_keys)
         _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)])
@@ -139,24 +126,20 @@ class EpisodeConfig:
 
 
 def read_toml(path: str | Path, field: str = "--config") -> dict:
-    """Parse a TOML file; an unreadable or malformed file is a ConfigError naming ``field``."""
+    """Parse a TOML file; an unreadable, non-UTF-8 or malformed file is a ConfigError naming ``field``."""
     p = Path(path)
     try:
-        return tomllib.loads(p.read_text(encoding="utf-8"))
+        data = p.read_bytes()
     except OSError as exc:
         raise ConfigError(field, str(p), f"a readable TOML file ({exc.strerror})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(field, str(p), f"a UTF-8 text file (byte {exc.start} is not UTF-8)") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(field, str(p), f"valid TOML ({exc})") from None
-
-
-def load_toml(path: str | Path) -> dict:
-    """Read a config file, refusing unknown tables; errors name the file and what is wrong."""
-    p = Path(path)
-    doc = read_toml(p)
-    for key, value in doc.items():
-        if key not in SECTIONS or not isinstance(value, dict):
-            raise ConfigError(f"{p.name}: [{key}]", value if not isinstance(value, dict) else "table", f"tables {', '.join(SECTIONS)}")
-    return doc
 
 
 def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
@@ -175,4 +158,3 @@ def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> N
 def _on_grid(value: float, step: float) -> bool:
     count = value / step
     return abs(count - round(count)) <= 1e-9 * max(1.0, count)
-

@@ -1,10 +1,15 @@
 """One HTML report of stored results: the paper's tables, heatmaps, time-space diagrams, accelerations
-and clusters. The time-space diagrams replay the most severe attacks through SUMO into FCD files."""
+and clusters. The time-space diagrams replay the most severe attacks through SUMO into FCD files.
+
+Also the single figures of ``d4sumo plot``: ``plot_figure`` checks where the figure goes before any
+work and writes nothing but the figure (and the FCD, only where one is asked for).
+"""
 
 from __future__ import annotations
 
 import html
 import logging
+import tempfile
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -13,7 +18,7 @@ from .analysis import (
     Record,
     Table,
     cluster_knots,
-    group,
+    count_noun,
     load_records,
     most_severe,
     richest_conditions,
@@ -22,10 +27,14 @@ from .analysis import (
     table_success_statistics,
 )
 from .campaign import Campaign, Evaluator
+from .errors import ConfigError
 from .simulation import simulate
 from .store import Store, collision_dict
 
 log = logging.getLogger(__name__)
+
+PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
+SEVERITY = "largest speed difference between the colliding cars at the first collision"
 
 
 def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
@@ -39,12 +48,88 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
 
 
 def collision_of(record: Record) -> dict | None:
+    """The stored first collision, its time in simulation time (the FCD's clock)."""
     return collision_dict(record.pair, record.time_s, record.position_m, record.speed_diff_kmh)
 
 
 def describe(record: Record) -> str:
-    return (f"sample {record.sample_id}: {record.attack} {record.optimizer}, {record.start}, setpoint {record.setpoint_m:g} m, "
-            f"{record.speed_mps:g} m/s; {record.pair} at {record.time_s:.1f} s, {record.speed_diff_kmh:.1f} km/h")
+    where = (f"{record.network}, " if record.network != "highway_4lane" else "") + (
+        f"{record.followers} followers, " if record.followers != 3 else "")
+    start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
+    head = (f"sample {record.sample_id}: {record.attack} {record.optimizer}, {where}{start}, setpoint {record.setpoint_m:g} m, "
+            f"{record.speed_mps:g} m/s")
+    if record.pair is None:
+        return f"{head}; {record.outcome.replace('_', ' ')}"
+    return (f"{head}; {record.pair} collided {record.time_from_attack_start_s:.1f} s after the attack started, "
+            f"{record.speed_diff_kmh:.1f} km/h")
+
+
+def _sample_figure(record: Record, kind: str, fcd: dict, out: Path, speed_max_mps: float | None = None) -> Path:
+    title = describe(record)
+    if kind == "time-space":
+        return figures.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps,
+                                  attack_start_s=record.attack_start_s)
+    return figures.accelerations(fcd, title, out, collision_of(record), attack_start_s=record.attack_start_s)
+
+
+def _check_kind(kind: str, allowed: Sequence[str]) -> None:
+    if kind not in allowed:
+        raise ConfigError("kind", kind, f"one of {', '.join(allowed)}")
+
+
+def plot_sample(record: Record, kind: str, out: str | Path, fcd_path: str | Path | None = None) -> Path:
+    """A time-space or acceleration figure of one stored sample, replayed through SUMO. The FCD goes to
+    ``fcd_path`` when given, else to a temporary folder that is removed afterwards."""
+    _check_kind(kind, ("time-space", "accel"))
+    out = figures.check_figure_path(out, "--out")
+    if fcd_path is not None:
+        fcd_path = Path(fcd_path)
+        if not fcd_path.parent.is_dir() or fcd_path.is_dir():
+            raise ConfigError("--fcd", str(fcd_path), "a file in an existing folder")
+        return _sample_figure(record, kind, replay_to_fcd(record, fcd_path), out)
+    with tempfile.TemporaryDirectory(prefix="d4sumo-fcd-") as folder:
+        fcd = replay_to_fcd(record, Path(folder) / "fcd.xml")
+    return _sample_figure(record, kind, fcd, out)
+
+
+def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label: str = "all samples") -> Path:
+    """A heatmap (one panel per attack, optimiser and start mode, one colour range) or the clusters of
+    the successful knot vectors of ``records``."""
+    _check_kind(kind, ("heatmap", "clusters"))
+    out = figures.check_figure_path(out, "--out")
+    if kind == "heatmap":
+        return figures.heatmap(records, f"Successful attacks over setpoint and target speed: {label}", out)
+    clustering = cluster_knots(records, label)
+    if clustering is None:
+        raise ConfigError("filters", label, "a selection with at least 4 successful knot attacks")
+    return figures.clusters(clustering, out)
+
+
+def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample: int | None = None,
+                fcd_path: str | Path | None = None, attack: str | None = None, optimizer: str | None = None,
+                start: str | None = None, setpoint_m: float | None = None, speed_mps: float | None = None) -> str:
+    """``d4sumo plot``: one figure into ``out`` (checked first: a file in an existing folder); a sample
+    (time-space, accel) or a selection (heatmap, clusters). Returns the line to print."""
+    _check_kind(kind, PLOT_KINDS)
+    out = figures.check_figure_path(out, "--out")
+    if fcd_path is not None and kind not in ("time-space", "accel"):
+        raise ConfigError("--fcd", str(fcd_path), "an FCD file only with a time-space or accel plot")
+    if kind in ("time-space", "accel") and sample is None:
+        raise ConfigError("--sample", None, f"a sample id for a {kind} plot")
+    records = load_records(dbs)
+    if kind in ("time-space", "accel"):
+        matches = [r for r in records if r.sample_id == sample]
+        if not matches:
+            raise ConfigError("--sample", sample, f"a sample id of {', '.join(map(str, dbs))}")
+        plot_sample(matches[0], kind, out, fcd_path)
+        return f"{kind} plot written to {out}" + (f" (FCD: {fcd_path})" if fcd_path is not None else "")
+    filters = {"attack": attack, "optimizer": optimizer, "start": start, "setpoint_m": setpoint_m, "speed_mps": speed_mps}
+    chosen = [r for r in records if all(v is None or getattr(r, k) == v for k, v in filters.items())]
+    if not chosen:
+        raise ConfigError("filters", {k: v for k, v in filters.items() if v is not None}, "values that match stored samples")
+    label = ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{v}" for k, v in filters.items() if v is not None) or "all samples"
+    plot_selection(chosen, kind, out, label)
+    return f"{kind} plot written to {out}"
 
 
 def build_report(
@@ -52,39 +137,57 @@ def build_report(
 ) -> Path:
     """Write ``index.html`` and its figures into ``out_dir``; returns the HTML path."""
     out = Path(out_dir)
-    (out / "fcd").mkdir(parents=True, exist_ok=True)
     records = load_records(dbs)
+    (out / "fcd").mkdir(parents=True, exist_ok=True)
     step = progress or (lambda what: log.info("%s", what))
     parts: list[str] = []
+    db_names = [str(db) for db in dbs]
+
+    def stem(r: Record) -> str:  # sample ids repeat across databases
+        return f"sample_{r.sample_id}" if len(set(db_names)) == 1 else f"db{db_names.index(r.db) + 1}_sample_{r.sample_id}"
 
     step("tables")
     tables = [table_success_statistics(records), table_attacker_crashes(records), table_by_speed(records)]
     for t in tables:
         parts.append(_table_html(t))
     (out / "tables.txt").write_text("\n\n".join(t.to_text() for t in tables) + "\n")
+    parts.append("<p>The tables as text: <a href='tables.txt'>tables.txt</a>. Times count from the attack's start "
+                 "(after the warm-up drive for start mode warmup).</p>")
 
     step("heatmaps")
-    parts.append("<h2>Successful attacks over setpoint and target speed</h2><div class='row'>")
-    for (attack, optimizer, start), rs in group(records, "attack", "optimizer", "start").items():
-        name = f"heatmap_{attack}_{optimizer}_{start}.png"
-        figures.heatmap(rs, f"{attack}, {optimizer.upper()}, start {start}: successes", out / name)
-        parts.append(_img(name, f"{attack} {optimizer} {start}"))
-    parts.append("</div>")
+    panels = figures.heatmap_panels(records)
+    parts.append("<h2>Successful attacks over setpoint and target speed</h2>"
+                 f"<p>One panel per attack, optimiser and start mode ({count_noun(len(panels), 'panel')}), "
+                 "all on one colour range; grey cells were not run.</p>")
+    figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
+                     columns=figures.heatmap_columns(records))
+    parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
 
     step("time-space diagrams")
-    parts.append("<h2>Most severe attacks (largest speed difference at collision)</h2>")
-    for r in most_severe(records, severe):
-        fcd = replay_to_fcd(r, out / "fcd" / f"sample_{r.sample_id}.xml")
-        c = collision_of(r)
-        ts = figures.time_space(fcd, describe(r), out / f"time_space_{r.sample_id}.png", c)
-        acc = figures.accelerations(fcd, f"accelerations, sample {r.sample_id}", out / f"accel_{r.sample_id}.png", c)
+    top = most_severe(records, severe)
+    parts.append(f"<h2>Most severe attacks</h2><p>The successful attacks with the {SEVERITY}, at most one per "
+                 "configuration (network, followers, setpoint, target speed, start mode, attack, optimiser): "
+                 f"{count_noun(len(top), 'attack')}. Each is replayed through SUMO; its time-space diagram shows every "
+                 "car's position over time coloured by speed (one scale for all diagrams), and beside it every car's "
+                 "acceleration.</p>")
+    fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml") for r in top]
+    speed_max_mps = max((float(d["speed"].max()) for fcd in fcds for d in fcd.values() if len(d["speed"])), default=None)
+    for r, fcd in zip(top, fcds):
+        ts = _sample_figure(r, "time-space", fcd, out / f"time_space_{stem(r)}.png", speed_max_mps)
+        acc = _sample_figure(r, "accel", fcd, out / f"accel_{stem(r)}.png")
         parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
-                     f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; FCD: <code>fcd/sample_{r.sample_id}.xml</code>; "
+                     f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; FCD: "
+                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; "
                      f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
-                     f"{_img(ts.name, 'time-space')}{_img(acc.name, 'accelerations')}</div>")
+                     f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
+    if not top:
+        parts.append("<p>No successful attack.</p>")
 
     step("clusters")
-    parts.append("<h2>Clusters of successful knot vectors</h2>")
+    parts.append("<h2>Clusters of successful knot vectors</h2><p>For each attack, optimiser and start mode, the "
+                 "configuration with the most successes. A knot counts only if it can have shaped the attack before "
+                 "the collision (with PCHIP, knot k reaches back to the time of knot k-2); k-means and DBSCAN ignore "
+                 "the others, and each knot's mean and standard deviation rest on the attacks shown above it.</p>")
     found = False
     for condition, rs in richest_conditions(records):
         c = cluster_knots(rs, condition)
@@ -93,9 +196,7 @@ def build_report(
         found = True
         name = "clusters_" + "".join(ch if ch.isalnum() else "_" for ch in condition) + ".png"
         figures.clusters(c, out / name)
-        sizes = ", ".join(str(size) for size, _, _ in c.cluster_stats())
-        parts.append(f"<h3>{html.escape(condition)}</h3><p>{len(c.vectors)} successes; k-means elbow k = {c.k} "
-                     f"(sizes {sizes}); DBSCAN: {c.dbscan_clusters} clusters, {c.dbscan_noise} noise points</p>{_img(name, condition)}")
+        parts.append(f"<h3>{html.escape(condition)}</h3><p>{html.escape(clusters_caption(c))}</p>{_img(name, condition)}")
     if not found:
         parts.append("<p>No knot campaign with at least 4 successes.</p>")
 
@@ -104,12 +205,20 @@ def build_report(
         "body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right;font-size:13px}td:first-child,th:first-child{text-align:left}"
         ".row{display:flex;flex-wrap:wrap;gap:12px}img{max-width:100%;border:1px solid #eee}</style></head><body>"
-        f"<h1>d4sumo report</h1><p>{len(records)} samples from {html.escape(', '.join(map(str, dbs)))}; d4sumo {__version__}.</p>"
-        + "".join(parts) + "</body></html>"
+        f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
+        f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
     index = out / "index.html"
     index.write_text(page, encoding="utf-8")
     return index
+
+
+def clusters_caption(c) -> str:
+    """One sentence on a clustering: k-means clusters with their sizes and own collision times, DBSCAN."""
+    sizes = ", ".join(f"{count_noun(s.size, 'attack')} colliding at {s.median_collision_s:.1f} s" for s in c.cluster_stats())
+    return (f"{count_noun(len(c.vectors), 'success', 'successes')}. k-means with the elbow rule: "
+            f"{count_noun(c.k, 'cluster')} ({sizes}; median times from the attack's start). DBSCAN: "
+            f"{count_noun(c.dbscan_clusters, 'cluster')}, {count_noun(c.dbscan_noise, 'noise point')}.")
 
 
 def _table_html(t: Table) -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import re
 import types
+from fractions import Fraction
 from typing import Sequence
 
 import numpy as np
@@ -61,7 +62,8 @@ class Specification:
     the paper's psi with ``d_safe_m``. Time bounds in a formula are in seconds.
     """
 
-    def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0):
+    def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0,
+                 duration_s: float | None = None):
         import rtamt
 
         self.followers = followers
@@ -86,9 +88,19 @@ class Specification:
         implicit = set(spec.ast.var_object_dict) - set(declared) - {"out"}
         if implicit or unknown:
             raise ConfigError("spec.formula", self.formula, f"signals among {_signal_help(followers)} (unknown: {', '.join(sorted(implicit | unknown))})")
+        _check_time_bounds(spec.ast, self.formula, step_s, duration_s)
         self.variables = tuple(n for n in declared if re.search(rf"\b{n}\b", self.formula))
         _speed_up_predicates(spec.offline_interpreter)
         self._spec = spec
+        if duration_s is not None:  # a formula that passes the checks never fails at evaluation
+            samples = int(round(duration_s / step_s)) + 1
+            trial = Trace(np.arange(samples) * step_s, {n: np.zeros(samples) for n in declared}, followers)
+            try:
+                value = self.robustness(trial)
+            except Exception as exc:
+                raise ConfigError("spec.formula", self.formula, f"an STL formula rtamt can evaluate ({type(exc).__name__}: {exc})") from None
+            if value != value:
+                raise ConfigError("spec.formula", self.formula, "an STL formula with a defined robustness (it gave NaN)")
 
     def robustness(self, trace: Trace) -> float:
         data = {"time": trace.times_s.tolist()}
@@ -100,6 +112,29 @@ class Specification:
                 raise ValueError(f"signal {name} has NaN or infinite values: not scored")
             data[name] = values.tolist()
         return float(self._spec.evaluate(data)[0][1])
+
+
+_UNIT_S = {"": Fraction(1), "s": Fraction(1), "ms": Fraction(1, 1000), "us": Fraction(1, 10**6), "ns": Fraction(1, 10**9)}
+
+
+def _check_time_bounds(ast, formula: str, step_s: float, duration_s: float | None) -> None:
+    """Every time bound [a:b] of the formula: ordered, on the step grid, within the episode."""
+    step = Fraction(step_s).limit_denominator(10**6)
+    stack = list(getattr(ast, "specs", [ast]))
+    while stack:
+        node = stack.pop()
+        stack.extend(getattr(node, "children", []))
+        if not hasattr(node, "begin"):
+            continue
+        begin = Fraction(node.begin) * _UNIT_S.get(getattr(node, "begin_unit", ""), Fraction(1))
+        end = Fraction(node.end) * _UNIT_S.get(getattr(node, "end_unit", ""), Fraction(1))
+        where = f"bound [{float(begin):g} s, {float(end):g} s]"
+        if begin > end:
+            raise ConfigError("spec.formula", formula, f"time bounds [a:b] with a <= b (the {where} is reversed)")
+        if begin % step or end % step:
+            raise ConfigError("spec.formula", formula, f"time bounds on the step grid, multiples of {step_s:g} s (the {where})")
+        if duration_s is not None and end > Fraction(duration_s).limit_denominator(10**6):
+            raise ConfigError("spec.formula", formula, f"time bounds within the episode of {duration_s:g} s (the {where})")
 
 
 def _signal_help(followers: int) -> str:

@@ -148,6 +148,8 @@ class Store:
                 self._create()  # new, empty, or left empty by a kill during creation
             else:
                 self._check_ours(tables)
+                if not self.readonly:
+                    self.check_all()
         except sqlite3.DatabaseError as exc:
             self.close()
             raise StoreError(f"{self.path}: not a d4sumo results database ({exc})") from None
@@ -239,6 +241,19 @@ class Store:
     # --- campaigns ------------------------------------------------------------------------------
 
     @_guarded
+    def find_campaign(self, definition: dict[str, Any]) -> int | None:
+        """The id of the campaign with this definition, if stored (reads only)."""
+        row = self.db.execute("SELECT id FROM campaign WHERE key = ?", (campaign_key(definition),)).fetchone()
+        return None if row is None else int(row[0])
+
+    def check_all(self) -> None:
+        """Read and check every campaign and sample: a writer refuses a damaged database before
+        writing anything to it."""
+        self.campaigns()
+        for _ in self.iter_samples():
+            pass
+
+    @_guarded
     def open_campaign(self, definition: dict[str, Any], budget: int, sweep: str | None = None) -> int:
         """The id of the campaign with this definition, created if new; its budget grows to ``budget``."""
         key = campaign_key(definition)
@@ -267,6 +282,9 @@ class Store:
                              "with config, attack, optimizer, seed and spec)")
         if not isinstance(r[3], int) or r[3] < 0:
             raise StoreError(f"{self.path}: damaged results database (campaign {r[0]}: budget {r[3]!r})")
+        from .campaign import Campaign  # here, not at the top: campaign imports this module
+
+        Campaign.from_definition(definition, where=f"{self.path}: campaign {r[0]}")  # every value checked
         return CampaignRow(r[0], r[1], definition, r[3], r[4], r[5], r[6])
 
     def campaign(self, campaign_id: int) -> CampaignRow:

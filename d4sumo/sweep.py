@@ -11,7 +11,7 @@ A sweep file is TOML:
     attack = ["knots"]
     optimizer = ["bo", "ce"]
     seed = [0]
-    [search]  samples = 100
+    [search]  samples = 100           # and [search.bo], [search.ce]: the optimisers' options
     [scenario], [vehicle], [controller], [attack], [spec]: fixed values, as in a config file
 
 Every campaign is built and checked before anything runs. Workers send every few samples back to
@@ -38,18 +38,19 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .campaign import Campaign, CampaignRunner, Evaluator, SampleResult, stored_results
-from .config import EpisodeConfig, read_toml
+from .config import read_toml
+from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
 from .scenarios import NetworkSource, build_road, network_source
 from .simulation import check_road
-from .spec import Specification
 from .store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
 
 GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "attack", "optimizer", "seed")
-SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start")
-TOP_LEVEL = ("name", "grid", "search", "scenario", "vehicle", "controller", "attack", "spec")
+#: a grid axis -> the document key it sets
+GRID_TO_KEY = {**{k: f"scenario.{k}" for k in GRID_KEYS[:5]}, "attack": "attack.family", "optimizer": "search.optimizer",
+               "seed": "search.seed"}
 
 
 @dataclass(frozen=True)
@@ -74,9 +75,7 @@ class Sweep:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any], default_name: str = "sweep", source: str = "sweep") -> "Sweep":
-        for key in doc:
-            if key not in TOP_LEVEL:
-                raise ConfigError(f"{source}: {key}", doc[key], f"a key of a sweep file: {', '.join(TOP_LEVEL)}")
+        check_document(doc, source, extra_keys=("name", "grid"))
         name = doc.get("name", default_name)
         if not isinstance(name, str) or not name.strip():
             raise ConfigError(f"{source}: name", name, "a non-empty string")
@@ -90,35 +89,11 @@ class Sweep:
                 raise ConfigError(f"grid.{key}", values, "a non-empty list")
             if len(set(map(repr, values))) != len(values):
                 raise ConfigError(f"grid.{key}", values, "a list without repeated values")
-        search = dict(doc.get("search", {}))
-        for key in search:
-            if key not in ("samples", "optimizer", "seed"):
-                raise ConfigError(f"search.{key}", search[key], "a key of [search]: samples, optimizer, seed")
-        spec = dict(doc.get("spec", {}))
-        attack = dict(doc.get("attack", {}))
-        for key in attack:
-            if key not in ("family", "delta_s", "horizon_s"):
-                raise ConfigError(f"attack.{key}", attack[key], "a key of [attack] in a sweep: family, delta_s, horizon_s")
-        base = {k: doc.get(k, {}) for k in ("scenario", "vehicle", "controller")}
-        axes = {k: grid.get(k) for k in GRID_KEYS if k in grid}
+        base = {k: v for k, v in doc.items() if k not in ("name", "grid")}
         campaigns = []
-        for values in itertools.product(*axes.values()):
-            point = dict(zip(axes, values))
-            overrides = {f"scenario.{k}": v for k, v in point.items() if k in SCENARIO_GRID_KEYS}
-            config = EpisodeConfig.from_dict(base, overrides)
-            campaigns.append(
-                Campaign(
-                    config=config,
-                    attack=point.get("attack", attack.get("family", "knots")),
-                    optimizer=point.get("optimizer", search.get("optimizer", "bo")),
-                    samples=search.get("samples", 100),
-                    seed=point.get("seed", search.get("seed", 0)),
-                    d_safe_m=spec.get("d_safe_m", 0.0),
-                    formula=spec.get("formula"),
-                    delta_s=attack.get("delta_s", 6.0),
-                    horizon_s=attack.get("horizon_s", 48.0),
-                )
-            )
+        for values in itertools.product(*grid.values()):
+            point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
+            campaigns.append(campaign_of(with_overrides(base, point)))
         return cls(name=name.strip(), campaigns=tuple(campaigns))
 
     def check(self) -> None:
@@ -128,8 +103,12 @@ class Sweep:
             if c.config.network not in roads:
                 roads[c.config.network] = build_road(c.config.network)
             check_road(c.config, roads[c.config.network])
-        for followers, step_s, formula, d_safe in {(c.config.followers, c.config.step_s, c.formula, c.d_safe_m) for c in self.campaigns}:
-            Specification(followers=followers, step_s=step_s, formula=formula, d_safe_m=d_safe)
+        seen = set()
+        for c in self.campaigns:
+            key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m)
+            if key not in seen:
+                seen.add(key)
+                c.specification()
 
 
 # --- running ---------------------------------------------------------------------------------

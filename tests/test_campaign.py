@@ -94,10 +94,10 @@ def test_robustness_positive_exactly_for_successes_with_the_papers_psi():
 @pytest.mark.parametrize(
     "changes, field",
     [
-        (dict(optimizer="annealing"), "optimizer"),
+        (dict(optimizer="annealing"), "search.optimizer"),
         (dict(attack="zigzag"), "attack"),
-        (dict(samples=0), "samples"),
-        (dict(seed=-1), "seed"),
+        (dict(samples=0), "search.samples"),
+        (dict(seed=-1), "search.seed"),
         (dict(delta_s=5.0), "attack.horizon_s"),
     ],
 )

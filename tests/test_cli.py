@@ -53,7 +53,7 @@ def test_scenarios_lists_the_variants(capsys):
         (["--network", "autobahn"], "--network (scenario.network): got 'autobahn'"),
         (["--setpoint", "-1"], "--setpoint (scenario.setpoint_m): got -1.0; allowed: a number in (0, 200]"),
         (["--followers", "0"], "--followers (scenario.followers): got 0"),
-        (["--knots=-1,1.5"], "--knots: m1: got 1.5; allowed: a number in [-1, 1]"),
+        (["--knots=-1,1.5"], "--knots (attack.params: m1): got 1.5; allowed: a number in [-1, 1]"),
         (["--knots=-1,x"], "--knots: got '-1,x'"),
         (["--attack", "sine"], "--params"),
         (["--set", "vehicle.wheels=4"], "vehicle.wheels"),
@@ -112,11 +112,11 @@ def test_falsify_then_export_and_replay_a_stored_sample(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, expected",
     [
-        (["--samples", "0"], "--samples (samples): got 0"),
+        (["--samples", "0"], "--samples (search.samples): got 0"),
         (["--formula", "eventually(foo < 1)"], "unknown: foo"),
         (["--formula", "always(gap_1 >"], "rtamt can parse"),
-        (["--attack", "knots", "--delta", "5"], "--horizon (attack.horizon_s)"),
-        (["--seed", "-2"], "--seed (seed)"),
+        (["--attack", "knots", "--delta", "5"], "attack.horizon_s: got 48.0; allowed: a whole multiple of delta_s=5 s"),
+        (["--seed", "-2"], "--seed (search.seed)"),
     ],
 )
 def test_bad_falsify_input_is_one_line_and_writes_nothing(argv, expected, tmp_path, capsys):

@@ -6,9 +6,10 @@ import sqlite3
 
 import pytest
 
+from d4sumo.campaign import Campaign
 from d4sumo.store import SCHEMA_VERSION, Store, StoreError
 
-DEFINITION = {"config": {}, "attack": {"family": "knots"}, "optimizer": "bo", "seed": 1, "spec": {}}
+DEFINITION = Campaign(seed=1).definition()
 
 
 def test_samples_round_trip_and_are_never_counted_twice(tmp_path):

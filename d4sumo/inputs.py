@@ -1,0 +1,150 @@
+"""One input document for every way in: command-line flags, config files and sweep files.
+
+A document is the tables of a config file:
+
+    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s
+    [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
+    [controller] class = "switching" (or "package.module:ClassName") and the class's parameters
+    [attack]     family, params (simulate only), delta_s, horizon_s
+    [spec]       d_safe_m, formula
+    [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
+
+Flags are dotted keys laid over the document (``--setpoint 5`` is ``scenario.setpoint_m = 5``,
+``--set search.ce.batch_size=20`` any key), so a flag, a config file and a sweep file are checked by
+the same code: every table for unknown keys, every value for its type and range, before anything runs.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from typing import Any, Mapping
+
+import numpy as np
+
+from .attacks import FAMILIES, AttackFamily, make_attack
+from .campaign import Campaign
+from .config import EpisodeConfig, VehicleParams, read_toml
+from .errors import ConfigError, check_number, is_number
+from .optimizers import OPTIMIZERS, resolve_options
+
+SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "controller"))
+TABLE_KEYS: dict[str, tuple[str, ...]] = {
+    "scenario": SCENARIO_KEYS,
+    "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
+    "attack": ("family", "params", "delta_s", "horizon_s"),
+    "spec": ("d_safe_m", "formula"),
+    "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
+}
+DEFAULTS = {"attack.delta_s": 6.0, "attack.horizon_s": 48.0}
+
+
+def read_document(path, field: str = "--config", extra_keys: tuple[str, ...] = ()) -> dict:
+    """A config file's tables, checked (unknown tables and keys refused); ``extra_keys`` are other
+    top-level keys the caller reads itself (a sweep file's name and grid)."""
+    doc = read_toml(path, field)
+    check_document(doc, str(path), extra_keys)
+    return doc
+
+
+def check_document(doc: Mapping[str, Any], source: str = "config", extra_keys: tuple[str, ...] = ()) -> None:
+    for key, value in doc.items():
+        if key in extra_keys:
+            continue
+        if key not in SECTIONS:
+            raise ConfigError(f"{source}: {key}", _short(value), f"the tables {', '.join(SECTIONS)}"
+                              + (f" and {', '.join(extra_keys)}" if extra_keys else ""))
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{source}: [{key}]", _short(value), "a table")
+        allowed = TABLE_KEYS.get(key)
+        for k, v in value.items():
+            if allowed is not None and k not in allowed:
+                raise ConfigError(f"{key}.{k}", _short(v), f"a key of [{key}]: {', '.join(allowed)}")
+            if key == "search" and k in OPTIMIZERS and not isinstance(v, Mapping):
+                raise ConfigError(f"search.{k}", _short(v), f"a table of {k}'s options ([search.{k}])")
+
+
+def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict:
+    """A copy of the document with dotted keys set (``scenario.setpoint_m``, ``search.ce.batch_size``)."""
+    out = copy.deepcopy(dict(doc))
+    for dotted, value in overrides.items():
+        parts = dotted.split(".")
+        if len(parts) < 2 or parts[0] not in SECTIONS or not all(parts):
+            raise ConfigError(dotted, _short(value), f"a key as TABLE.KEY with TABLE one of {', '.join(SECTIONS)}")
+        table = out
+        for part in parts[:-1]:
+            if not isinstance(table.get(part, {}), dict):
+                raise ConfigError(dotted, _short(value), f"a key inside a table ({part} is not one)")
+            table = table.setdefault(part, {})
+        table[parts[-1]] = value
+    check_document(out, "flags")
+    return out
+
+
+def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
+    table, _, key = dotted.partition(".")
+    return doc.get(table, {}).get(key, DEFAULTS.get(dotted, default))
+
+
+def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
+    return EpisodeConfig.from_dict(doc)
+
+
+def _family(doc: Mapping[str, Any], choices=FAMILIES) -> AttackFamily:
+    name = _get(doc, "attack.family", "knots")
+    if not isinstance(name, str) or name not in choices:
+        raise ConfigError("attack.family", _short(name), f"one of {', '.join(choices)}")
+    return make_attack(name, delta_s=_get(doc, "attack.delta_s"), horizon_s=_get(doc, "attack.horizon_s"))
+
+
+def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
+    """The one attack an episode plays: (family, parameter vector), or (None, None) for no attack."""
+    attack = doc.get("attack", {})
+    for key, low, high in (("delta_s", 0.05, 600.0), ("horizon_s", 0.05, 3600.0)):
+        if key in attack:
+            check_number(f"attack.{key}", attack[key], low, high, "seconds")
+    if "family" not in attack:
+        if "params" in attack:
+            raise ConfigError("attack.params", _short(attack["params"]), "parameters with an attack family (--attack or [attack] family)")
+        return None, None
+    family = _family(doc)
+    if "params" not in attack:
+        raise ConfigError("attack.params", None, f"{family.dimension} values for {family.name}: {', '.join(family.names)}")
+    params = attack["params"]
+    if not isinstance(params, (list, tuple)) or not all(is_number(v) for v in params):
+        raise ConfigError("attack.params", _short(params), f"a list of {family.dimension} numbers for {family.name}: {', '.join(family.names)}")
+    return family, family.check(params, "attack.params")
+
+
+def campaign_of(doc: Mapping[str, Any]) -> Campaign:
+    """The campaign a document describes (the optimiser chooses the attack's parameters)."""
+    if "params" in doc.get("attack", {}):
+        raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
+    config = episode_config(doc)
+    family = _family(doc, tuple(f for f in FAMILIES if f != "constant"))
+    optimizer = _get(doc, "search.optimizer", "bo")
+    if not isinstance(optimizer, str) or optimizer not in OPTIMIZERS:
+        raise ConfigError("search.optimizer", _short(optimizer), f"one of {', '.join(OPTIMIZERS)}")
+    for name in OPTIMIZERS:  # every optimiser's table is checked, not only the one used
+        if name in doc.get("search", {}):
+            resolve_options(name, doc["search"][name])
+    options = doc.get("search", {}).get(optimizer, {})
+    return Campaign(
+        config=config,
+        attack=family.name,
+        optimizer=optimizer,
+        samples=_get(doc, "search.samples", 100),
+        seed=_get(doc, "search.seed", 0),
+        d_safe_m=_get(doc, "spec.d_safe_m", 0.0),
+        formula=_get(doc, "spec.formula"),
+        delta_s=_get(doc, "attack.delta_s"),
+        horizon_s=_get(doc, "attack.horizon_s"),
+        optimizer_options=tuple(options.items()),
+    )
+
+
+def _short(value: Any) -> Any:
+    """A value as shown in an error message: long ones cut."""
+    text = repr(value)
+    return value if len(text) <= 80 else text[:77] + "..."

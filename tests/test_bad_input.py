@@ -1,0 +1,235 @@
+"""Malformed input of every kind, fed to the command line as a new user would: each ends in one clear
+line (`d4sumo: error: ...`), exit code 2, no traceback, and every stored file byte-identical."""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+
+import pytest
+
+from d4sumo.cli import main
+
+SIMULATE = [
+    ["--setpoint", "inf"], ["--setpoint", "nan"], ["--setpoint", "-1"], ["--setpoint", "abc"],
+    ["--followers", "3.5"], ["--followers", "0"], ["--followers", "11"], ["--start", "fast"],
+    ["--network", "nowhere"], ["--network", "/"], ["--knots=1,x"], ["--knots="], ["--knots=2"], ["--knots", "1,,2"],
+    ["--params", "-0.5,0.2,1"], ["--attack", "sine", "--params", "-0.5,0.2,1"], ["--attack", "sine"],
+    ["--attack", "sine", "--params", "0.5,0.2"], ["--attack", "zigzag"], ["--constant", "2"],
+    ["--knots=1,1", "--constant", "1"], ["--controller", "foo"], ["--controller", "nope.module:X"],
+    ["--controller", "os:path"], ["--controller", ""], ["--set", "scenario.setpoint_m=inf"], ["--set", "nosection"],
+    ["--set", "vehicle.length_m=[1,2]"], ["--set", "scenario.setpont_m=3"], ["--set", "controller.acc_kp=nan"],
+    ["--set", "controller.acc_kp=-1"], ["--set", "=3"], ["--set", "a.b.c=1"],
+    ["--formula", "eventually[5:2](gap_1 <= 0)"], ["--formula", "eventually[0:1e12](gap_1 <= 0)"],
+    ["--formula", "eventually[0:0.01](gap_1 <= 0)"], ["--formula", "always(foo > 0)"], ["--formula", "always(gap_1 >"],
+    ["--formula", "always(gap_9 > 0)"], ["--formula", ""], ["--d-safe", "nan"], ["--duration", "0"], ["--step", "2"],
+    ["--start", "warmup", "--warmup", "15.01"], ["--warmup", "-1"], ["--speed", "45"], ["--duration", "500"],
+    ["--fcd", "/nonexistent/folder/out.xml"], ["--delta", "0"], ["--horizon", "-3"], ["--delta", "5", "--knots=1,1,1", "--horizon", "7"],
+    ["--length", "0"], ["--config", "/nonexistent.toml"], ["--bogus"], ["--json", "extra"],
+]
+
+
+@pytest.mark.parametrize("argv", SIMULATE, ids=lambda a: " ".join(a) or "empty")
+def test_simulate_refuses_bad_input_in_one_line(argv, capsys):
+    assert main(["simulate", *argv]) == 2
+    check_one_line(capsys)
+
+
+def check_one_line(capsys):
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert err.startswith("d4sumo: error: ") and err.count("\n") == 0, err
+    assert "Traceback" not in captured.err + captured.out
+    return err
+
+
+def test_a_list_that_starts_with_a_negative_number_is_read_with_or_without_equals(capsys):
+    for argv in (["--attack", "sine", "--params", "-0.5,0.2,1"], ["--attack", "sine", "--params=-0.5,0.2,1"]):
+        assert main(["simulate", *argv]) == 2
+        assert "amplitude): got -0.5" in check_one_line(capsys)  # read as values, refused by range
+
+
+def test_gui_without_a_display_is_one_line_at_once(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["simulate", "--gui"]) == 2
+    assert "DISPLAY is not set" in check_one_line(capsys)
+
+
+def test_output_paths_that_cannot_be_written(tmp_path, capsys):
+    assert main(["simulate", "--fcd", str(tmp_path)]) == 2
+    assert "this is a folder" in check_one_line(capsys)
+    assert main(["simulate", "--fcd", str(tmp_path / "no" / "f.xml")]) == 2
+    assert "does not exist" in check_one_line(capsys)
+    assert not (tmp_path / "no").exists()
+
+
+BAD_FILES = {
+    "not utf-8": b"[scenario]\nnetwork = '\xff'\n",
+    "unknown table": b"[scenaro]\nx = 1\n",
+    "unknown key": b"[scenario]\nsetpont_m = 3\n",
+    "unknown spec key": b"[spec]\nformulas = 'x'\n",
+    "inf gain": b"[controller]\nacc_kp = inf\n",
+    "nan vehicle": b"[vehicle]\nmax_decel_mps2 = nan\n",
+    "wrong type": b"[scenario]\nfollowers = 'three'\n",
+    "table as value": b"scenario = 3\n",
+    "bad optimizer option": b"[search.ce]\nelite_fraction = 2.0\n",
+    "params in a campaign": b"[attack]\nfamily = 'sine'\nparams = [0.1, 0.1, 0.1]\n",
+    "malformed": b"[scenario\n",
+}
+
+
+@pytest.mark.parametrize("name", BAD_FILES)
+def test_a_bad_config_file_is_refused_and_writes_nothing(tmp_path, name, capsys):
+    config = tmp_path / "c.toml"
+    config.write_bytes(BAD_FILES[name])
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--config", str(config), "--db", str(db), "--quiet"]) == 2
+    check_one_line(capsys)
+    assert not db.exists()
+
+
+FALSIFY = [
+    ["--samples", "0"], ["--samples", "x"], ["--seed", "-1"], ["--optimizer", "anneal"], ["--attack", "constant"],
+    ["--set", "search.ce.batch_size=0"], ["--set", "search.bo.xi=nan"], ["--set", "search.random.x=1"],
+    ["--set", "search.samples=-3"], ["--formula", "eventually[0:99](gap_1 <= 0)"], ["--followers", "1"],
+    ["--db", "/nonexistent/folder/r.sqlite"],
+]
+
+
+@pytest.mark.parametrize("argv", FALSIFY, ids=lambda a: " ".join(a))
+def test_falsify_refuses_bad_input_and_creates_no_database(tmp_path, argv, capsys):
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--db", str(db), "--quiet", *argv]) == 2
+    check_one_line(capsys)
+    assert not db.exists()
+
+
+def test_falsify_into_a_folder_or_a_foreign_file_changes_nothing(tmp_path, capsys):
+    assert main(["falsify", "--db", str(tmp_path), "--quiet"]) == 2
+    check_one_line(capsys)
+    foreign = tmp_path / "notes.sqlite"
+    foreign.write_bytes(b"not a database" * 100)
+    assert main(["falsify", "--db", str(foreign), "--quiet", "--samples", "1"]) == 2
+    check_one_line(capsys)
+    assert foreign.read_bytes() == b"not a database" * 100
+
+
+SWEEPS = {
+    "not utf-8": b"[grid]\nsetpoint_m = [5.0]\nname = '\xff'\n",
+    "unknown grid key": b"[grid]\nsetpoint = [5.0]\n",
+    "unknown top key": b"[grid]\nsetpoint_m = [5.0]\n[sweep]\nx = 1\n",
+    "grid not lists": b"[grid]\nsetpoint_m = 5.0\n",
+    "grid wrong type": b"[grid]\nsetpoint_m = ['five']\n",
+    "grid nan": b"[grid]\nsetpoint_m = [nan]\n",
+    "unknown search option": b"[grid]\nsetpoint_m = [5.0]\n[search.ce]\nbatch = 3\n",
+    "name not a string": b"name = 5\n[grid]\nsetpoint_m = [5.0]\n",
+    "reversed formula bounds": b"[grid]\nsetpoint_m = [5.0]\n[spec]\nformula = 'eventually[3:1](gap_1 <= 0)'\n",
+    "bad spec key": b"[grid]\nsetpoint_m = [5.0]\n[spec]\nd_safe = 1\n",
+}
+
+
+@pytest.mark.parametrize("name", SWEEPS)
+def test_a_bad_sweep_file_is_refused_and_writes_nothing(tmp_path, name, capsys):
+    path = tmp_path / "s.toml"
+    path.write_bytes(SWEEPS[name])
+    db = tmp_path / "r.sqlite"
+    assert main(["sweep", str(path), "--db", str(db), "--quiet"]) == 2
+    check_one_line(capsys)
+    assert not db.exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["--dask", "not an address"], ["--dask", "tcp://host:99999"], ["--dask", "http//x:1"], ["--dask-timeout", "-1"],
+    ["--dask-timeout", "nan"], ["--workers", "0"], ["--workers", "two"],
+], ids=lambda a: " ".join(a))
+def test_sweep_flags_are_checked_up_front(tmp_path, argv, capsys):
+    path = tmp_path / "s.toml"
+    path.write_text("[grid]\nsetpoint_m = [5.0]\n[search]\nsamples = 2\n")
+    db = tmp_path / "r.sqlite"
+    assert main(["sweep", str(path), "--db", str(db), "--quiet", *argv]) == 2
+    check_one_line(capsys)
+    assert not db.exists()
+
+
+# --- commands that read a database: bad flags, damaged databases; never a changed byte ----------
+
+
+@pytest.fixture(scope="module")
+def good_db(tmp_path_factory):
+    db = tmp_path_factory.mktemp("good") / "r.sqlite"
+    assert main(["falsify", "--optimizer", "random", "--samples", "3", "--db", str(db), "--quiet"]) == 0
+    return db
+
+
+def readers(db, tmp):
+    return [
+        ["export", str(db)],
+        ["replay", str(db), "1"],
+        ["report", str(db), "--out", str(tmp / "report"), "--quiet"],
+        ["plot", "heatmap", str(db), "--out", str(tmp / "h.png")],
+        ["falsify", "--optimizer", "random", "--samples", "4", "--db", str(db), "--quiet"],  # a resume reads it all
+    ]
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("argv", [
+    ["replay", "{db}", "999999"], ["replay", "{db}", "abc"], ["export", "{db}", "--campaign", "99"],
+    ["export", "{db}", "--out", "{tmp}/absent/x.csv"], ["export", "{db}", "--out", "{tmp}"],
+    ["plot", "time-space", "{db}", "--out", "{tmp}/f.png"], ["plot", "heatmap", "{db}", "--out", "{tmp}/absent/f.png"],
+    ["plot", "heatmap", "{db}", "--out", "{tmp}/f.png", "--setpoint", "99"], ["plot", "heatmap", "{db}", "--out", "{tmp}/f.xyz"],
+    ["replay", "{db}", "1", "--fcd", "{tmp}/absent/f.xml"], ["report", "{db}", "--out", "{tmp}/absent/deep/report"],
+    ["report", "{tmp}/missing.sqlite"], ["export", "{tmp}"],
+], ids=lambda a: " ".join(a))
+def test_reading_commands_refuse_bad_flags_and_change_nothing(good_db, tmp_path, argv, capsys):
+    before = good_db.read_bytes()
+    argv = [a.format(db=good_db, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    check_one_line(capsys)
+    assert good_db.read_bytes() == before
+    assert sorted(p.name for p in good_db.parent.iterdir()) == ["r.sqlite"]
+    assert not (tmp_path / "absent").exists()
+
+
+DAMAGE = {
+    "schema version not a number": "UPDATE meta SET value = 'x' WHERE key = 'schema_version'",
+    "old schema": "UPDATE meta SET value = '1' WHERE key = 'schema_version'",
+    "foreign app": "UPDATE meta SET value = 'other' WHERE key = 'app'",
+    "missing table": "DROP TABLE sample",
+    "bad params json": "UPDATE sample SET params = '[0.1,'",
+    "unknown outcome": "UPDATE sample SET outcome = 'maybe'",
+    "orphan sample": "UPDATE sample SET campaign_id = 42",
+    "bad definition": "UPDATE campaign SET definition = '[]'",
+    "definition of bad values": "UPDATE campaign SET definition = replace(definition, '\"followers\": 3', '\"followers\": -3')",
+    "bad min gaps": "UPDATE sample SET min_gaps = 'x'",
+}
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("damage", DAMAGE)
+def test_a_damaged_database_is_one_clear_line_in_every_command(good_db, tmp_path, damage, capsys):
+    db = tmp_path / "r.sqlite"
+    shutil.copy(good_db, db)
+    con = sqlite3.connect(db)
+    con.execute(DAMAGE[damage])
+    con.commit()
+    con.close()
+    before = db.read_bytes()
+    for argv in readers(db, tmp_path):
+        assert main(argv) == 2, argv
+        check_one_line(capsys)
+        assert db.read_bytes() == before, argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
+
+
+@pytest.mark.sumo
+def test_a_malformed_page_is_one_clear_line(good_db, tmp_path, capsys):
+    db = tmp_path / "r.sqlite"
+    data = bytearray(good_db.read_bytes())
+    data[4096: 4096 + 8] = b"\x07" * 8  # the second page's header: an invalid page type
+    db.write_bytes(bytes(data))
+    before = db.read_bytes()
+    for argv in readers(db, tmp_path):
+        assert main(argv) == 2, argv
+        check_one_line(capsys)
+        assert db.read_bytes() == before

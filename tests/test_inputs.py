@@ -1,0 +1,96 @@
+"""One input document: config files, flags and sweep files checked by the same code. No SUMO."""
+
+from __future__ import annotations
+
+import pytest
+
+from d4sumo.errors import ConfigError
+from d4sumo.inputs import attack_of, campaign_of, episode_config, read_document, with_overrides
+
+
+def write(tmp_path, text, name="c.toml"):
+    path = tmp_path / name
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    return path
+
+
+def test_flags_win_over_the_file(tmp_path):
+    doc = read_document(write(tmp_path, '[scenario]\nsetpoint_m = 9\nspeed_mps = 20\n[controller]\nacc_kp = 1.1\n'))
+    c = episode_config(with_overrides(doc, {"scenario.setpoint_m": 3.0}))
+    assert c.setpoint_m == 3.0 and c.speed_mps == 20 and dict(c.controller.params)["acc_kp"] == 1.1
+
+
+def test_optimizer_options_come_from_search_tables(tmp_path):
+    doc = read_document(write(tmp_path, '[search]\noptimizer = "ce"\nsamples = 50\n[search.ce]\nbatch_size = 25\n'))
+    campaign = campaign_of(doc)
+    assert campaign.optimizer == "ce" and campaign.samples == 50
+    assert dict(campaign.optimizer_options)["batch_size"] == 25
+    assert campaign.definition()["optimizer_options"]["batch_size"] == 25
+
+
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        ("[scenaro]\nx = 1\n", "scenaro"),
+        ("[scenario]\nsetpont_m = 3\n", "scenario.setpont_m"),
+        ("[spec]\nd_saf_m = 1\n", "spec.d_saf_m"),
+        ("[search]\nsample = 3\n", "search.sample"),
+        ("[attack]\nfamilly = 'sine'\n", "attack.familly"),
+        ("[search.ce]\nbatchsize = 3\n", "search.ce.batchsize"),
+        ("[search]\nce = 3\n", "search.ce"),
+        ("scenario = 5\n", "[scenario]"),
+        ("[controller]\nacc_kp = inf\n", "controller.acc_kp"),
+        ("[controller]\nacc_kp = nan\n", "controller.acc_kp"),
+        ("[controller]\nacc_kp = 'high'\n", "controller.acc_kp"),
+        ("[controller]\nclass = 5\n", "controller.class"),
+        ("[vehicle]\nlength_m = inf\n", "vehicle.length_m"),
+        ("[scenario]\nsetpoint_m = '7'\n", "scenario.setpoint_m"),
+        ("[scenario]\nfollowers = 3.0\n", "scenario.followers"),
+        ("[scenario]\nstart = ['rest']\n", "scenario.start"),
+        ("[scenario]\nnetwork = 4\n", "scenario.network"),
+        ("[search]\nsamples = '100'\n", "search.samples"),
+        ("[search]\nseed = 1.5\n", "search.seed"),
+        ("[search]\noptimizer = ['bo']\n", "search.optimizer"),
+        ("[attack]\nfamily = 7\n", "attack.family"),
+        ("[attack]\ndelta_s = nan\n", "attack.delta_s"),
+        ("[spec]\nformula = 3\n", "spec.formula"),
+        ("[spec]\nd_safe_m = inf\n", "spec.d_safe_m"),
+        ("[attack]\nparams = [0.1]\n", "attack.params"),
+    ],
+)
+def test_a_bad_config_file_names_the_field(tmp_path, text, field):
+    with pytest.raises(ConfigError) as info:
+        campaign_of(read_document(write(tmp_path, text)))
+    assert field in info.value.field
+
+
+def test_a_file_that_is_not_utf8_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="UTF-8"):
+        read_document(write(tmp_path, b"[scenario]\nnetwork = '\xff\xfe'\n"))
+
+
+def test_malformed_toml_says_where(tmp_path):
+    with pytest.raises(ConfigError, match="valid TOML"):
+        read_document(write(tmp_path, "[scenario]\nsetpoint_m = = 3\n"))
+
+
+@pytest.mark.parametrize(
+    "attack, field",
+    [
+        ({"params": [0.1]}, "attack.params"),
+        ({"family": "sine"}, "attack.params"),
+        ({"family": "sine", "params": "x"}, "attack.params"),
+        ({"family": "sine", "params": [0.1, "a", 2]}, "attack.params"),
+        ({"family": "sine", "params": [0.1, 0.2]}, "attack.params"),
+        ({"family": "zigzag", "params": [0.1]}, "attack.family"),
+    ],
+)
+def test_a_bad_attack_of_an_episode_names_the_field(attack, field):
+    with pytest.raises(ConfigError) as info:
+        attack_of({"attack": attack})
+    assert info.value.field.startswith(field)
+
+
+def test_a_knot_attack_of_an_episode():
+    family, params = attack_of({"attack": {"family": "knots", "params": [0, 1, -1], "horizon_s": 12}})
+    assert family.name == "knots" and list(params) == [0, 1, -1]
