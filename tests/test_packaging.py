@@ -1,0 +1,68 @@
+"""The built wheel works anywhere: installed into a fresh environment, run from an unrelated folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory):
+    """The project's wheel, built from a copy of its files (the checkout stays clean)."""
+    src = tmp_path_factory.mktemp("src")
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True)
+    names = files.stdout.split() if files.returncode == 0 else []
+    if not names:  # not a git checkout: copy the package's own folders
+        names = [str(p.relative_to(ROOT)) for d in ("d4sumo", "sumo_scenarios") for p in (ROOT / d).rglob("*") if p.is_file()]
+        names += ["pyproject.toml", "README.md"]
+    for name in names:
+        if (ROOT / name).is_file():
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    out = tmp_path_factory.mktemp("dist")
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out), str(src)],
+                           capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stderr
+    (whl,) = out.glob("d4sumo-*.whl")
+    return whl
+
+
+def test_the_wheel_ships_every_scenario_variant(wheel):
+    names = zipfile.ZipFile(wheel).namelist()
+    for variant in (p.name for p in (ROOT / "sumo_scenarios").iterdir() if p.is_dir() and not p.name.startswith("_")):
+        assert f"sumo_scenarios/{variant}/highway.nod.xml" in names and f"sumo_scenarios/{variant}/highway.edg.xml" in names
+    assert "d4sumo/cli.py" in names and not any(n.startswith("tests/") for n in names)
+
+
+@pytest.mark.sumo
+def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp_path):
+    """Regression: a non-editable install had no sumo_scenarios/, so every episode exited 2."""
+    env_dir = tmp_path / "env"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True)
+    python = env_dir / "bin" / "python"
+    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                               capture_output=True, text=True, check=True).stdout.strip())
+    with zipfile.ZipFile(wheel) as z:  # what pip does for a pure wheel; the dependencies come from this environment
+        z.extractall(site)
+    (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    run = lambda *code: subprocess.run([str(python), *code], cwd=work, capture_output=True, text=True, env=env, timeout=300)
+    where = run("-c", "import d4sumo, sumo_scenarios; print(d4sumo.__file__); print(sumo_scenarios.__file__)")
+    assert where.returncode == 0, where.stderr
+    assert all(line.startswith(str(site)) for line in where.stdout.split()), where.stdout  # not the checkout
+    listed = run("-m", "d4sumo.cli", "scenarios")
+    assert listed.returncode == 0 and "highway_3lane_120kmh" in listed.stdout, listed.stderr
+    episode = run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json")
+    assert episode.returncode == 0, episode.stderr
+    assert json.loads(episode.stdout)["outcome"] == "attacker_crash"
