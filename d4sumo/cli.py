@@ -382,6 +382,8 @@ def cmd_export(args: argparse.Namespace) -> int:
                 out.close()
                 os.replace(tmp, out_path)  # whole or not at all
         except OSError as exc:
+            if tmp is None:  # standard output (a closed pipe, say): main handles it
+                raise
             raise D4sumoError(f"--out: {out_path} could not be written ({exc.strerror}); nothing was written") from None
         finally:
             if tmp:
@@ -598,7 +600,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif getattr(args, "attack", None) is not None and args.command == "simulate":
         flags["attack.params"] = "--params"  # named even when it is missing
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # inside the try: a closed pipe surfaces here, not at exit
+        return code
     except ConfigError as exc:
         flag = flags.get(exc.field) or flags.get(exc.field.split(":")[0])
         field = f"{flag} ({exc.field})" if flag and not exc.field.startswith("--") else exc.field

@@ -233,3 +233,31 @@ def test_a_malformed_page_is_one_clear_line(good_db, tmp_path, capsys):
         assert main(argv) == 2, argv
         check_one_line(capsys)
         assert db.read_bytes() == before
+
+
+@pytest.mark.sumo
+def test_a_full_device_is_reported_and_leaves_no_file(good_db, tmp_path, monkeypatch, capsys):
+    import errno
+
+    import d4sumo.cli as cli
+
+    def full(*args):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(cli.os, "replace", full)
+    out = tmp_path / "s.csv"
+    assert main(["export", str(good_db), "--out", str(out)]) == 2
+    assert "No space left on device" in check_one_line(capsys)
+    assert list(tmp_path.iterdir()) == []  # no partial file, never "written"
+
+
+def test_an_fcd_file_cut_short_is_an_error(tmp_path):
+    from d4sumo.cli import check_fcd_written
+    from d4sumo.errors import D4sumoError
+
+    fcd = tmp_path / "f.xml"
+    fcd.write_text('<fcd-export>\n  <timestep time="0.00">\n')
+    with pytest.raises(D4sumoError, match="not written completely"):
+        check_fcd_written(fcd)
+    fcd.write_text('<fcd-export>\n</fcd-export>\n')
+    check_fcd_written(fcd)

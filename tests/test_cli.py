@@ -134,3 +134,40 @@ def test_a_database_that_is_not_ours_is_refused(tmp_path, capsys):
     assert "not a d4sumo results database" in capsys.readouterr().err
     assert db.read_text() == "not a database"
     assert main(["export", str(tmp_path / "missing.sqlite")]) == 2
+
+
+def test_output_piped_into_head_ends_quietly(tmp_path):
+    """Regression: `d4sumo export db | head` ended with a BrokenPipeError traceback."""
+    from d4sumo.campaign import Campaign
+    from d4sumo.store import Store
+
+    db = tmp_path / "r.sqlite"
+    with Store(db) as store:
+        cid = store.open_campaign(Campaign().definition(), 5000)
+        store.add_samples(cid, [(i, [0.1] * 9, -0.5, "no_crash", None, {"v0-v1": 1.0}, 0.01, None) for i in range(5000)])
+    result = subprocess.run(f"{sys.executable} -m d4sumo.cli export {db} | head -1", shell=True, capture_output=True,
+                            text=True, timeout=120)
+    assert result.stdout.startswith("sample_id,") and result.stdout.count("\n") == 1
+    assert result.stderr == ""
+
+
+def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
+    import re
+    from pathlib import Path
+
+    from d4sumo.cli import build_parser
+
+    parser = build_parser()
+    known = set()
+    for action in parser._actions:
+        for name, sub in getattr(action, "choices", None).items() if isinstance(getattr(action, "choices", None), dict) else []:
+            for a in sub._actions:
+                known.update(a.option_strings)
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    in_readme = set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", readme))
+    not_d4sumo = {"--nthreads", "--system-site-packages"}  # dask worker's, venv's
+    assert in_readme - known - not_d4sumo == set()
+    main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
+                  "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",
+                  "--json", "--gui", "--workers", "--dask", "--out", "--sample"}
+    assert main_flags - in_readme == set()

@@ -129,6 +129,64 @@ def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path):
     assert outcomes(tmp_path / "dask.sqlite") == outcomes(tmp_path / "local.sqlite")
 
 
+@pytest.mark.sumo
+def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_on_the_client(tmp_path):
+    """Regression: Dask workers wrote into a database on their own side and the client reported
+    '0 samples'. Now the workers (started elsewhere, with their own cache) only compute; the client
+    stores everything, and a worker killed mid-sweep loses nothing finished."""
+    import json as json_module
+    from pathlib import Path
+
+    dask = Path(sys.executable).parent / "dask"
+    scheduler_file = tmp_path / "scheduler.json"
+    procs = []
+
+    def spawn(args, folder):
+        folder.mkdir()
+        env = {**os.environ, "XDG_CACHE_HOME": str(folder / "cache")}
+        procs.append(subprocess.Popen([str(dask), *args], cwd=folder, env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL, start_new_session=True))
+        return procs[-1]
+
+    try:
+        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+              tmp_path / "scheduler")
+        deadline = time.time() + 60
+        while not scheduler_file.exists() and time.time() < deadline:
+            time.sleep(0.2)
+        address = json_module.loads(scheduler_file.read_text())["address"]
+        workers = [spawn(["worker", address, "--nthreads", "1", "--no-dashboard"], tmp_path / f"worker{i}") for i in (1, 2)]
+        path = write(tmp_path, TINY.replace("samples = 6", "samples = 30"))
+        db = tmp_path / "client" / "r.sqlite"
+        db.parent.mkdir()
+        cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--dask", address, "--quiet"]
+        sweep = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for_samples(db, 10)
+        os.killpg(workers[0].pid, signal.SIGKILL)  # one worker dies mid-sweep
+        out, err = sweep.communicate(timeout=300)
+        assert sweep.returncode == 0, err
+        assert "4 campaigns, 120 samples" in out
+        for i in (1, 2):  # the workers wrote nothing of the results on their side
+            assert not list((tmp_path / f"worker{i}").rglob("*.sqlite"))
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    rows = outcomes(db)
+    assert len(rows) == 120 and len({(r[0], r[1]) for r in rows}) == 120
+    run_sweep(Sweep.load(path), tmp_path / "local.sqlite", workers=1)
+    assert rows == outcomes(tmp_path / "local.sqlite")
+
+
+@pytest.mark.sumo
+def test_dask_local_runs_a_local_cluster(tmp_path):
+    path = write(tmp_path, TINY)
+    result = run_sweep(Sweep.load(path), tmp_path / "d.sqlite", workers=2, dask_address="local")
+    assert result.samples == 24
+
+
 def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
     path = write(tmp_path, TINY)
     assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "2", "--quiet"]) == 2
@@ -203,12 +261,22 @@ def wait_for_samples(db, n, timeout=90):
     raise AssertionError(f"fewer than {n} samples in {timeout} s")
 
 
+LONG = TINY.replace("samples = 6", "samples = 100")  # about 5 s on 2 cores: long enough to kill midway
+
+
+@pytest.fixture(scope="module")
+def long_reference(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("reference")
+    run_sweep(Sweep.load(write(folder, LONG)), folder / "ref.sqlite", workers=1)
+    return outcomes(folder / "ref.sqlite")
+
+
 @pytest.mark.sumo
 @pytest.mark.parametrize("how", ["SIGTERM", "SIGINT to the group", "kill -9 of the parent alone"])
-def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_path, how):
+def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_path, how, long_reference):
     """Regression: in 7 of 7 kills both workers and the resource tracker lived on and wrote hundreds
     more samples."""
-    path = write(tmp_path, TINY.replace("samples = 6", "samples = 40"))
+    path = write(tmp_path, LONG)
     db = tmp_path / "r.sqlite"
     cmd, proc = start_sweep(path, db)
     wait_for_samples(db, 20)
@@ -231,14 +299,13 @@ def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_pat
     if how != "kill -9 of the parent alone":
         assert proc.returncode in (130, 143) and "resume" in err
     stored = count_samples(db)
+    assert stored < 400, "the sweep ended before it was killed"
     time.sleep(1.5)
     assert count_samples(db) == stored, "samples were written after the sweep was killed"
     assert subprocess.run(cmd, timeout=300, capture_output=True).returncode == 0
     rows = outcomes(db)
-    assert len(rows) == 160 and len({(r[0], r[1]) for r in rows}) == 160
-    reference = tmp_path / "ref.sqlite"
-    run_sweep(Sweep.load(path), reference, workers=1)
-    assert rows == outcomes(reference)
+    assert len(rows) == 400 and len({(r[0], r[1]) for r in rows}) == 400
+    assert rows == long_reference
 
 
 @pytest.mark.sumo
