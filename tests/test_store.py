@@ -169,3 +169,16 @@ def test_a_malformed_page_is_a_clear_error(one_sample):
     with pytest.raises(StoreError, match="damaged|not a d4sumo"):
         with Store(one_sample, create=False) as store:
             store.samples()
+
+
+def test_a_campaign_of_a_controller_not_importable_here_is_still_readable(tmp_path):
+    """A database made with a user's own controller can be exported and reported elsewhere."""
+    import copy
+
+    definition = copy.deepcopy(DEFINITION)
+    definition["config"]["controller"]["class"] = "gone_package.module:MyController"
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        store.open_campaign(definition, 10)
+    with Store(path, create=False) as store:
+        assert store.campaigns()[0].definition["config"]["controller"]["class"] == "gone_package.module:MyController"
