@@ -260,7 +260,7 @@ def _print_summary(s: dict, road_name: str) -> None:
         )
     print("min gaps: " + ", ".join(f"{k} {v:.2f} m" for k, v in s["min_gaps_m"].items()))
     if s["robustness"] is not None:
-        what = "the campaign's formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
+        what = "the formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
         print(f"robustness of {what}: {s['robustness']:.4f}")
     if s["fcd"]:
         print(f"FCD written to {s['fcd']}")
@@ -405,10 +405,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         check_dask_address(args.dask)
     check_number("--dask-timeout", args.dask_timeout, 0.0, 3600.0, "seconds", low_open=True)
     sweep = Sweep.load(args.sweep)
-    bar = tqdm(total=sweep.samples, desc=f"sweep {sweep.name}", unit="sample", disable=args.quiet, file=sys.stderr,
-               dynamic_ncols=True)
+    bar = None  # made at the first progress report: an error before it stays one line
 
     def progress(done: int, total: int, successes: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total, desc=f"sweep {sweep.name}", unit="sample", disable=args.quiet, file=sys.stderr,
+                       dynamic_ncols=True, initial=done)
         bar.update(done - bar.n)
         bar.set_postfix(success=successes, refresh=False)
 
@@ -416,11 +419,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
                            progress=progress)
     except KeyboardInterrupt:
-        bar.close()
+        if bar is not None:
+            bar.close()
         print(f"d4sumo: sweep interrupted; every sample it finished is in {args.db}: run the same command to resume",
               file=sys.stderr)
         raise
-    bar.close()
+    except BaseException:
+        if bar is not None:
+            bar.close()
+        raise
+    if bar is not None:
+        bar.close()
     print(f"sweep {sweep.name}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
           f"in {result.wall_s:.1f} s -> {args.db}")
     print(f"  report: d4sumo report {args.db} --out report/")
@@ -491,7 +500,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s)")
     g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from the attack's start")
     g.add_argument("--attack", choices=FAMILIES, help="attack family (with --params)")
-    g.add_argument("--params", help="comma-separated parameter values of the family, e.g. --params -0.5,0.2,1")
+    g.add_argument("--params", help="comma-separated parameter values of the family, e.g. --attack sine --params 0.5,0.2,0")
     _add_knot_options(g)
     g = p.add_argument_group("specification and output")
     _add_spec_options(g)
@@ -590,7 +599,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(_join_negative_lists(list(sys.argv[1:] if argv is None else argv)))
     except SystemExit as exc:  # usage errors (one line, exit 2), --help, --version
         return int(exc.code or 0)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s" if args.verbose else "d4sumo: %(message)s")
     flags: dict[str, str] = {}
     for dest, key in FLAG_KEYS.items():
         if getattr(args, dest, None) is not None:

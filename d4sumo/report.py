@@ -115,7 +115,7 @@ def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample
     if fcd_path is not None and kind not in ("time-space", "accel"):
         raise ConfigError("--fcd", str(fcd_path), "an FCD file only with a time-space or accel plot")
     if kind in ("time-space", "accel") and sample is None:
-        raise ConfigError("--sample", None, f"a sample id for a {kind} plot")
+        raise ConfigError("--sample", "nothing", f"a sample id: a {kind} plot draws one stored sample")
     records = load_records(dbs)
     if kind in ("time-space", "accel"):
         matches = [r for r in records if r.sample_id == sample]

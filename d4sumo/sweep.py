@@ -21,6 +21,7 @@ it again skips complete campaigns and resumes the others.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
@@ -237,7 +238,10 @@ def run_sweep(
     workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
     sources: dict[str, NetworkSource] = {}
-    with Store(db_path) as store:
+    with contextlib.ExitStack() as stack:
+        # the cluster first: an unreachable scheduler leaves no database behind
+        client = stack.enter_context(_dask_client(dask_address, dask_timeout_s, workers)) if dask_address else None
+        store = stack.enter_context(Store(db_path))
         claim(store, sweep)
         todo: list[_Active] = []
         for c in sweep.campaigns:
@@ -263,8 +267,8 @@ def run_sweep(
             progress(min(counts[0], total), total, counts[1])
         if todo:
             log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
-            if dask_address:
-                _run_dask(todo, store_results, dask_address, dask_timeout_s, workers)
+            if client is not None:
+                _run_dask(todo, store_results, client)
             elif workers == 1:
                 _run_inline(todo, store_results)
             else:
@@ -384,53 +388,58 @@ def check_dask_address(address: str) -> str:
     return address.strip() if m.group(1) else f"tcp://{address.strip()}"
 
 
-def _run_dask(todo: list[_Active], store_results, address: str, timeout_s: float, workers: int) -> None:
+@contextlib.contextmanager
+def _dask_client(address: str, timeout_s: float, workers: int):
+    """A Dask client of the scheduler at ``address``, or of a local cluster of ``workers`` processes."""
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a core dependency
         raise D4sumoError("--dask needs the distributed package (pip install 'dask[distributed]')") from None
-    cluster = None
-    try:
+    with contextlib.ExitStack() as stack:
         if address == "local":
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
-            log.warning("local Dask cluster: dashboard at %s", cluster.dashboard_link)
+            logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
+            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       host="127.0.0.1", dashboard_address=":0", silence_logs=logging.WARNING))
+            log.warning("local Dask cluster of %d workers; dashboard at %s", workers, cluster.dashboard_link)
             address = cluster.scheduler_address
         try:
             client = Client(address, timeout=timeout_s)
         except (OSError, TimeoutError) as exc:
             raise D4sumoError(f"--dask: no Dask scheduler answered at {address} within {timeout_s:g} s ({exc})") from None
         with client:
-            slots = max(1, sum(client.nthreads().values()))
-            queue = list(todo)
-            running: dict = {}
-            futures = as_completed()
+            yield client
 
-            def submit(active: _Active) -> None:
-                # pure=False: the same chunk sent again after a failure is run again, not looked up
-                future = client.submit(run_chunk, active.chunk(), pure=False)
-                running[future] = active
-                futures.add(future)
 
-            while queue and len(running) < slots + 1:
-                submit(queue.pop(0))
-            for future in futures:
-                active = running.pop(future)
-                if future.status == "error":
-                    exc = future.exception()
-                    if isinstance(exc, D4sumoError):
-                        raise exc
-                    _check_failures(active, f"{type(exc).__name__}: {exc}")
-                    submit(active)
-                    continue
-                result = future.result()
-                future.release()
-                if not _accept(active, result, store_results):
-                    submit(active)
-                elif queue:
-                    submit(queue.pop(0))
-                while queue and len(running) < max(1, sum(client.nthreads().values())) + 1:
-                    submit(queue.pop(0))
-    finally:
-        if cluster is not None:
-            cluster.close()
+def _run_dask(todo: list[_Active], store_results, client) -> None:
+    from distributed import as_completed
+
+    queue = list(todo)
+    running: dict = {}
+    futures = as_completed()
+
+    def slots() -> int:
+        return max(1, sum(client.nthreads().values())) + 1
+
+    def submit(active: _Active) -> None:
+        # pure=False: the same chunk sent again after a failure is run again, not looked up
+        future = client.submit(run_chunk, active.chunk(), pure=False)
+        running[future] = active
+        futures.add(future)
+
+    while queue and len(running) < slots():
+        submit(queue.pop(0))
+    for future in futures:
+        active = running.pop(future)
+        if future.status == "error":
+            exc = future.exception()
+            if isinstance(exc, D4sumoError):
+                raise exc
+            _check_failures(active, f"{type(exc).__name__}: {exc}")
+            submit(active)
+            continue
+        result = future.result()
+        future.release()
+        if not _accept(active, result, store_results):
+            submit(active)
+        while queue and len(running) < slots():
+            submit(queue.pop(0))

@@ -191,6 +191,7 @@ def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
     path = write(tmp_path, TINY)
     assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "2", "--quiet"]) == 2
     assert "no Dask scheduler answered" in capsys.readouterr().err
+    assert not (tmp_path / "r.sqlite").exists()  # regression: an empty database was left behind
 
 
 def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
