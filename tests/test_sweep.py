@@ -250,7 +250,10 @@ def count_samples(db):
 
 def start_sweep(path, db, *extra):
     cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "2", "--quiet", *extra]
-    return cmd, subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    # SIGINT at its default: a shell running the tests in the background hands its children SIGINT ignored
+    restore = lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)  # noqa: E731
+    return cmd, subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                 preexec_fn=restore)
 
 
 def wait_for_samples(db, n, timeout=90):
