@@ -26,7 +26,7 @@ from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
 from .scenarios import Road, build_road
 from .simulation import check_road, simulate
 from .spec import Specification
-from .store import Store, StoreError
+from .store import DefinitionError, Store, StoreError
 
 log = logging.getLogger(__name__)
 
@@ -103,8 +103,10 @@ class Campaign:
                 horizon_s=attack.get("horizon_s", 48.0),
                 optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
             )
-        except (KeyError, TypeError, AttributeError, ConfigError) as exc:
-            raise StoreError(f"{where}: damaged results database (a campaign definition: {exc})") from None
+        except ConfigError as exc:
+            raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})", exc.field) from None
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})") from None
 
     def replace(self, **changes: Any) -> "Campaign":
         if "optimizer" in changes and "optimizer_options" not in changes:  # another optimiser: its own defaults
@@ -248,9 +250,7 @@ def run_campaign(
 
     Pass an ``evaluator`` built beforehand to have every input checked before anything is written."""
     evaluate = evaluator or Evaluator(campaign)
-    if evaluate.campaign.definition() != campaign.definition():  # before anything is written
-        raise ValueError("run_campaign: the evaluator was built for another campaign than the one to run")
-    # read and check what is stored before writing anything
+    # read and check what is stored (and that the evaluator is this campaign's) before writing anything
     campaign_id = store.find_campaign(campaign.definition()) if store else None
     results = stored_results(store, campaign_id, campaign.samples) if campaign_id is not None else []
     runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}")

@@ -16,6 +16,7 @@ from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_c
 from .errors import D4sumoError
 from .trace import Collision, Episode, Trace
 
+
 class ControllerError(D4sumoError, ValueError):
     """A follower controller returned something that is not a command."""
 

@@ -65,6 +65,14 @@ class StoreError(D4sumoError):
     """The database is not ours, is from another schema version, or disagrees with a campaign."""
 
 
+class DefinitionError(StoreError):
+    """A stored campaign definition does not describe a valid campaign; ``field`` names the bad value."""
+
+    def __init__(self, message: str, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+
 @dataclass(frozen=True)
 class SampleRow:
     id: int
@@ -286,8 +294,8 @@ class Store:
 
         try:  # every value checked
             Campaign.from_definition(definition, where=f"{self.path}: campaign {r[0]}")
-        except StoreError as exc:
-            if "controller.class" not in str(exc):  # a user's controller not importable here is not damage
+        except DefinitionError as exc:
+            if exc.field != "controller.class":  # a user's controller not importable here is not damage
                 raise
         return CampaignRow(r[0], r[1], definition, r[3], r[4], r[5], r[6])
 
