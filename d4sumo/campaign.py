@@ -24,7 +24,7 @@ from .config import EpisodeConfig
 from .errors import ConfigError, SumoError, check_int, check_number
 from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
 from .scenarios import Road, build_road
-from .simulation import check_road, simulate
+from .simulation import check_episode, simulate
 from .spec import Specification
 from .store import DefinitionError, Store, StoreError
 
@@ -149,7 +149,7 @@ class Evaluator:
         self.family = campaign.family()
         self.spec = campaign.specification()
         self.road = road or build_road(campaign.config.network)
-        check_road(campaign.config, self.road)
+        check_episode(campaign.config, self.road)
 
     def signal(self, params) -> np.ndarray:
         c = self.campaign.config

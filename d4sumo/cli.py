@@ -68,13 +68,17 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--step", type=float, help="simulation step in s [0.05]")
     g.add_argument("--duration", type=float, help="seconds from the attack's start to the episode's end [60]")
     g.add_argument("--length", type=float, help="vehicle length in m [4.5]")
-    g.add_argument("--controller", help="follower controller: 'switching' or 'package.module:ClassName'")
+    g.add_argument("--controller",
+                   help="follower controller: switching, timegap, a SUMO car-following model as sumo:MODEL (sumo:ACC, "
+                        "sumo:CACC, sumo:IDM, ...) or package.module:ClassName; a comma-separated list gives one per "
+                        "follower, v1 first [switching]")
     g.add_argument(
         "--set",
         action="append",
         default=[],
         metavar="TABLE.KEY=VALUE",
-        help="any value of the config file, e.g. --set controller.acc_kp=1.2 or --set search.ce.batch_size=20 (repeatable)",
+        help="any value of the config file, e.g. --set controller.acc_kp=1.2, --set controller.tau=1.2 (sumo:MODEL), "
+             "--set controller.v2.tau=1.2 (one follower of a mixed platoon) or --set search.ce.batch_size=20 (repeatable)",
     )
 
 
@@ -114,6 +118,8 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         value = getattr(args, dest, None)
         if value is not None:
             flags[key] = _floats(f"--{dest}", value) if dest == "params" else value
+    if "," in (getattr(args, "controller", None) or ""):  # a mixed platoon
+        flags["controller"] = [name.strip() for name in flags.pop("controller.class").split(",")]
     knots, constant = getattr(args, "knots", None), getattr(args, "constant", None)
     given = [f"--{n}" for n, v in (("knots", knots), ("constant", constant), ("attack", getattr(args, "attack", None)))
              if v is not None]

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from . import carfollowing
 from .control import VehicleParams, build_params, resolve_controller
 from .errors import ConfigError, check_int, check_number
 
@@ -24,23 +25,64 @@ MAX_FOLLOWERS = 10
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which follower controller to run and its parameters (as (name, value) pairs, all resolved)."""
+    """One follower's controller and its parameters (as (name, value) pairs, all resolved).
+
+    ``cls`` is a Python controller ("switching", "timegap", "package.module:ClassName") or one of
+    SUMO's car-following models ("sumo:ACC", "sumo:IDM", ...), whose parameters are SUMO's attributes
+    for that model (see `carfollowing`).
+    """
 
     cls: str = "switching"
     params: tuple[tuple[str, Any], ...] = ()
+    where: str = dataclasses.field(default="controller", compare=False)  # its place in the config, for messages
 
     def __post_init__(self) -> None:
         if not isinstance(self.cls, str) or not self.cls:
-            raise ConfigError("controller.class", self.cls, "a registered controller name or 'package.module:ClassName'")
+            raise ConfigError(f"{self.where}.class", self.cls,
+                              "a registered controller name, 'sumo:MODEL' or 'package.module:ClassName'")
+        if carfollowing.is_sumo(self.cls):
+            object.__setattr__(self, "params", carfollowing.check_params(self.cls, dict(self.params), self.where))
+            return
         controller = resolve_controller(self.cls)
         resolved = build_params(controller, dict(self.params))  # validates every value
         object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
+
+    @property
+    def sumo_model(self) -> str | None:
+        """The SUMO car-following model driving this follower, or None for a Python controller."""
+        return carfollowing.model_of(self.cls) if carfollowing.is_sumo(self.cls) else None
 
     def controller_class(self) -> type:
         return resolve_controller(self.cls)
 
     def build_params(self) -> Any:
         return build_params(self.controller_class(), dict(self.params))
+
+    def to_dict(self) -> dict:
+        return {"class": self.cls, **dict(self.params)}
+
+    @property
+    def label(self) -> str:
+        """A short name for reports: the class and the parameters that differ from its defaults."""
+        if self.sumo_model:
+            defaults = dict(carfollowing.check_params(self.cls, {}))
+        else:
+            try:
+                defaults = dataclasses.asdict(self.controller_class().Params())
+            except (ConfigError, TypeError):
+                defaults = {}
+        changed = [f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.params if defaults.get(k) != v]
+        return self.cls + (f"({', '.join(changed)})" if changed else "")
+
+    @classmethod
+    def from_table(cls, table: Any, where: str = "controller") -> "ControllerConfig":
+        """From a [controller] table, or a bare class name."""
+        if isinstance(table, str):
+            return cls(cls=table, where=where)
+        if not isinstance(table, Mapping):
+            raise ConfigError(where, table, "a table with a class key, or a controller name")
+        values = dict(table)
+        return cls(cls=values.pop("class", "switching"), params=tuple(values.items()), where=where)
 
 
 @dataclass(frozen=True)
@@ -56,7 +98,11 @@ class EpisodeConfig:
     duration_s: float = 60.0  # from the attack's start to the episode's end
     warmup_s: float = 15.0  # start = "warmup": seconds driven from rest before the attack starts
     vehicle: VehicleParams = field(default_factory=VehicleParams)
-    controller: ControllerConfig = field(default_factory=ControllerConfig)
+    #: one controller for every follower, or one per follower (v1 first): a mixed platoon
+    controller: ControllerConfig | tuple[ControllerConfig, ...] = field(default_factory=ControllerConfig)
+    #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
+    #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
+    attacker_declared_decel_mps2: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -74,8 +120,19 @@ class EpisodeConfig:
             raise ConfigError("scenario.warmup_s", self.warmup_s, f"a whole number of steps of {self.step_s:g} s")
         if not isinstance(self.vehicle, VehicleParams):
             raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
-        if not isinstance(self.controller, ControllerConfig):
+        if isinstance(self.controller, (list, tuple)):
+            if len(self.controller) != self.followers:
+                raise ConfigError("controller", f"{len(self.controller)} tables",
+                                  f"one [[controller]] table per follower ({self.followers}), or one [controller] for all")
+            fix("controller", tuple(self.controller))
+        controllers = self.controllers
+        if not all(isinstance(c, ControllerConfig) for c in controllers):
             raise ConfigError("controller", self.controller, "a [controller] table")
+        if len(set(controllers)) == 1 and isinstance(self.controller, tuple):  # the same for all: one table
+            fix("controller", controllers[0])
+        declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
+        fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
+                                                         "m/s^2 (positive)", low_open=True))
 
     @property
     def attack_start_step(self) -> int:
@@ -96,6 +153,25 @@ class EpisodeConfig:
         return self.steps * self.step_s
 
     @property
+    def controllers(self) -> tuple[ControllerConfig, ...]:
+        """Each follower's controller, v1 first."""
+        if isinstance(self.controller, tuple):
+            return self.controller
+        return (self.controller,) * self.followers
+
+    @property
+    def sumo_driven(self) -> bool:
+        """Whether any follower is driven by a SUMO car-following model."""
+        return any(c.sumo_model for c in self.controllers)
+
+    @property
+    def system_label(self) -> str:
+        """The system under test in a few words: the controller, or each follower's for a mixed platoon."""
+        if isinstance(self.controller, ControllerConfig):
+            return self.controller.label
+        return " / ".join(c.label for c in self.controller)
+
+    @property
     def vehicle_ids(self) -> tuple[str, ...]:
         return tuple(f"v{i}" for i in range(self.followers + 1))
 
@@ -103,25 +179,28 @@ class EpisodeConfig:
 
     def to_dict(self) -> dict:
         scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("vehicle", "controller")}
-        if self.start != "warmup":  # no effect: not part of what identifies the episode
+        # Keys without effect are not part of what identifies the episode.
+        if self.start != "warmup":
             del scenario["warmup_s"]
-        return {
-            "scenario": scenario,
-            "vehicle": dataclasses.asdict(self.vehicle),
-            "controller": {"class": self.controller.cls, **dict(self.controller.params)},
-        }
+        if not self.sumo_driven:  # only SUMO's models read what the attacker declares
+            del scenario["attacker_declared_decel_mps2"]
+        controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
+                      else [c.to_dict() for c in self.controller])
+        return {"scenario": scenario, "vehicle": dataclasses.asdict(self.vehicle), "controller": controller}
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
-        """Build from the [scenario], [vehicle] and [controller] tables of a document."""
-        tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle", "controller")}
+        """Build from the [scenario], [vehicle] and [controller] tables of a document; [controller] may
+        be a list of tables (TOML's [[controller]]) or names, one per follower."""
+        tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
         scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in ("vehicle", "controller")]
         _check_keys("scenario", tables["scenario"], scenario_keys)
         _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)])
-        controller_table = tables["controller"]
-        controller = ControllerConfig(
-            cls=controller_table.pop("class", "switching"), params=tuple(controller_table.items())
-        )
+        given = doc.get("controller", {})
+        if isinstance(given, (list, tuple)):
+            controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
+        else:
+            controller = ControllerConfig.from_table(_table(doc, "controller"))
         return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), controller=controller)
 
 

@@ -1,9 +1,12 @@
-"""Longitudinal control of the cars: the paper's switching ACC/cruise controller (its Eq. 1).
+"""Longitudinal control of the cars: the paper's switching ACC/cruise controller (its Eq. 1) and its
+constant time-gap variant (the paper's suggested mitigation).
 
 Pure code, no SUMO. A follower controller turns what the car senses (bumper gap to the car ahead,
 its own speed, the speed of the car ahead) into a command u in [-1, 1] (-1 full brake, +1 full
-throttle). Controllers are pluggable: a config names a registered controller ("switching") or any
-class as "package.module:ClassName" that follows the `FollowerController` protocol.
+throttle). Controllers are pluggable: a config names a registered controller ("switching",
+"timegap") or any class as "package.module:ClassName" that follows the `FollowerController`
+protocol. (Followers driven by SUMO's own car-following models are named "sumo:MODEL"; see
+`carfollowing`.)
 """
 
 from __future__ import annotations
@@ -214,6 +217,41 @@ class SwitchingController:
         return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
 
 
+@dataclass(frozen=True)
+class TimeGapParams(SwitchingParams):
+    """The switching controller with a constant time-gap spacing policy (the paper's mitigation)."""
+
+    time_gap_s: float = 1.0  # h: seconds of own speed added to the standstill distance
+
+
+class TimeGapController(SwitchingController):
+    """Eq. 1 with a speed-dependent desired gap: d(v) = s0 + h v, s0 the scenario's setpoint.
+
+    The paper suggests ACCs "that can handle different distances at different speeds" as a
+    mitigation; this is the textbook one. The mode switch and the ACC law use d(v) where Eq. 1 uses
+    d: CC when gap >= d(v) + eps_x or v >= v_d + eps_v; ACC when gap <= d(v) and v <= v_d;
+    ACC: a = Kp (gap - d(v)) + Kv (v_lead - v). At h = 0 it is the paper's controller.
+    """
+
+    Params = TimeGapParams
+
+    def __init__(self, params: TimeGapParams, **kwargs):
+        super().__init__(params, **kwargs)
+        self.time_gap_s = params.time_gap_s
+
+    def desired_gap_m(self, speed_mps: float) -> float:
+        return self.setpoint_m + self.time_gap_s * speed_mps
+
+    def desired_acceleration(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        desired = self.desired_gap_m(speed_mps)
+        # select_mode's gap thresholds follow d(v); the tolerances are the paper controller's
+        self._cc_gap = desired + self.params.eps_x_m - GAP_TOLERANCE_M
+        self._acc_gap = desired + GAP_TOLERANCE_M
+        if self.select_mode(gap_m, speed_mps) == MODE_CC:
+            return self.cruise.acceleration(speed_mps)
+        return self._acc_kp * (gap_m - desired) + self._acc_kv * (lead_speed_mps - speed_mps)
+
+
 # --- registry of follower controllers ------------------------------------------------------------
 
 _REGISTRY: dict[str, type] = {}
@@ -227,6 +265,7 @@ def register_controller(name: str, cls: type) -> None:
 
 
 register_controller("switching", SwitchingController)
+register_controller("timegap", TimeGapController)
 
 
 def registered_controllers() -> tuple[str, ...]:
@@ -234,10 +273,12 @@ def registered_controllers() -> tuple[str, ...]:
 
 
 def resolve_controller(name: str) -> type:
-    """A registered name, or "package.module:ClassName" for a user's own controller class."""
+    """A registered name, or "package.module:ClassName" for a user's own controller class.
+
+    (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
     if name in _REGISTRY:
         return _REGISTRY[name]
-    allowed = f"one of {', '.join(registered_controllers())}, or 'package.module:ClassName'"
+    allowed = f"one of {', '.join(registered_controllers())}, a SUMO model as 'sumo:MODEL' or 'package.module:ClassName'"
     if ":" not in name:
         raise ConfigError("controller.class", name, allowed)
     module_name, _, attr = name.partition(":")

@@ -4,7 +4,8 @@ A document is the tables of a config file:
 
     [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
-    [controller] class = "switching" (or "package.module:ClassName") and the class's parameters
+    [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
+                 parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
     [attack]     family, params (simulate only), delta_s, horizon_s
     [spec]       d_safe_m, formula
     [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
@@ -55,6 +56,11 @@ def check_document(doc: Mapping[str, Any], source: str = "config", extra_keys: t
         if key not in SECTIONS:
             raise ConfigError(f"{source}: {key}", _short(value), f"the tables {', '.join(SECTIONS)}"
                               + (f" and {', '.join(extra_keys)}" if extra_keys else ""))
+        if key == "controller" and isinstance(value, list):  # a mixed platoon: one table (or name) per follower
+            for i, item in enumerate(value, 1):
+                if not isinstance(item, (Mapping, str)):
+                    raise ConfigError(f"controller.v{i}", _short(item), "a [[controller]] table or a controller name")
+            continue
         if not isinstance(value, Mapping):
             raise ConfigError(f"{source}: [{key}]", _short(value), "a table")
         allowed = TABLE_KEYS.get(key)
@@ -70,16 +76,40 @@ def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict
     out = copy.deepcopy(dict(doc))
     for dotted, value in overrides.items():
         parts = dotted.split(".")
+        if dotted == "controller":  # the whole system under test: a name, a table, or one per follower
+            if not isinstance(value, (str, list, Mapping)):
+                raise ConfigError("controller", _short(value), "a controller name, a table, or a list of them (one per follower)")
+            out["controller"] = {"class": value} if isinstance(value, str) else copy.deepcopy(value)
+            continue
         if len(parts) < 2 or parts[0] not in SECTIONS or not all(parts):
             raise ConfigError(dotted, _short(value), f"a key as TABLE.KEY with TABLE one of {', '.join(SECTIONS)}")
-        table = out
+        if parts[0] == "controller" and isinstance(out.get("controller"), list):
+            parts = _follower_key(out["controller"], dotted, value)
+        table: Any = out
         for part in parts[:-1]:
-            if not isinstance(table.get(part, {}), dict):
+            if isinstance(part, int):  # a follower's table in a mixed platoon
+                table = table[part]
+                continue
+            if not isinstance(table.get(part, {}), (dict, list)) or (isinstance(table.get(part), list) and part != "controller"):
                 raise ConfigError(dotted, _short(value), f"a key inside a table ({part} is not one)")
             table = table.setdefault(part, {})
         table[parts[-1]] = value
     check_document(out, "flags")
     return out
+
+
+def _follower_key(controllers: list, dotted: str, value: Any) -> list:
+    """In a mixed platoon a controller key names its follower (controller.v2.tau): the path to it,
+    with the follower's entry made a table."""
+    parts = dotted.split(".")
+    names = [f"v{i}" for i in range(1, len(controllers) + 1)]
+    if len(parts) < 3 or parts[1] not in names:
+        raise ConfigError(dotted, _short(value), f"a key of one follower in a mixed platoon, as controller.VEHICLE.KEY "
+                                                 f"with VEHICLE one of {', '.join(names)}")
+    i = names.index(parts[1])
+    if isinstance(controllers[i], str):
+        controllers[i] = {"class": controllers[i]}
+    return ["controller", i, *parts[2:]]
 
 
 def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:

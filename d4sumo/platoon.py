@@ -1,19 +1,21 @@
 """The platoon's longitudinal control, one step at a time: pure code, no SUMO.
 
-`Platoon.advance` takes the sensed state (positions and speeds, front to back) and returns the speed
-each car reaches at the end of the step: the attacker plays its attack signal (or cruises where the
-signal is NaN), each follower runs its controller, and every command goes through the car's actuator.
-The SUMO co-simulation calls it each step; `integrate` runs it with SUMO's ballistic position update
-for SUMO-free physics tests.
+The system under test is a platoon of followers of two kinds: a `PythonFollower` runs a Python
+controller whose command goes through the car's actuator; a `SumoFollower` is driven by one of SUMO's
+car-following models, which the co-simulation only senses. `Platoon.advance` takes the sensed state
+(positions and speeds, front to back) and returns the speed at the end of the step of each car Python
+commands: the attacker plays its attack signal (or cruises where the signal is NaN) and each Python
+follower runs its controller. The SUMO co-simulation calls it each step; `integrate` runs it with
+SUMO's ballistic position update for SUMO-free physics tests (Python followers only).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .config import EpisodeConfig
+from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
-from .errors import D4sumoError
+from .errors import ConfigError, D4sumoError
 from .trace import Collision, Episode, Trace
 
 
@@ -54,6 +56,44 @@ def collisions_at(time_s: float, positions: list[float], speeds: list[float], le
     )
 
 
+class PythonFollower:
+    """A follower commanded each step by a Python controller, through its actuator."""
+
+    sumo_driven = False
+
+    def __init__(self, controller, actuator: Actuator):
+        self.controller = controller
+        self.actuator = actuator
+        self.command = controller.command
+        self.has_mode = hasattr(controller, "mode")
+
+
+class SumoFollower:
+    """A follower driven by one of SUMO's car-following models: d4sumo senses it and commands nothing.
+
+    ``model`` and ``params`` (SUMO's attributes, and d4sumo's ``speed_mode``) become its vehicle type;
+    the simulation module turns them into SUMO's terms.
+    """
+
+    sumo_driven = True
+    has_mode = False  # SUMO does not expose its models' internal modes to TraCI
+
+    def __init__(self, controller: ControllerConfig):
+        self.config = controller
+        self.model = controller.sumo_model
+        self.params = dict(controller.params)
+
+
+def make_follower(controller: ControllerConfig, config: EpisodeConfig) -> PythonFollower | SumoFollower:
+    """The one place that tells the kinds of follower apart."""
+    if controller.sumo_model:
+        return SumoFollower(controller)
+    cls = controller.controller_class()
+    python = cls(controller.build_params(), setpoint_m=config.setpoint_m, target_speed_mps=config.speed_mps,
+                 vehicle=config.vehicle, step_s=config.step_s)
+    return PythonFollower(python, Actuator(config.vehicle, config.step_s, float("inf")))
+
+
 class Platoon:
     def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float):
         attack_u = np.asarray(attack_u, dtype=float)
@@ -63,25 +103,25 @@ class Platoon:
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
         vehicle, dt = config.vehicle, config.step_s
         self.length_m = vehicle.length_m
-        cls = config.controller.controller_class()
-        params = config.controller.build_params()
+        self.followers = [make_follower(c, config) for c in config.controllers]
         # The attacker is the same kind of car: it cruises with the followers' PID gains when they
-        # run the switching controller, with the default gains otherwise.
+        # all run the paper's controller (or its time-gap variant), with the default gains otherwise.
+        uniform = isinstance(config.controller, ControllerConfig) and not config.controller.sumo_model
+        params = config.controller.build_params() if uniform else None
         cruise_params = params if isinstance(params, SwitchingParams) else SwitchingParams()
         self.attacker_cruise = CruiseControl(cruise_params, config.speed_mps, dt)
-        self.followers = [
-            cls(params, setpoint_m=config.setpoint_m, target_speed_mps=config.speed_mps, vehicle=vehicle, step_s=dt)
-            for _ in range(config.followers)
-        ]
-        self.actuators = [Actuator(vehicle, dt, attacker_max_speed_mps)]
-        self.actuators += [Actuator(vehicle, dt, float("inf")) for _ in range(config.followers)]
-        self.records_modes = all(hasattr(f, "mode") for f in self.followers)
+        self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
+        #: the cars Python commands (the attacker, then the Python-commanded followers): advance returns their speeds
+        self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven))
+        self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
+        self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
 
     def advance(self, k: int, positions: list[float], speeds: list[float]) -> list[float]:
-        """Commands for step k from the sensed state; returns each car's speed at the step's end."""
+        """Commands for step k from the sensed state; returns the speed at the step's end of each car
+        in ``commanded`` (SUMO moves its own followers)."""
         u = self.attack_u[k]
         if u != u:  # NaN: no attack here, the attacker cruises like everyone else
             if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
@@ -91,46 +131,61 @@ class Platoon:
         else:
             self._attacking = True
         commands = [u]
+        new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
         length = self.length_m
-        for i, follower in enumerate(self.followers, start=1):
+        for i, follower in self._python:
             c = follower.command(positions[i - 1] - length - positions[i], speeds[i], speeds[i - 1])
             if not -1.0 <= c <= 1.0:  # NaN fails too: a user's controller must not corrupt the trace
                 raise ControllerError(f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
             commands.append(c)
+            new_speeds.append(follower.actuator.apply(c, speeds[i]))
         self.commands.append(commands)
-        if self.records_modes:
-            self.modes.append([f.mode for f in self.followers])
-        return [a.apply(c, v) for a, c, v in zip(self.actuators, commands, speeds)]
+        if self._with_mode:
+            self.modes.append([c.mode for c in self._with_mode])
+        return new_speeds
 
     def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray) -> Trace:
         """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands."""
         n_samples = times_s.size
         n = self.config.followers + 1
-        cmds = np.array(self.commands, dtype=float).reshape(-1, n)
-        if cmds.shape[0] < n_samples:  # the last sample has no step after it: hold its command
-            cmds = np.vstack([cmds, np.repeat(cmds[-1:], n_samples - cmds.shape[0], axis=0)])
         accel = np.zeros_like(speeds)
         accel[1:] = np.diff(speeds, axis=0) / self.config.step_s
+        cmds = np.empty((n_samples, n))
+        recorded = _hold_last(np.array(self.commands, dtype=float).reshape(-1, len(self.commanded)), n_samples)
+        cmds[:, list(self.commanded)] = recorded
+        vehicle = self.config.vehicle
+        for i, follower in enumerate(self.followers, start=1):
+            if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
+                ahead = np.append(accel[1:, i], accel[-1, i])
+                cmds[:, i] = [acceleration_to_command(a, vehicle) for a in ahead]
         signals: dict[str, np.ndarray] = {}
         for i in range(n):
             signals[f"pos_v{i}"] = positions[:, i]
             signals[f"speed_v{i}"] = speeds[:, i]
             signals[f"accel_v{i}"] = accel[:, i]
-            signals[f"cmd_v{i}"] = cmds[:n_samples, i]
+            signals[f"cmd_v{i}"] = cmds[:, i]
         for i in range(n - 1):  # the same arithmetic as collisions_at: verdicts and trace agree exactly
             signals[f"gap_{i}"] = positions[:, i] - self.length_m - positions[:, i + 1]
-        if self.records_modes and self.modes:
-            modes = np.array(self.modes, dtype=float)
-            if modes.shape[0] < n_samples:
-                modes = np.vstack([modes, np.repeat(modes[-1:], n_samples - modes.shape[0], axis=0)])
-            for i in range(1, n):
-                signals[f"mode_v{i}"] = modes[:n_samples, i - 1]
+        if self._with_mode and self.modes:
+            modes = _hold_last(np.array(self.modes, dtype=float), n_samples)
+            with_mode = [i for i, f in enumerate(self.followers, start=1) if f.has_mode]
+            for column, i in enumerate(with_mode):
+                signals[f"mode_v{i}"] = modes[:, column]
         return Trace(times_s=times_s, signals=signals, followers=self.config.followers)
+
+
+def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:
+    """Rows recorded per step, one per sample: the last sample has no step after it, so it holds the last row."""
+    if rows.shape[0] < n_samples:
+        rows = np.vstack([rows, np.repeat(rows[-1:], n_samples - rows.shape[0], axis=0)])
+    return rows[:n_samples]
 
 
 def integrate(config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float = float("inf")) -> Episode:
     """Run the platoon without SUMO: ballistic positions (mean of old and new speed, as SUMO's
     --step-method.ballistic), stopping at the first bumper overlap. For physics tests and checks."""
+    if config.sumo_driven:
+        raise ConfigError("controller.class", config.system_label, "Python controllers only: this runs without SUMO")
     platoon = Platoon(config, attack_u, attacker_max_speed_mps)
     positions, speeds = initial_state(config)
     dt, length = config.step_s, config.vehicle.length_m

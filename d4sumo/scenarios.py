@@ -46,6 +46,19 @@ def default_cache_dir() -> Path:
     return Path(base) / "d4sumo" / "nets"
 
 
+def sumo_home() -> str:
+    """SUMO's installation folder: the eclipse-sumo package's, else $SUMO_HOME."""
+    try:
+        import sumo  # the eclipse-sumo wheel ships SUMO's binaries and data
+
+        return str(sumo.SUMO_HOME)
+    except ImportError:
+        home = os.environ.get("SUMO_HOME")
+        if not home:
+            raise SumoError("SUMO not found: install the eclipse-sumo package (pip install eclipse-sumo) or set SUMO_HOME") from None
+        return home
+
+
 def sumo_binary(name: str, explicit: str | None = None) -> str:
     """Path of a SUMO program (netconvert, sumo-gui): the given path, the eclipse-sumo package's, or PATH's."""
     if explicit:

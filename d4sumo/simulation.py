@@ -1,7 +1,9 @@
 """The SUMO co-simulation: the only module that talks to SUMO (libsumo, or traci for sumo-gui).
 
-Each step Python commands every car's speed (SUMO's car-following, lane changing and speed checks are
-off: speed mode 32, lane-change mode 0) and SUMO moves the cars (ballistic update). A collision is any
+Each step Python commands the speed of the attacker and of every Python-commanded follower (SUMO's
+car-following, lane changing and speed checks are off for them: speed mode 32, lane-change mode 0);
+followers driven by SUMO's own car-following models run with their vehicle type, loaded from an
+additional file checked once per content, and their speed mode. SUMO moves the cars (ballistic update). A collision is any
 bumper overlap at the end of a step, measured on SUMO's positions (`platoon.collisions_at`): SUMO's own
 reports miss overlaps of 1 mm or less. The episode ends at the first one: SUMO lets the cars drive
 through each other afterwards, so later data are not physical.
@@ -9,21 +11,28 @@ through each other afterwards, so later data are not physical.
 
 from __future__ import annotations
 
+import hashlib
 import logging
+import os
+import subprocess
+import tempfile
 from pathlib import Path
+from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
+from . import carfollowing
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError
 from .platoon import Platoon, collisions_at, initial_state, road_needed_m
-from .scenarios import Road, build_road, sumo_binary
+from .scenarios import Road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
 
 log = logging.getLogger(__name__)
 
 ROUTE_ID = "platoon"
 VTYPE_ID = "d4car"
+ATTACKER_VTYPE_ID = "d4attacker"
 SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
 
@@ -39,6 +48,80 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
             config.duration_s,
             f"an episode that fits on {road.name} ({road.length_m:g} m; this one may need {needed:.0f} m)",
         )
+
+
+def check_episode(config: EpisodeConfig, road: Road) -> None:
+    """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters."""
+    check_road(config, road)
+    followers_file(config, road)
+
+
+# --- followers driven by SUMO's car-following models ---------------------------------------------
+
+_CHECKED: dict[str, Path] = {}  # vehicle-type XML -> its checked file, in this process
+
+
+def follower_types(config: EpisodeConfig) -> dict:
+    """The SUMO-driven followers' distinct controller configs -> their vehicle-type ids."""
+    types: dict = {}
+    for c in config.controllers:
+        if c.sumo_model and c not in types:
+            types[c] = f"d4{c.sumo_model}{len(types)}"
+    return types
+
+
+def followers_xml(config: EpisodeConfig, road: Road) -> str | None:
+    """The vehicle types of the SUMO-driven followers, as SUMO reads them, or None when there are none."""
+    types = follower_types(config)
+    if not types:
+        return None
+    v = config.vehicle
+    lines = ["<additional>"]
+    for controller, type_id in types.items():
+        attributes = carfollowing.vtype_attributes(controller.sumo_model, dict(controller.params))
+        # The same car as the attacker; its desired speed is the target speed, exactly.
+        attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
+                          maxSpeed=repr(config.speed_mps), speedFactor="1", speedDev="0")
+        if controller.sumo_model == "CC":
+            attributes["lanesCount"] = str(road.lanes)
+        attrs = " ".join(f'{k}="{xml_escape(str(val), {chr(34): "&quot;"})}"' for k, val in attributes.items())
+        lines.append(f'    <vType id="{type_id}" {attrs}/>')
+    lines.append("</additional>")
+    return "\n".join(lines) + "\n"
+
+
+def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
+    """The followers' vehicle-type file, checked by loading it in SUMO once (cached by its content).
+
+    SUMO refuses a value its model cannot take (a negative tau, say) only when it loads the type: this
+    turns that into a ConfigError before any episode runs.
+    """
+    text = followers_xml(config, road)
+    if text is None:
+        return None
+    if text in _CHECKED and _CHECKED[text].is_file():
+        return _CHECKED[text]
+    folder = Path(default_cache_dir()).parent / "vtypes"
+    path = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}.add.xml"
+    if not path.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".add.xml")
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+            cmd = [sumo_binary("sumo"), "--net-file", str(road.net_file), "--additional-files", tmp, "--end", "0",
+                   "--no-step-log", "true", "--duration-log.disable", "true"]
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+            if done.returncode != 0:
+                message = next((ln.removeprefix("Error: ") for ln in done.stderr.splitlines() if ln.startswith("Error:")),
+                               done.stderr.strip() or f"exit {done.returncode}")
+                raise ConfigError("controller", config.system_label, f"parameters SUMO accepts (SUMO: {message})")
+            os.replace(tmp, path)  # only a checked file gets its final name
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    _CHECKED[text] = path
+    return path
 
 
 def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo") -> list[str]:
@@ -58,6 +141,9 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         "--no-warnings", "true",
         "--duration-log.disable", "true",
     ]
+    types = followers_file(config, road)
+    if types is not None:
+        cmd += ["--additional-files", str(types)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
@@ -77,17 +163,31 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
     api.vehicletype.setEmergencyDecel(VTYPE_ID, v.max_decel_mps2)
     api.vehicletype.setImperfection(VTYPE_ID, 0.0)
     api.vehicletype.setSpeedDeviation(VTYPE_ID, 0.0)
+    types = follower_types(config)
+    attacker_type = VTYPE_ID
+    if types:  # what SUMO's models behind the attacker believe of its brakes
+        attacker_type = ATTACKER_VTYPE_ID
+        api.vehicletype.copy(VTYPE_ID, attacker_type)
+        api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
+    type_ids = [attacker_type] + [types.get(c, VTYPE_ID) for c in config.controllers]
     positions, speeds = initial_state(config)
-    for vid, x, s in zip(config.vehicle_ids, positions, speeds):
-        api.vehicle.add(vid, ROUTE_ID, typeID=VTYPE_ID, depart="0", departLane="0", departPos=repr(x), departSpeed=repr(s))
+    for vid, type_id, x, s in zip(config.vehicle_ids, type_ids, positions, speeds):
+        api.vehicle.add(vid, ROUTE_ID, typeID=type_id, depart="0", departLane="0", departPos=repr(x), departSpeed=repr(s))
     api.simulationStep()  # inserts the cars: this state is t = 0
     present = set(api.vehicle.getIDList())
     missing = [vid for vid in config.vehicle_ids if vid not in present]
     if missing:
         raise SumoError(f"SUMO did not insert {', '.join(missing)} on {road.name}")
-    for vid in config.vehicle_ids:
-        api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
+    for vid, controller in zip(config.vehicle_ids, (None, *config.controllers)):
         api.vehicle.setLaneChangeMode(vid, 0)
+        if controller is None or not controller.sumo_model:
+            api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
+            continue
+        params = dict(controller.params)
+        api.vehicle.setSpeedMode(vid, params["speed_mode"])
+        if controller.sumo_model == "CC":  # Plexe's CC: which of its controllers runs, and its cruise speed
+            api.vehicle.setParameter(vid, "carFollowModel.ccac", str(carfollowing.CC_CONTROLLERS[params["active_controller"]]))
+            api.vehicle.setParameter(vid, "carFollowModel.ccds", repr(config.speed_mps))
 
 
 def simulate(
@@ -101,7 +201,7 @@ def simulate(
     """Play one episode in SUMO. ``attack_u`` holds the attacker's command at each step's start
     (``config.steps`` values in [-1, 1], NaN where the attacker cruises)."""
     road = road or build_road(config.network)
-    check_road(config, road)
+    check_episode(config, road)
     platoon = Platoon(config, attack_u, attacker_max_speed_mps=road.speed_limit_mps)
     if gui:
         import traci as api  # libsumo has no window; traci drives sumo-gui with the same API
@@ -126,6 +226,7 @@ def simulate(
 
 def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
     ids = config.vehicle_ids
+    commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
     get_position = api.vehicle.getLanePosition
     get_speed = api.vehicle.getSpeed
     set_speed = api.vehicle.setSpeed
@@ -137,8 +238,8 @@ def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
     rows_x, rows_v = [positions], [speeds]
     collisions: tuple = ()
     for k in range(config.steps):
-        commanded = advance(k, positions, speeds)
-        for vid, v in zip(ids, commanded):
+        speeds_out = advance(k, positions, speeds)
+        for vid, v in zip(commanded, speeds_out):
             set_speed(vid, v)
         step()
         positions = [get_position(v) for v in ids]

@@ -8,6 +8,7 @@ A sweep file is TOML:
     setpoint_m = [3, 5, 7]
     speed_mps = [20, 25, 30]
     start = ["rest", "steady"]
+    controller = ["switching", "timegap", "sumo:ACC", {class = "sumo:IDM", tau = 1.5}]   # optional
     attack = ["knots"]
     optimizer = ["bo", "ce"]
     seed = [0]
@@ -43,15 +44,16 @@ from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
 from .scenarios import NetworkSource, build_road, network_source
-from .simulation import check_road
+from .simulation import check_episode
 from .store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
 
-GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "attack", "optimizer", "seed")
-#: a grid axis -> the document key it sets
-GRID_TO_KEY = {**{k: f"scenario.{k}" for k in GRID_KEYS[:5]}, "attack": "attack.family", "optimizer": "search.optimizer",
-               "seed": "search.seed"}
+GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "controller", "attack", "optimizer", "seed")
+#: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
+#: table, or a list of them for a mixed platoon)
+GRID_TO_KEY = {**{k: f"scenario.{k}" for k in GRID_KEYS[:5]}, "controller": "controller", "attack": "attack.family",
+               "optimizer": "search.optimizer", "seed": "search.seed"}
 
 
 @dataclass(frozen=True)
@@ -103,7 +105,7 @@ class Sweep:
         for c in self.campaigns:
             if c.config.network not in roads:
                 roads[c.config.network] = build_road(c.config.network)
-            check_road(c.config, roads[c.config.network])
+            check_episode(c.config, roads[c.config.network])
         seen = set()
         for c in self.campaigns:
             key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m)
