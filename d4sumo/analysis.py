@@ -12,6 +12,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from .config import EpisodeConfig
 from .errors import ConfigError
 from .store import Store
 
@@ -40,6 +41,7 @@ class Record:
     position_m: float | None
     speed_diff_kmh: float | None
     attack_start_s: float = 0.0  # simulation time at which the attack starts (after a warm-up, else 0)
+    system: str = "switching"  # the system under test: its controller(s), see EpisodeConfig.system_label
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -50,7 +52,7 @@ class Record:
     def configuration(self) -> tuple:
         """What makes two campaigns different experiments (the seed does not)."""
         return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,
-                self.attack, self.optimizer)
+                self.system, self.attack, self.optimizer)
 
 
 def attack_start_s(scenario: dict) -> float:
@@ -58,11 +60,22 @@ def attack_start_s(scenario: dict) -> float:
     return float(scenario.get("warmup_s", 15.0)) if scenario.get("start") == "warmup" else 0.0
 
 
+def system_label(config: dict) -> str:
+    """The system under test of a stored campaign config, as EpisodeConfig.system_label names it."""
+    try:
+        return EpisodeConfig.from_dict(config).system_label
+    except ConfigError:  # a user's controller not importable here: its class names still tell it
+        controller = config.get("controller", {})
+        tables = controller if isinstance(controller, list) else [controller]
+        return " / ".join(str(t.get("class", "switching")) if isinstance(t, dict) else str(t) for t in tables)
+
+
 def load_records(paths: Sequence[str | Path]) -> list[Record]:
     records: list[Record] = []
     for path in paths:
         with Store(path, create=False) as store:
             campaigns = {c.id: c.definition for c in store.campaigns()}
+            systems = {cid: system_label(d["config"]) for cid, d in campaigns.items()}
             for s in store.iter_samples():
                 d = campaigns[s.campaign_id]
                 sc = d["config"]["scenario"]
@@ -70,7 +83,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     str(path), s.id, s.campaign_id, sc["network"], sc["followers"], float(sc["setpoint_m"]),
                     float(sc["speed_mps"]), sc["start"], d["attack"]["family"], d["optimizer"], d["seed"],
                     d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
-                    s.speed_diff_kmh, attack_start_s(sc),
+                    s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id],
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
@@ -82,6 +95,16 @@ def group(records: Iterable[Record], *fields: str) -> dict[tuple, list[Record]]:
     for r in records:
         out[tuple(getattr(r, f) for f in fields)].append(r)
     return dict(sorted(out.items(), key=lambda kv: tuple(str(k) for k in kv[0])))
+
+
+def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict[tuple, list[Record]]]:
+    """Group by ``fields``, led by the system under test when the records hold more than one."""
+    lead = ("system",) if len({r.system for r in records}) > 1 else ()
+    return lead + fields, group(records, *lead, *fields)
+
+
+def run_label(key: tuple) -> str:
+    return " ".join(str(k) for k in key)
 
 
 def count_noun(count: int, singular: str, plural: str | None = None) -> str:
@@ -110,11 +133,11 @@ class Table:
 def table_success_statistics(records: Sequence[Record]) -> Table:
     """The paper's Table 1: per attack and optimiser, the successes and their collisions."""
     rows = []
-    for (attack, optimizer), rs in group(records, "attack", "optimizer").items():
+    for key, rs in runs(records, "attack", "optimizer")[1].items():
         wins = [r for r in rs if r.outcome == "success"]
         v12 = sum(1 for r in wins if r.pair == "v1-v2")
         rows.append((
-            f"{attack} {optimizer}", str(len(rs)), str(len(wins)),
+            run_label(key), str(len(rs)), str(len(wins)),
             f"{v12} ({100 * v12 / len(wins):.0f}%)" if wins else "0",
             _mean_std([r.time_from_attack_start_s for r in wins]), _mean_std([r.position_m for r in wins]),
             _mean_std([r.speed_diff_kmh for r in wins]),
@@ -129,7 +152,7 @@ def table_success_statistics(records: Sequence[Record]) -> Table:
 
 def table_attacker_crashes(records: Sequence[Record]) -> Table:
     """The paper's Table 2: per setpoint, attacker crashes / no-crash samples of each attack and optimiser."""
-    groups = group(records, "attack", "optimizer")
+    groups = runs(records, "attack", "optimizer")[1]
     rows = []
     for d in sorted({r.setpoint_m for r in records}):
         cells = [f"{d:g} m"]
@@ -138,7 +161,7 @@ def table_attacker_crashes(records: Sequence[Record]) -> Table:
             crashes = sum(r.outcome == "attacker_crash" for r in sub)
             cells.append(f"{crashes} / {sum(r.outcome == 'no_crash' for r in sub)}" if sub else "-")
         rows.append(tuple(cells))
-    header = ("setpoint", *[f"{a} {o}" for a, o in groups])
+    header = ("setpoint", *[run_label(key) for key in groups])
     return Table("Table 2: attacker crashes / no-crash samples per setpoint", header, tuple(rows))
 
 
@@ -146,14 +169,32 @@ def table_by_speed(records: Sequence[Record]) -> Table:
     """The paper's Table 3: successes per optimiser and start mode, split by target speed."""
     speeds = sorted({r.speed_mps for r in records})
     rows = []
-    for (attack, optimizer, start), rs in group(records, "attack", "optimizer", "start").items():
+    for key, rs in runs(records, "attack", "optimizer", "start")[1].items():
         wins = [r for r in rs if r.outcome == "success"]
-        cells = [f"{attack} {optimizer} {start}", str(len(wins))]
+        cells = [run_label(key), str(len(wins))]
         for v in speeds:
             n = sum(1 for r in wins if r.speed_mps == v)
             cells.append(f"{n} ({100 * n / len(wins):.1f}%)" if wins else "0")
         rows.append(tuple(cells))
     return Table("Table 3: successes by target speed", ("attack", "successes", *[f"{v:g} m/s" for v in speeds]), tuple(rows))
+
+
+def table_systems(records: Sequence[Record]) -> Table:
+    """Per system under test: how often an attacker made it crash, where, and how hard."""
+    rows = []
+    for (system,), rs in group(records, "system").items():
+        wins = [r for r in rs if r.outcome == "success"]
+        setpoints = sorted({r.setpoint_m for r in wins})
+        rows.append((
+            system, str(len(rs)), f"{len(wins)} ({100 * len(wins) / len(rs):.1f}%)",
+            str(sum(r.outcome == "attacker_crash" for r in rs)),
+            ", ".join(f"{d:g}" for d in setpoints) or "none",
+            f"{max(r.speed_diff_kmh for r in wins):.1f}" if wins else "-",
+            _mean_std([r.time_from_attack_start_s for r in wins]),
+        ))
+    return Table("Systems under test: successful attacks",
+                 ("system", "samples", "successes", "attacker crashes", "setpoints with a success m",
+                  "worst speed difference km/h", "time from attack start to collision s, mean (std)"), tuple(rows))
 
 
 def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = None,
@@ -170,7 +211,7 @@ def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = 
 
 def most_severe(records: Sequence[Record], count: int = 3) -> list[Record]:
     """The successes with the largest speed difference at the first collision, at most one per
-    configuration (network, followers, setpoint, speed, start, attack, optimiser), so that one
+    configuration (network, followers, setpoint, speed, start, system, attack, optimiser), so that one
     campaign's near-copies of its best attack do not fill the list."""
     wins = [r for r in records if r.outcome == "success" and r.speed_diff_kmh is not None]
     chosen: dict[tuple, Record] = {}
@@ -343,11 +384,13 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
 
 
 def richest_conditions(records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
-    """For each (attack, optimiser, start) of knot campaigns, the condition with the most successes."""
+    """For each (system,) attack, optimiser and start of knot campaigns, the condition with the most successes."""
     out = []
     knots = [r for r in records if r.attack in ("knots", "spline")]
-    for (attack, optimizer, start), rs in group(knots, "attack", "optimizer", "start").items():
+    for key, rs in runs(knots, "attack", "optimizer", "start")[1].items():
+        *system, attack, optimizer, start = key
         conditions = group(rs, "network", "setpoint_m", "speed_mps")
         (network, d, v), best = max(conditions.items(), key=lambda kv: sum(r.outcome == "success" for r in kv[1]))
-        out.append((f"{attack} {optimizer}, {start}, setpoint {d:g} m, {v:g} m/s", best))
+        lead = f"{system[0]}: " if system else ""
+        out.append((f"{lead}{attack} {optimizer}, {start}, setpoint {d:g} m, {v:g} m/s", best))
     return out

@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .analysis import FEW_ATTACKS, Clustering, Record, count_noun, group, success_grid
+from .analysis import FEW_ATTACKS, Clustering, Record, count_noun, runs, success_grid
 from .errors import ConfigError
 
 SPEED_CMAP = "turbo"
@@ -272,17 +272,20 @@ def text_colour(background) -> str:
 
 
 def heatmap_panels(records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
-    """One panel per attack, optimiser and start mode: the groups a reader compares."""
-    return [(f"{attack}, {optimizer.upper()}, start {start}", rs)
-            for (attack, optimizer, start), rs in group(records, "attack", "optimizer", "start").items()]
+    """One panel per attack, optimiser and start mode (and system under test, when there are several):
+    the groups a reader compares."""
+    fields, groups = runs(records, "attack", "optimizer", "start")
+    system = fields[0] == "system"
+    return [((f"{key[0]}: " if system else "") + f"{key[-3]}, {key[-2].upper()}, start {key[-1]}", rs)
+            for key, rs in groups.items()]
 
 
 def heatmap_columns(records: Sequence[Record]) -> int:
     """One column per start mode when every attack and optimiser ran them all (rows then compare
     optimisers, columns start modes), else up to four panels a row."""
     starts = {r.start for r in records}
-    runs = group(records, "attack", "optimizer")
-    if 1 < len(starts) <= 4 and all({r.start for r in rs} == starts for rs in runs.values()):
+    by_run = runs(records, "attack", "optimizer")[1]
+    if 1 < len(starts) <= 4 and all({r.start for r in rs} == starts for rs in by_run.values()):
         return len(starts)
     return 4
 

@@ -25,6 +25,7 @@ from .analysis import (
     table_attacker_crashes,
     table_by_speed,
     table_success_statistics,
+    table_systems,
 )
 from .campaign import Campaign, Evaluator
 from .errors import ConfigError
@@ -56,8 +57,9 @@ def describe(record: Record) -> str:
     where = (f"{record.network}, " if record.network != "highway_4lane" else "") + (
         f"{record.followers} followers, " if record.followers != 3 else "")
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
-    head = (f"sample {record.sample_id}: {record.attack} {record.optimizer}, {where}{start}, setpoint {record.setpoint_m:g} m, "
-            f"{record.speed_mps:g} m/s")
+    system = f"{record.system}, " if record.system != "switching" else ""
+    head = (f"sample {record.sample_id}: {system}{record.attack} {record.optimizer}, {where}{start}, "
+            f"setpoint {record.setpoint_m:g} m, {record.speed_mps:g} m/s")
     if record.pair is None:
         return f"{head}; {record.outcome.replace('_', ' ')}"
     return (f"{head}; {record.pair} collided {record.time_from_attack_start_s:.1f} s after the attack started, "
@@ -147,7 +149,11 @@ def build_report(
         return f"sample_{r.sample_id}" if len(set(db_names)) == 1 else f"db{db_names.index(r.db) + 1}_sample_{r.sample_id}"
 
     step("tables")
+    systems = sorted({r.system for r in records})
+    compare_systems = systems != ["switching"]
     tables = [table_success_statistics(records), table_attacker_crashes(records), table_by_speed(records)]
+    if compare_systems:
+        tables.insert(0, table_systems(records))
     for t in tables:
         parts.append(_table_html(t))
     (out / "tables.txt").write_text("\n\n".join(t.to_text() for t in tables) + "\n")
@@ -163,10 +169,27 @@ def build_report(
                      columns=figures.heatmap_columns(records))
     parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
 
+    if compare_systems:
+        step("worst counterexample per system")
+        parts.append("<h2>Worst counterexample per system under test</h2><p>For each system, its successful attack "
+                     f"with the {SEVERITY}, replayed through SUMO; a system without one is named with its budget.</p>")
+        for system in systems:
+            rs = [r for r in records if r.system == system]
+            worst = most_severe(rs, 1)
+            if not worst:
+                parts.append(f"<h3>{html.escape(system)}</h3><p>No successful attack in {count_noun(len(rs), 'sample')} "
+                             f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
+                continue
+            r = worst[0]
+            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml")
+            ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
+            parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
+                         f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
+
     step("time-space diagrams")
     top = most_severe(records, severe)
     parts.append(f"<h2>Most severe attacks</h2><p>The successful attacks with the {SEVERITY}, at most one per "
-                 "configuration (network, followers, setpoint, target speed, start mode, attack, optimiser): "
+                 "configuration (network, followers, setpoint, target speed, start mode, system, attack, optimiser): "
                  f"{count_noun(len(top), 'attack')}. Each is replayed through SUMO; its time-space diagram shows every "
                  "car's position over time coloured by speed (one scale for all diagrams), and beside it every car's "
                  "acceleration.</p>")

@@ -232,3 +232,24 @@ def test_clusters_use_the_time_from_the_attack_start():
 def test_count_noun(count, words):
     assert count_noun(count, "cluster") == words
     assert count_noun(count, "success", "successes") == words.replace("clusters", "successes").replace("cluster", "success")
+
+
+# --- systems under test --------------------------------------------------------------------------------
+
+
+def test_tables_split_by_system_when_several_were_attacked():
+    from d4sumo.analysis import system_label, table_systems
+
+    paper = [_record([0] * 9, sample_id=i, speed_diff_kmh=20.0 + i) for i in range(3)]
+    acc = [_record([0] * 9, sample_id=10 + i, system="sumo:ACC", outcome="no_crash", pair=None, time_s=None,
+                   speed_diff_kmh=None) for i in range(4)]
+    t = table_systems(paper + acc)
+    rows = {row[0]: row for row in t.rows}
+    assert rows["switching"][2] == "3 (100.0%)" and rows["switching"][4] == "7"
+    assert rows["sumo:ACC"][2] == "0 (0.0%)" and rows["sumo:ACC"][4] == "none"  # said plainly
+    assert [row[0] for row in table_success_statistics(paper + acc).rows] == ["sumo:ACC knots bo", "switching knots bo"]
+    assert [row[0] for row in table_success_statistics(paper).rows] == ["knots bo"]  # one system: as the paper
+    assert len(most_severe(paper + acc, 3)) == 1  # one configuration with successes
+    assert system_label({"controller": [{"class": "sumo:ACC", "tau": 0.5}, {"class": "switching"}, "sumo:IDM"]}) \
+        == "sumo:ACC(tau=0.5) / switching / sumo:IDM"
+    assert system_label({"controller": {"class": "nowhere.module:Ctl", "gain": 1}}) == "nowhere.module:Ctl"

@@ -26,6 +26,14 @@ SIMULATE = [
     ["--start", "warmup", "--warmup", "15.01"], ["--warmup", "-1"], ["--speed", "45"], ["--duration", "500"],
     ["--fcd", "/nonexistent/folder/out.xml"], ["--delta", "0"], ["--horizon", "-3"], ["--delta", "5", "--knots=1,1,1", "--horizon", "7"],
     ["--length", "0"], ["--config", "/nonexistent.toml"], ["--bogus"], ["--json", "extra"],
+    # SUMO's car-following models: unknown models and attributes, values SUMO itself refuses, mixed platoons
+    ["--controller", "sumo:FOO"], ["--controller", "sumo:"], ["--controller", "sumo:IDM", "--set", "controller.speedControlGain=1"],
+    ["--controller", "sumo:ACC", "--set", "controller.tau=0"], ["--controller", "sumo:ACC", "--set", "controller.accel=9"],
+    ["--controller", "sumo:ACC", "--set", "controller.speed_mode=-1"], ["--controller", "sumo:CC", "--set", "controller.active_controller=1"],
+    ["--controller", "sumo:ACC,switching"], ["--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.tau=1"],
+    ["--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.v4.tau=1"], ["--controller", "sumo:ACC,,switching"],
+    ["--controller", "timegap", "--set", "controller.time_gap_s=-1"],
+    ["--controller", "sumo:Krauss", "--set", "scenario.attacker_declared_decel_mps2=0"],
 ]
 
 

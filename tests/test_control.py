@@ -170,3 +170,44 @@ def test_bad_controller_configs_name_the_field(name, params, field):
     with pytest.raises(ConfigError) as info:
         ControllerConfig(cls=name, params=params)
     assert info.value.field == field
+
+
+# --- the constant time-gap controller (the paper's mitigation) ----------------------------------
+
+
+@pytest.mark.parametrize("time_gap_s", [0.5, 1.0, 2.0])
+def test_the_time_gap_controller_keeps_its_desired_gap_at_steady_state(time_gap_s):
+    import numpy as np
+
+    from d4sumo.config import EpisodeConfig
+    from d4sumo.platoon import integrate
+
+    config = EpisodeConfig(controller=ControllerConfig("timegap", (("time_gap_s", time_gap_s),)), duration_s=120.0)
+    episode = integrate(config, np.full(config.steps, np.nan))  # the attacker only cruises
+    trace = episode.trace
+    assert episode.outcome == "no_crash"
+    for i in range(1, config.followers + 1):
+        desired = config.setpoint_m + time_gap_s * trace[f"speed_v{i}"][-1]  # d(v) = s0 + h v
+        assert trace[f"gap_{i - 1}"][-1] == pytest.approx(desired, abs=0.01)
+        assert trace[f"mode_v{i}"][-1] == MODE_ACC
+        assert trace[f"speed_v{i}"][-1] == pytest.approx(trace["speed_v0"][-1], abs=0.01)
+
+
+def test_the_time_gap_controller_at_zero_time_gap_is_the_papers_controller():
+    from d4sumo.control import TimeGapController, TimeGapParams
+
+    paper = SwitchingController(SwitchingParams(), setpoint_m=7.0, target_speed_mps=25.0, vehicle=VEHICLE, step_s=0.05)
+    zero = TimeGapController(TimeGapParams(time_gap_s=0.0), setpoint_m=7.0, target_speed_mps=25.0, vehicle=VEHICLE, step_s=0.05)
+    for gap, v, v_lead in [(7.0, 25.0, 25.0), (6.0, 20.0, 18.0), (30.0, 24.0, 25.0), (7.5, 24.5, 20.0), (2.0, 10.0, 0.0)]:
+        assert zero.command(gap, v, v_lead) == paper.command(gap, v, v_lead)
+        assert zero.mode == paper.mode
+
+
+def test_the_time_gap_controller_wants_more_room_the_faster_it_goes():
+    from d4sumo.control import TimeGapController, TimeGapParams
+
+    c = TimeGapController(TimeGapParams(time_gap_s=1.0), setpoint_m=7.0, target_speed_mps=25.0, vehicle=VEHICLE, step_s=0.05)
+    # at the paper's setpoint gap and 20 m/s it is 20 m too close: ACC mode, braking
+    assert c.command(7.0, 20.0, 20.0) < 0.0 and c.mode == MODE_ACC
+    assert c.desired_gap_m(20.0) == pytest.approx(27.0)
+    assert ControllerConfig("timegap", (("time_gap_s", 1.5),)).label == "timegap(time_gap_s=1.5)"

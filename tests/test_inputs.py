@@ -94,3 +94,14 @@ def test_a_bad_attack_of_an_episode_names_the_field(attack, field):
 def test_a_knot_attack_of_an_episode():
     family, params = attack_of({"attack": {"family": "knots", "params": [0, 1, -1], "horizon_s": 12}})
     assert family.name == "knots" and list(params) == [0, 1, -1]
+
+
+def test_controller_flags_reach_one_follower_of_a_mixed_platoon():
+    doc = with_overrides({"controller": ["sumo:ACC", "switching", "sumo:IDM"]}, {"controller.v1.tau": 0.8, "controller.v2.acc_kp": 1.2})
+    config = episode_config(doc)
+    assert dict(config.controllers[0].params)["tau"] == 0.8 and dict(config.controllers[1].params)["acc_kp"] == 1.2
+    with pytest.raises(ConfigError, match="controller.VEHICLE.KEY"):
+        with_overrides(doc, {"controller.tau": 1.0})
+    # a whole [controller] at once (a sweep grid's controller axis): a name, a table or a list
+    assert episode_config(with_overrides(doc, {"controller": "timegap"})).controller.cls == "timegap"
+    assert episode_config(with_overrides({}, {"controller": {"class": "sumo:ACC", "tau": 0.5}})).controller.label == "sumo:ACC(tau=0.5)"

@@ -140,3 +140,71 @@ def test_warmup_episodes_in_sumo_match_the_reference_integration(road):
     reference = integrate(config, u, road.speed_limit_mps)
     assert episode.outcome == reference.outcome and episode.collisions[0].pair == reference.collisions[0].pair
     assert episode.trace.times_s[-1] == reference.trace.times_s[-1] > config.warmup_s
+
+
+# --- followers driven by SUMO's own car-following models -------------------------------------------
+
+#: Found by `d4sumo falsify --controller sumo:ACC --set controller.tau=0.5 --start steady --optimizer ce
+#: --samples 100` (sample 4 of seed 0): v3 hits v2 at 51.1 s, 19.6 km/h faster, the attacker untouched.
+SUMO_ACC_TAU_05_SUCCESS_KNOTS = [0.9473164841377867, 0.32304009950861967, 0.26038596731253244, 0.3282815479400487,
+                                 -0.1912424504245193, -0.6717098386366155, 0.3885832289277623, 0.04340117517536158,
+                                 -0.3306508328295664]
+
+
+@pytest.mark.parametrize("model", ["ACC", "CACC", "CC", "IDM", "EIDM", "Krauss"])
+def test_each_listed_sumo_model_drives_the_followers(model, road):
+    config = EpisodeConfig(controller=ControllerConfig(f"sumo:{model}"), start="steady", duration_s=20.0)
+    episode = simulate(config, knots_signal(ATTACKER_CRASH_KNOTS, config), road=road)
+    trace = episode.trace
+    assert len(trace) >= 2 and np.all(np.isfinite(trace["cmd_v1"])) and np.all(np.abs(trace["cmd_v1"]) <= 1.0)
+    assert "mode_v1" not in trace.names  # SUMO does not expose its models' modes
+    # SUMO's model, not d4sumo's controller: the same attack gives another motion than the paper's controller
+    paper = simulate(EpisodeConfig(start="steady", duration_s=20.0), knots_signal(ATTACKER_CRASH_KNOTS, config), road=road)
+    n = min(len(trace), len(paper.trace))
+    assert not np.allclose(trace["speed_v1"][:n], paper.trace["speed_v1"][:n])
+    assert episode.min_gaps_m() == {f"v{i}-v{i + 1}": pytest.approx(float(trace[f"gap_{i}"].min())) for i in range(3)}
+
+
+def test_a_known_counterexample_against_sumos_acc_still_crashes(road):
+    config = EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 0.5),)), start="steady")
+    episode = simulate(config, knots_signal(SUMO_ACC_TAU_05_SUCCESS_KNOTS, config), road=road)
+    assert episode.outcome == "success"
+    assert episode.first_collision.pair == "v2-v3"
+    assert episode.first_collision.time_s == pytest.approx(51.1)
+    assert episode.first_collision.speed_diff_kmh == pytest.approx(19.58, abs=0.01)
+    # SUMO's ACC as shipped (tau 1 s) survives the same attack
+    safe = EpisodeConfig(controller=ControllerConfig("sumo:ACC"), start="steady")
+    assert simulate(safe, knots_signal(SUMO_ACC_TAU_05_SUCCESS_KNOTS, safe), road=road).outcome == "no_crash"
+
+
+def test_what_the_attacker_declares_is_what_sumos_models_plan_with(road):
+    def full_brake(declared):
+        config = EpisodeConfig(controller=ControllerConfig("sumo:Krauss"), start="steady", duration_s=20.0,
+                               attacker_declared_decel_mps2=declared)
+        return simulate(config, np.full(config.steps, -1.0), road=road)
+
+    assert full_brake(8.0).outcome == "no_crash"  # honest: Krauss keeps a gap it can stop in
+    lied = full_brake(0.5)  # the attacker claims weak brakes, then brakes at 8 m/s^2
+    assert lied.outcome == "attacker_crash" and lied.first_collision.pair == "v0-v1"
+
+
+def test_a_mixed_platoon_runs_each_follower_with_its_own_controller(road):
+    config = EpisodeConfig.from_dict({"controller": ["sumo:ACC", "switching", {"class": "sumo:IDM", "tau": 1.5}]})
+    episode = simulate(config, knots_signal(SUCCESS_KNOTS, config), road=road)
+    trace = episode.trace
+    assert "mode_v2" in trace.names and "mode_v1" not in trace.names and "mode_v3" not in trace.names
+    # the Python follower's command is its controller's, in [-1, 1]
+    assert np.all(np.abs(trace["cmd_v2"]) <= 1.0) and np.all(np.isfinite(trace["cmd_v3"]))
+
+
+def test_a_value_sumo_refuses_is_a_config_error_before_any_episode(road):
+    config = EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 0.0),)))
+    with pytest.raises(ConfigError) as err:
+        simulate(config, np.full(config.steps, np.nan), road=road)
+    assert err.value.field == "controller" and "Must be greater than 0" in err.value.allowed
+
+
+def test_sumo_models_cannot_run_without_sumo():
+    config = EpisodeConfig(controller=ControllerConfig("sumo:IDM"))
+    with pytest.raises(ConfigError, match="Python controllers only"):
+        integrate(config, np.full(config.steps, np.nan))

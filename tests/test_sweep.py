@@ -46,6 +46,14 @@ def test_a_sweep_is_the_product_of_its_grid(tmp_path):
     assert {(c.config.setpoint_m, c.config.start) for c in sweep.campaigns} == {(5, "rest"), (5, "steady"), (7, "rest"), (7, "steady")}
 
 
+def test_a_sweep_grid_ranges_over_systems_under_test(tmp_path):
+    grid = '[grid]\ncontroller = ["switching", {class = "sumo:ACC", tau = 0.5}, ["sumo:ACC", "timegap", "sumo:IDM"]]\n'
+    sweep = Sweep.load(write(tmp_path, TINY.replace("[grid]\n", grid, 1)))
+    assert len(sweep.campaigns) == 12
+    assert {c.config.system_label for c in sweep.campaigns} == {"switching", "sumo:ACC(tau=0.5)", "sumo:ACC / timegap / sumo:IDM"}
+    sweep.check()  # SUMO loads the models' types
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
@@ -57,6 +65,8 @@ def test_a_sweep_is_the_product_of_its_grid(tmp_path):
         (TINY + "\n[scenario]\nspeed_mps = 45.0\n", "speed limit"),
         ("name = 'x'\n", "[grid]"),
         ("[grid\n", "valid TOML"),
+        (TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC", {class = "sumo:ACC", tau = 0}]\n'), "Must be greater than 0"),
+        (TINY.replace("[grid]\n", '[grid]\ncontroller = [["sumo:ACC", "switching"]]\n'), "one [[controller]] table per follower"),
     ],
 )
 def test_a_bad_sweep_file_is_refused_before_anything_runs(tmp_path, text, message, capsys):
