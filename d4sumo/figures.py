@@ -95,6 +95,13 @@ def lanes(fcd: dict) -> list[str]:
     return sorted(used, key=key)
 
 
+def wrap_title(title: str, width: int = 100) -> str:
+    """A long title on as many lines as it needs: a system's name and parameters can make one long."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(title, width)) or title
+
+
 def _lane_title(lane: str) -> str:
     edge, _, index = lane.rpartition("_")
     return f"lane {index} ({lane})" if index.isdigit() else f"lane {lane}"
@@ -209,7 +216,7 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
     axes[0].set_xlim(t0, t1 + 0.16 * (t1 - t0 or 1.0))  # room on the right for the vehicle labels
     axes[0].set_ylim(p0 - 0.04 * (p1 - p0 or 1.0), p1 + 0.06 * (p1 - p0 or 1.0))
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle(wrap_title(title), fontsize=9)
     fig.colorbar(ScalarMappable(norm, SPEED_CMAP), ax=list(axes), label="speed [m/s]", shrink=0.9 if len(axes) > 1 else 1.0)
     fig.canvas.draw()  # lay out, then freeze it so the labels placed in pixels stay put
     fig.set_layout_engine("none")
@@ -238,7 +245,7 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
         ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("acceleration [m/s²]")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(wrap_title(title), fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     return fig

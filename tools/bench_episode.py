@@ -1,11 +1,12 @@
-"""Episode cost against bare libsumo stepping of the same steps and cars (SPEC section 7: ratio <= 2.5).
+"""Episode cost against bare libsumo stepping of the same steps and cars (SPEC section 7: ratio <= 2.5),
+for followers commanded by the paper's Python controller and for followers driven by SUMO's ACC model.
 
 Both sides are timed the same way, start to close, interleaved in one run so machine noise hits both:
-  bare     libsumo start, the same cars inserted, `steps` calls of simulationStep, close
+  bare     libsumo start, the same cars (and vehicle types) inserted, `steps` calls of simulationStep, close
   episode  d4sumo.simulation.simulate: controllers, actuators, speed commands, sensing, collision
            checks and the Trace, for an attack that never crashes (so every step runs)
 
-Usage: python tools/bench_episode.py [--repeats 30] [--followers 3]
+Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC]
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import time
 import libsumo
 import numpy as np
 
-from d4sumo.config import EpisodeConfig
+from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.scenarios import build_road
 from d4sumo.simulation import load_platoon, simulate, sumo_command
 
@@ -44,21 +45,28 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--followers", type=int, default=3)
+    parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
     args = parser.parse_args()
-    config = EpisodeConfig(followers=args.followers, start="steady")
-    road = build_road(config.network)
-    attack_u = np.full(config.steps, np.nan)  # the attacker cruises: no crash, full length
-    bare(config, road), episode(config, road, attack_u)  # warm caches
-    t_bare, t_episode = [], []
+    configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
+    road = build_road(configs[0].network)
+    attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length
+    times: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in args.systems}
+    for config in configs:
+        bare(config, road), episode(config, road, attack_u)  # warm caches (and check SUMO's vehicle types)
     for _ in range(args.repeats):
-        t_bare.append(bare(config, road))
-        t_episode.append(episode(config, road, attack_u))
-    mb, me = statistics.median(t_bare), statistics.median(t_episode)
-    cars = config.followers + 1
-    print(f"{config.steps} steps, {cars} cars, {args.repeats} repeats (median, start to close)")
-    print(f"bare libsumo stepping : {mb * 1e3:7.2f} ms  ({mb / config.steps * 1e6:.1f} us/step)")
-    print(f"d4sumo episode        : {me * 1e3:7.2f} ms  ({me / config.steps * 1e6:.1f} us/step)")
-    print(f"ratio episode / bare  : {me / mb:7.2f}   (target <= 2.5)")
+        for name, config in zip(args.systems, configs):
+            times[name][0].append(bare(config, road))
+            times[name][1].append(episode(config, road, attack_u))
+    steps, cars = configs[0].steps, args.followers + 1
+    print(f"{steps} steps, {cars} cars, {args.repeats} repeats (median, start to close)")
+    ratios = {}
+    for name in args.systems:
+        mb, me = statistics.median(times[name][0]), statistics.median(times[name][1])
+        ratios[name] = me / mb
+        print(f"followers {name:<10} bare libsumo stepping : {mb * 1e3:7.2f} ms  ({mb / steps * 1e6:.1f} us/step)")
+        print(f"followers {name:<10} d4sumo episode        : {me * 1e3:7.2f} ms  ({me / steps * 1e6:.1f} us/step)")
+    for name in args.systems:
+        print(f"ratio episode / bare, followers {name:<10}: {ratios[name]:5.2f}   (target <= 2.5)")
 
 
 if __name__ == "__main__":
