@@ -1,7 +1,8 @@
 """Verdict invariants over many random episodes, checked against SUMO's own FCD output.
 
 Plays N random episodes (every attack family, every start mode, setpoints with and without fractional
-metres, 1-10 followers, three target speeds), each scored and stored exactly as a campaign stores a
+metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
+SUMO's models, a quarter of the platoons mixed), each scored and stored exactly as a campaign stores a
 sample, and counts the samples where any of these disagree:
 
 - outcome and collision record: no collision <=> no_crash; a collision involving v0 <=> attacker_crash;
@@ -31,22 +32,30 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.attacks import FAMILIES
 from d4sumo.campaign import Campaign, Evaluator
-from d4sumo.config import START_MODES, EpisodeConfig
+from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.scenarios import build_road
 from d4sumo.simulation import simulate
 from d4sumo.spec import psi_robustness
 from d4sumo.store import Store
 
 FCD_TOLERANCE_M = 1.5e-6  # two positions rounded to 6 decimals
+#: the systems under test drawn from: Python controllers and SUMO-driven followers
+SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("sumo:ACC"),
+           ControllerConfig("sumo:ACC", (("tau", 0.5),)), ControllerConfig("sumo:IDM"), ControllerConfig("sumo:Krauss"),
+           ControllerConfig("sumo:CACC")]
 
 
 def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     setpoint = float(rng.choice([rng.integers(2, 16), round(rng.uniform(2, 15), 1), rng.uniform(2, 15)]))
+    followers = int(rng.integers(1, 11))
+    systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
     config = EpisodeConfig(
-        followers=int(rng.integers(1, 11)),
+        followers=followers,
         setpoint_m=setpoint,
         speed_mps=float(rng.choice([20.0, 25.0, 30.0])),
         start=str(rng.choice(START_MODES)),
+        # one system for the whole platoon, or (one time in four) a mixed platoon
+        controller=systems if rng.random() < 0.25 else systems[0],
     )
     family = str(rng.choice(FAMILIES))
     # with one follower the paper's psi is undefined: score the attacker's gap instead
