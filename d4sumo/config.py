@@ -43,8 +43,13 @@ class ControllerConfig:
         if carfollowing.is_sumo(self.cls):
             object.__setattr__(self, "params", carfollowing.check_params(self.cls, dict(self.params), self.where))
             return
-        controller = resolve_controller(self.cls)
-        resolved = build_params(controller, dict(self.params))  # validates every value
+        try:
+            controller = resolve_controller(self.cls)
+            resolved = build_params(controller, dict(self.params))  # validates every value
+        except ConfigError as exc:  # name the follower of a mixed platoon: controller.v2.acc_kp
+            if self.where == "controller" or not exc.field.startswith("controller"):
+                raise
+            raise ConfigError(self.where + exc.field.removeprefix("controller"), exc.given, exc.allowed) from None
         object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
 
     @property

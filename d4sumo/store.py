@@ -295,8 +295,8 @@ class Store:
         try:  # every value checked
             Campaign.from_definition(definition, where=f"{self.path}: campaign {r[0]}")
         except DefinitionError as exc:
-            if exc.field != "controller.class":  # a user's controller not importable here is not damage
-                raise
+            if not (exc.field.startswith("controller") and exc.field.endswith(".class")):
+                raise  # a user's controller not importable here (any follower's) is not damage
         return CampaignRow(r[0], r[1], definition, r[3], r[4], r[5], r[6])
 
     def campaign(self, campaign_id: int) -> CampaignRow:

@@ -182,3 +182,18 @@ def test_a_campaign_of_a_controller_not_importable_here_is_still_readable(tmp_pa
         store.open_campaign(definition, 10)
     with Store(path, create=False) as store:
         assert store.campaigns()[0].definition["config"]["controller"]["class"] == "gone_package.module:MyController"
+    # the same in a mixed platoon: any follower's controller may be one of the user's own
+    mixed = copy.deepcopy(DEFINITION)
+    mixed["config"]["controller"] = [{"class": "sumo:ACC"}, {"class": "gone_package.module:MyController", "gain": 1},
+                                     {"class": "switching"}]
+    with Store(tmp_path / "m.sqlite") as store:
+        store.open_campaign(mixed, 10)
+    with Store(tmp_path / "m.sqlite", create=False) as store:
+        assert store.campaigns()[0].definition["config"]["controller"][1]["class"] == "gone_package.module:MyController"
+    # while a bad value of a follower's controller is damage, named by its follower
+    from d4sumo.config import EpisodeConfig
+    from d4sumo.errors import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        EpisodeConfig.from_dict({"controller": ["switching", {"class": "switching", "acc_kp": -1}, "timegap"]})
+    assert err.value.field == "controller.v2.acc_kp"
