@@ -9,25 +9,29 @@ one ``carFollowing-MODEL`` type per model); SUMO itself checks the values when i
 What d4sumo sets itself, from the rest of the config, and a user may not override in the table:
 the body and drivetrain limits of the car (``length``, ``accel``, ``emergencyDecel`` from ``[vehicle]``),
 the desired speed (``maxSpeed`` = the target speed, ``speedFactor`` 1, ``speedDev`` 0) and, for ``CC``,
-``lanesCount`` (from the road). Everything else not given keeps SUMO's default for the model.
+``lanesCount`` (from the road). ``sigma`` (a driver's random dawdling) defaults to 0: the followers are
+deterministic, like the attacker. Everything else not given keeps SUMO's default for the model, and the
+followers run with SUMO's default speed mode (31: SUMO applies it only to speeds set through TraCI, which
+d4sumo never sets for them).
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import numbers
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from .errors import ConfigError, check_int, check_number, is_number
+from .errors import ConfigError, is_number
 
 PREFIX = "sumo:"
 XSD = "{http://www.w3.org/2001/XMLSchema}"
 
 #: Attributes of every model that shape its car following (the model's own come from the schema).
-COMMON = ("tau", "minGap", "decel", "apparentDecel", "actionStepLength", "sigma")
+COMMON = ("tau", "minGap", "decel", "apparentDecel", "actionStepLength")
 #: Set by d4sumo from the rest of the config: a follower is the same car as the attacker.
 SET_BY_D4SUMO = {
     "length": "vehicle.length_m",
@@ -39,8 +43,9 @@ SET_BY_D4SUMO = {
     "speedDev": "scenario.speed_mps (the followers' desired speed)",
     "lanesCount": "the road's lanes",
 }
-#: d4sumo's own keys in a sumo: table (snake_case, unlike SUMO's attributes).
-SPEED_MODE_DEFAULT = 31  # SUMO's default: every safety check on
+#: d4sumo's defaults where SUMO's would make the followers random: a driver's dawdling (Krauss-type
+#: models draw it from SUMO's own random stream, which the campaign's seed does not reach).
+DEFAULTS = {"sigma": 0.0}
 #: Plexe's CC model runs one of its controllers; the others need data fed in by the application.
 CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1}
 
@@ -61,10 +66,20 @@ class AttributeType:
             if not isinstance(value, str):
                 raise ConfigError(field, value, "a string")
             return value
-        if self.kind == "int":
-            return check_int(field, value, int(max(self.low, -1e9)), int(min(self.high, 1e9)))
-        low, high = max(self.low, -1e9), min(self.high, 1e9)
-        return check_number(field, value, low, high, low_open=self.low_open)
+        whole = self.kind == "int"
+        ok = (isinstance(value, numbers.Integral) if whole else is_number(value)) and not isinstance(value, bool)
+        ok = ok and math.isfinite(float(value)) and (self.low < value if self.low_open else self.low <= value) and value <= self.high
+        if not ok:
+            raise ConfigError(field, value, f"{'a whole number' if whole else 'a number'}{self.range_text()}")
+        return int(value) if whole else float(value)
+
+    def range_text(self) -> str:
+        bounds = []
+        if self.low > -math.inf:
+            bounds.append(f"{'>' if self.low_open else '>='} {self.low:g}")
+        if self.high < math.inf:
+            bounds.append(f"<= {self.high:g}")
+        return (" " + " and ".join(bounds)) if bounds else ""
 
 
 _TYPES = {
@@ -129,49 +144,60 @@ def is_sumo(name: Any) -> bool:
     return isinstance(name, str) and name.startswith(PREFIX)
 
 
-def model_of(name: str) -> str:
+def model_of(name: str, where: str = "controller") -> str:
     """The SUMO model of a ``sumo:MODEL`` controller name, checked."""
     model = name[len(PREFIX):]
     known = models()
     if model not in known:
-        raise ConfigError("controller.class", name, f"one of {', '.join(PREFIX + m for m in sorted(known))}")
+        raise ConfigError(f"{where}.class", name, f"one of {', '.join(PREFIX + m for m in sorted(known))}")
     return model
 
 
-def check_params(name: str, values: Mapping[str, Any], field: str = "controller") -> tuple[tuple[str, Any], ...]:
-    """The table of a ``sumo:MODEL`` controller: SUMO attributes of that model plus d4sumo's own keys
-    (``speed_mode``; ``active_controller`` for CC), checked and with d4sumo's defaults filled in."""
-    model = model_of(name)
+def check_params(name: str, values: Mapping[str, Any], where: str = "controller") -> tuple[tuple[str, Any], ...]:
+    """The table of a ``sumo:MODEL`` controller: SUMO attributes of that model (plus ``active_controller``
+    for CC), checked, with d4sumo's defaults filled in."""
+    model = model_of(name, where)
     attributes = models()[model]
     out: dict[str, Any] = {}
     for key, value in values.items():
-        where = f"{field}.{key}"
-        if key == "speed_mode":
-            out[key] = check_int(where, value, 0, 255)
-        elif key == "active_controller" and model == "CC":
+        field = f"{where}.{key}"
+        if key == "active_controller" and model == "CC":
             if value not in CC_CONTROLLERS:
-                raise ConfigError(where, value, f"one of {', '.join(CC_CONTROLLERS)}")
+                raise ConfigError(field, value, f"one of {', '.join(CC_CONTROLLERS)}")
             out[key] = value
         elif key in SET_BY_D4SUMO:
-            raise ConfigError(where, value, f"not set here: d4sumo sets {key} from {SET_BY_D4SUMO[key]}")
+            raise ConfigError(field, value, f"not set here: d4sumo sets {key} from {SET_BY_D4SUMO[key]}")
         elif key in attributes:
-            if not (is_number(value) or isinstance(value, (bool, str))):
-                raise ConfigError(where, value, "a number, true/false or a string")
-            out[key] = attributes[key].check(where, value)
+            out[key] = attributes[key].check(field, value)
         else:
-            own = ["speed_mode"] + (["active_controller"] if model == "CC" else [])
-            raise ConfigError(where, value, f"an attribute SUMO's {model} model reads: {', '.join(sorted(attributes) + own)}")
-    out.setdefault("speed_mode", SPEED_MODE_DEFAULT)
+            own = ["active_controller"] if model == "CC" else []
+            raise ConfigError(field, value, f"an attribute SUMO's {model} model reads: {', '.join(sorted(attributes) + own)}")
+    for key, value in DEFAULTS.items():
+        if key in attributes:
+            out.setdefault(key, value)
     if model == "CC":
         out.setdefault("active_controller", "ACC")
     return tuple(sorted(out.items()))
 
 
-def vtype_attributes(model: str, params: Mapping[str, Any]) -> dict[str, str]:
+def vtype_attributes(model: str, params: Mapping[str, Any], *, lanes: int = 1) -> dict[str, str]:
     """The model's attributes as SUMO reads them in a <vType> (d4sumo's own keys left out)."""
     out = {"carFollowModel": model}
+    if model == "CC":  # Plexe's model must know the road's lanes
+        out["lanesCount"] = str(lanes)
     for key, value in params.items():
-        if key in ("speed_mode", "active_controller"):
+        if key == "active_controller":
             continue
-        out[key] = ("true" if value else "false") if isinstance(value, bool) else (value if isinstance(value, str) else repr(float(value)) if isinstance(value, float) else str(value))
+        if isinstance(value, bool):
+            out[key] = "true" if value else "false"
+        else:
+            out[key] = value if isinstance(value, str) else repr(value)
     return out
+
+
+def runtime_parameters(model: str, params: Mapping[str, Any], speed_mps: float) -> dict[str, str]:
+    """Per-vehicle parameters SUMO's model reads after insertion (TraCI's setParameter), by key."""
+    if model != "CC":
+        return {}
+    # Plexe's CC: which of its controllers drives, and the cruise speed it holds
+    return {"carFollowModel.ccac": str(CC_CONTROLLERS[params["active_controller"]]), "carFollowModel.ccds": repr(speed_mps)}

@@ -120,6 +120,8 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
             flags[key] = _floats(f"--{dest}", value) if dest == "params" else value
     if "," in (getattr(args, "controller", None) or ""):  # a mixed platoon
         flags["controller"] = [name.strip() for name in flags.pop("controller.class").split(",")]
+    elif "controller.class" in flags and isinstance(doc.get("controller"), list):  # one controller for all, over a mixed file
+        flags["controller"] = flags.pop("controller.class")
     knots, constant = getattr(args, "knots", None), getattr(args, "constant", None)
     given = [f"--{n}" for n, v in (("knots", knots), ("constant", constant), ("attack", getattr(args, "attack", None)))
              if v is not None]
@@ -353,6 +355,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     import csv
 
+    from .analysis import system_label
     from .campaign import Campaign
     from .store import Store
 
@@ -361,12 +364,13 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.campaign is not None and args.campaign not in campaigns:
             raise ConfigError("--campaign", args.campaign, f"a campaign id of {args.db}: {', '.join(map(str, campaigns)) or 'none'}")
         names: dict[int, tuple[str, ...]] = {}
+        systems = {cid: system_label(c.definition["config"]) for cid, c in campaigns.items()}
         columns: list[str] = []
         for cid, c in campaigns.items():
             names[cid] = Campaign.from_definition(c.definition, where=str(args.db)).family().names
             columns += [n for n in names[cid] if n not in columns]
-        header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "attack",
-                  "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
+        header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "system",
+                  "attack", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
                   "error"] + columns
         out_path = check_output_file("--out", args.out)
         tmp = out_path.with_name(f".{out_path.name}.part") if out_path else None
@@ -380,7 +384,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                 sc = d["config"]["scenario"]
                 params = dict(zip(names[s.campaign_id], s.params))
                 writer.writerow([s.id, s.campaign_id, s.index, sc["network"], sc["followers"], sc["setpoint_m"], sc["speed_mps"],
-                                 sc["start"], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
+                                 sc["start"], systems[s.campaign_id], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
                                  s.time_s, s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
                                 + [params.get(n, "") for n in columns])
                 rows += 1

@@ -17,8 +17,9 @@ from .control import VehicleParams, build_params, resolve_controller
 from .errors import ConfigError, check_int, check_number
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
-#: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium); warmup: the paper's
-#: steady-state procedure, drive from rest for warmup_s with the attacker cruising, attack after.
+#: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);
+#: warmup: the paper's steady-state procedure, drive from rest for warmup_s with the attacker cruising,
+#: attack after (every system then starts from its own steady state).
 START_MODES = ("rest", "steady", "warmup")
 MAX_FOLLOWERS = 10
 
@@ -135,6 +136,10 @@ class EpisodeConfig:
             raise ConfigError("controller", self.controller, "a [controller] table")
         if len(set(controllers)) == 1 and isinstance(self.controller, tuple):  # the same for all: one table
             fix("controller", controllers[0])
+        for c in controllers:  # SUMO rounds an action step to whole steps, silently
+            step = dict(c.params).get("actionStepLength") if c.sumo_model else None
+            if step is not None and not (step >= self.step_s and _on_grid(step, self.step_s)):
+                raise ConfigError(f"{c.where}.actionStepLength", step, f"a whole number of steps of {self.step_s:g} s")
         declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
                                                          "m/s^2 (positive)", low_open=True))

@@ -182,17 +182,21 @@ class SwitchingController:
         self.cruise = CruiseControl(params, target_speed_mps, step_s)
         self.mode = MODE_CC
         self._mode_known = False
-        self._cc_gap = setpoint_m + params.eps_x_m - GAP_TOLERANCE_M
+        self._eps_x = params.eps_x_m
         self._cc_speed = target_speed_mps + params.eps_v_mps - SPEED_TOLERANCE_MPS
-        self._acc_gap = setpoint_m + GAP_TOLERANCE_M
         self._acc_speed = target_speed_mps + SPEED_TOLERANCE_MPS
         self._acc_kp, self._acc_kv = params.acc_kp, params.acc_kv
         self._accel_max, self._decel_max = vehicle.max_accel_mps2, vehicle.max_decel_mps2
 
+    def desired_gap_m(self, speed_mps: float) -> float:
+        """The gap the ACC keeps: the setpoint d (Eq. 1)."""
+        return self.setpoint_m
+
     def select_mode(self, gap_m: float, speed_mps: float) -> float:
-        if gap_m >= self._cc_gap or speed_mps >= self._cc_speed:
+        desired = self.desired_gap_m(speed_mps)
+        if gap_m >= desired + self._eps_x - GAP_TOLERANCE_M or speed_mps >= self._cc_speed:
             mode = MODE_CC
-        elif gap_m <= self._acc_gap and speed_mps <= self._acc_speed:
+        elif gap_m <= desired + GAP_TOLERANCE_M and speed_mps <= self._acc_speed:
             mode = MODE_ACC
         elif self._mode_known:
             mode = self.mode
@@ -208,7 +212,7 @@ class SwitchingController:
         """Eq. 1: the acceleration the active law asks for [m/s^2]."""
         if self.select_mode(gap_m, speed_mps) == MODE_CC:
             return self.cruise.acceleration(speed_mps)
-        return self._acc_kp * (gap_m - self.setpoint_m) + self._acc_kv * (lead_speed_mps - speed_mps)
+        return self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         # acceleration_to_command inlined: this runs for every follower at every step
@@ -241,15 +245,6 @@ class TimeGapController(SwitchingController):
 
     def desired_gap_m(self, speed_mps: float) -> float:
         return self.setpoint_m + self.time_gap_s * speed_mps
-
-    def desired_acceleration(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
-        desired = self.desired_gap_m(speed_mps)
-        # select_mode's gap thresholds follow d(v); the tolerances are the paper controller's
-        self._cc_gap = desired + self.params.eps_x_m - GAP_TOLERANCE_M
-        self._acc_gap = desired + GAP_TOLERANCE_M
-        if self.select_mode(gap_m, speed_mps) == MODE_CC:
-            return self.cruise.acceleration(speed_mps)
-        return self._acc_kp * (gap_m - desired) + self._acc_kv * (lead_speed_mps - speed_mps)
 
 
 # --- registry of follower controllers ------------------------------------------------------------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
 from .errors import ConfigError, D4sumoError
@@ -61,37 +62,54 @@ class PythonFollower:
 
     sumo_driven = False
 
-    def __init__(self, controller, actuator: Actuator):
-        self.controller = controller
-        self.actuator = actuator
-        self.command = controller.command
-        self.has_mode = hasattr(controller, "mode")
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+        self.config = config
+        self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
+                                                    target_speed_mps=episode.speed_mps, vehicle=episode.vehicle,
+                                                    step_s=episode.step_s)
+        self.actuator = Actuator(episode.vehicle, episode.step_s, float("inf"))
+        self.command = self.controller.command
+        self.has_mode = hasattr(self.controller, "mode")
 
 
 class SumoFollower:
     """A follower driven by one of SUMO's car-following models: d4sumo senses it and commands nothing.
 
-    ``model`` and ``params`` (SUMO's attributes, and d4sumo's ``speed_mode``) become its vehicle type;
-    the simulation module turns them into SUMO's terms.
+    It is the same car as the attacker (length, full-throttle acceleration and full-brake deceleration
+    from [vehicle]) whose desired speed is the target speed; the model and its attributes come from
+    its controller table. `vtype` and `parameters` say it in SUMO's terms; the simulation loads them.
     """
 
     sumo_driven = True
     has_mode = False  # SUMO does not expose its models' internal modes to TraCI
 
-    def __init__(self, controller: ControllerConfig):
-        self.config = controller
-        self.model = controller.sumo_model
-        self.params = dict(controller.params)
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+        self.config = config
+        self.model = config.sumo_model
+        self.params = dict(config.params)
+        self.episode = episode
+
+    def vtype(self, lanes: int) -> dict[str, str]:
+        """Its <vType> attributes."""
+        v = self.episode.vehicle
+        attributes = carfollowing.vtype_attributes(self.model, self.params, lanes=lanes)
+        attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
+                          maxSpeed=repr(self.episode.speed_mps), speedFactor="1", speedDev="0")
+        return attributes
+
+    def parameters(self) -> dict[str, str]:
+        """Per-vehicle parameters its model reads after insertion."""
+        return carfollowing.runtime_parameters(self.model, self.params, self.episode.speed_mps)
 
 
 def make_follower(controller: ControllerConfig, config: EpisodeConfig) -> PythonFollower | SumoFollower:
     """The one place that tells the kinds of follower apart."""
-    if controller.sumo_model:
-        return SumoFollower(controller)
-    cls = controller.controller_class()
-    python = cls(controller.build_params(), setpoint_m=config.setpoint_m, target_speed_mps=config.speed_mps,
-                 vehicle=config.vehicle, step_s=config.step_s)
-    return PythonFollower(python, Actuator(config.vehicle, config.step_s, float("inf")))
+    return (SumoFollower if controller.sumo_model else PythonFollower)(controller, config)
+
+
+def followers_of(config: EpisodeConfig) -> list[PythonFollower | SumoFollower]:
+    """Each follower of the platoon, v1 first."""
+    return [make_follower(c, config) for c in config.controllers]
 
 
 class Platoon:
@@ -103,7 +121,7 @@ class Platoon:
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
         vehicle, dt = config.vehicle, config.step_s
         self.length_m = vehicle.length_m
-        self.followers = [make_follower(c, config) for c in config.controllers]
+        self.followers = followers_of(config)
         # The attacker is the same kind of car: it cruises with the followers' PID gains when they
         # all run the paper's controller (or its time-gap variant), with the default gains otherwise.
         uniform = isinstance(config.controller, ControllerConfig) and not config.controller.sumo_model

@@ -3,8 +3,8 @@
 Each step Python commands the speed of the attacker and of every Python-commanded follower (SUMO's
 car-following, lane changing and speed checks are off for them: speed mode 32, lane-change mode 0);
 followers driven by SUMO's own car-following models run with their vehicle type, loaded from an
-additional file checked once per content, and their speed mode. SUMO moves the cars (ballistic update). A collision is any
-bumper overlap at the end of a step, measured on SUMO's positions (`platoon.collisions_at`): SUMO's own
+additional file checked once per content, with SUMO's default speed mode. SUMO moves the cars
+(ballistic update). A collision is any bumper overlap at the end of a step, measured on SUMO's positions (`platoon.collisions_at`): SUMO's own
 reports miss overlaps of 1 mm or less. The episode ends at the first one: SUMO lets the cars drive
 through each other afterwards, so later data are not physical.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import re
 import subprocess
 import tempfile
 from pathlib import Path
@@ -21,10 +22,9 @@ from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
-from . import carfollowing
-from .config import EpisodeConfig
+from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
-from .platoon import Platoon, collisions_at, initial_state, road_needed_m
+from .platoon import Platoon, SumoFollower, collisions_at, followers_of, initial_state, road_needed_m
 from .scenarios import Road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
 
@@ -61,12 +61,12 @@ def check_episode(config: EpisodeConfig, road: Road) -> None:
 _CHECKED: dict[str, Path] = {}  # vehicle-type XML -> its checked file, in this process
 
 
-def follower_types(config: EpisodeConfig) -> dict:
-    """The SUMO-driven followers' distinct controller configs -> their vehicle-type ids."""
+def follower_types(config: EpisodeConfig) -> dict[ControllerConfig, tuple[str, SumoFollower]]:
+    """The SUMO-driven followers' distinct controllers -> their vehicle-type id and one such follower."""
     types: dict = {}
-    for c in config.controllers:
-        if c.sumo_model and c not in types:
-            types[c] = f"d4{c.sumo_model}{len(types)}"
+    for follower in followers_of(config):
+        if follower.sumo_driven and follower.config not in types:
+            types[follower.config] = (f"d4{follower.model}{len(types)}", follower)
     return types
 
 
@@ -75,53 +75,70 @@ def followers_xml(config: EpisodeConfig, road: Road) -> str | None:
     types = follower_types(config)
     if not types:
         return None
-    v = config.vehicle
     lines = ["<additional>"]
-    for controller, type_id in types.items():
-        attributes = carfollowing.vtype_attributes(controller.sumo_model, dict(controller.params))
-        # The same car as the attacker; its desired speed is the target speed, exactly.
-        attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
-                          maxSpeed=repr(config.speed_mps), speedFactor="1", speedDev="0")
-        if controller.sumo_model == "CC":
-            attributes["lanesCount"] = str(road.lanes)
-        attrs = " ".join(f'{k}="{xml_escape(str(val), {chr(34): "&quot;"})}"' for k, val in attributes.items())
+    for type_id, follower in types.values():
+        attrs = " ".join(f'{k}="{xml_escape(str(v), {chr(34): "&quot;"})}"' for k, v in follower.vtype(road.lanes).items())
         lines.append(f'    <vType id="{type_id}" {attrs}/>')
     lines.append("</additional>")
     return "\n".join(lines) + "\n"
 
 
 def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
-    """The followers' vehicle-type file, checked by loading it in SUMO once (cached by its content).
+    """The followers' vehicle-type file, checked by loading it in SUMO once (cached by its content and
+    SUMO's build).
 
-    SUMO refuses a value its model cannot take (a negative tau, say) only when it loads the type: this
-    turns that into a ConfigError before any episode runs.
+    SUMO refuses a value its model cannot take (a zero tau, say) only when it loads the type: this turns
+    that into a ConfigError before any episode runs. Only a checked file gets its final name.
     """
     text = followers_xml(config, road)
     if text is None:
         return None
     if text in _CHECKED and _CHECKED[text].is_file():
         return _CHECKED[text]
+    sumo = sumo_binary("sumo")
+    build = f"{sumo}:{os.stat(sumo).st_mtime_ns}"  # another SUMO checks again
     folder = Path(default_cache_dir()).parent / "vtypes"
-    path = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}.add.xml"
+    path = folder / f"{hashlib.sha256((build + text).encode()).hexdigest()[:16]}.add.xml"
     if not path.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".add.xml")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=folder, suffix=".add.xml")
+        except OSError as exc:
+            raise SumoError(f"cannot write SUMO's vehicle types under {folder}: {exc.strerror or exc}") from None
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(text)
-            cmd = [sumo_binary("sumo"), "--net-file", str(road.net_file), "--additional-files", tmp, "--end", "0",
-                   "--no-step-log", "true", "--duration-log.disable", "true"]
-            done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-            if done.returncode != 0:
-                message = next((ln.removeprefix("Error: ") for ln in done.stderr.splitlines() if ln.startswith("Error:")),
-                               done.stderr.strip() or f"exit {done.returncode}")
-                raise ConfigError("controller", config.system_label, f"parameters SUMO accepts (SUMO: {message})")
-            os.replace(tmp, path)  # only a checked file gets its final name
+            _check_types(config, road, sumo, tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise SumoError(f"cannot write SUMO's vehicle types under {folder}: {exc.strerror or exc}") from None
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
     _CHECKED[text] = path
     return path
+
+
+def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) -> None:
+    cmd = [sumo, "--net-file", str(road.net_file), "--additional-files", types_file, "--step-length",
+           repr(config.step_s), "--end", "0", "--no-step-log", "true", "--duration-log.disable", "true"]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        raise SumoError("SUMO did not load the followers' vehicle types within 120 s") from None
+    if done.returncode == 0:
+        return
+    errors = [ln.removeprefix("Error: ") for ln in done.stderr.splitlines() if ln.startswith("Error:")]
+    message = errors[0] if errors else done.stderr.strip() or f"exit {done.returncode}"
+    # Name the attribute SUMO refused, in the table of the first follower that sets it.
+    named = re.search(r"Attribute '?(\w+)'?", message)
+    field = "controller"
+    if named:
+        for c in config.controllers:
+            if named.group(1) in dict(c.params):
+                field, given = f"{c.where}.{named.group(1)}", dict(c.params)[named.group(1)]
+                raise ConfigError(field, given, f"a value SUMO's {c.sumo_model} model accepts (SUMO: {message})")
+    raise ConfigError(field, config.system_label, f"parameters SUMO accepts (SUMO: {message})")
 
 
 def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo") -> list[str]:
@@ -169,7 +186,7 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
         attacker_type = ATTACKER_VTYPE_ID
         api.vehicletype.copy(VTYPE_ID, attacker_type)
         api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
-    type_ids = [attacker_type] + [types.get(c, VTYPE_ID) for c in config.controllers]
+    type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
     positions, speeds = initial_state(config)
     for vid, type_id, x, s in zip(config.vehicle_ids, type_ids, positions, speeds):
         api.vehicle.add(vid, ROUTE_ID, typeID=type_id, depart="0", departLane="0", departPos=repr(x), departSpeed=repr(s))
@@ -178,16 +195,15 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
     missing = [vid for vid in config.vehicle_ids if vid not in present]
     if missing:
         raise SumoError(f"SUMO did not insert {', '.join(missing)} on {road.name}")
-    for vid, controller in zip(config.vehicle_ids, (None, *config.controllers)):
+    for vid in config.vehicle_ids:
         api.vehicle.setLaneChangeMode(vid, 0)
-        if controller is None or not controller.sumo_model:
+    api.vehicle.setSpeedMode(config.vehicle_ids[0], SPEED_MODE_PYTHON)
+    for vid, controller in zip(config.vehicle_ids[1:], config.controllers):
+        if controller not in types:
             api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
             continue
-        params = dict(controller.params)
-        api.vehicle.setSpeedMode(vid, params["speed_mode"])
-        if controller.sumo_model == "CC":  # Plexe's CC: which of its controllers runs, and its cruise speed
-            api.vehicle.setParameter(vid, "carFollowModel.ccac", str(carfollowing.CC_CONTROLLERS[params["active_controller"]]))
-            api.vehicle.setParameter(vid, "carFollowModel.ccds", repr(config.speed_mps))
+        for key, value in types[controller][1].parameters().items():
+            api.vehicle.setParameter(vid, key, value)
 
 
 def simulate(

@@ -93,10 +93,18 @@ class Sweep:
             if len(set(map(repr, values))) != len(values):
                 raise ConfigError(f"grid.{key}", values, "a list without repeated values")
         base = {k: v for k, v in doc.items() if k not in ("name", "grid")}
-        campaigns = []
+        if "controller" in grid and "controller" in base:
+            raise ConfigError(f"{source}: [controller]", base["controller"],
+                              "no [controller] beside grid.controller: give each controller's values in the grid")
+        campaigns, points = [], {}
         for values in itertools.product(*grid.values()):
             point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
-            campaigns.append(campaign_of(with_overrides(base, point)))
+            campaign = campaign_of(with_overrides(base, point))
+            key = campaign_key(campaign.definition())
+            if key in points:  # e.g. a controller's defaults written out, or one table per follower alike
+                raise ConfigError(f"{source}: [grid]", f"{points[key]} and {point}", "grid points that are different campaigns")
+            points[key] = point
+            campaigns.append(campaign)
         return cls(name=name.strip(), campaigns=tuple(campaigns))
 
     def check(self) -> None:

@@ -29,7 +29,7 @@ SIMULATE = [
     # SUMO's car-following models: unknown models and attributes, values SUMO itself refuses, mixed platoons
     ["--controller", "sumo:FOO"], ["--controller", "sumo:"], ["--controller", "sumo:IDM", "--set", "controller.speedControlGain=1"],
     ["--controller", "sumo:ACC", "--set", "controller.tau=0"], ["--controller", "sumo:ACC", "--set", "controller.accel=9"],
-    ["--controller", "sumo:ACC", "--set", "controller.speed_mode=-1"], ["--controller", "sumo:CC", "--set", "controller.active_controller=1"],
+    ["--controller", "sumo:ACC", "--set", "controller.actionStepLength=0.07"], ["--controller", "sumo:CC", "--set", "controller.active_controller=1"],
     ["--controller", "sumo:ACC,switching"], ["--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.tau=1"],
     ["--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.v4.tau=1"], ["--controller", "sumo:ACC,,switching"],
     ["--controller", "timegap", "--set", "controller.time_gap_s=-1"],

@@ -47,6 +47,34 @@ def test_scenarios_lists_the_variants(capsys):
     assert "highway_4lane" in out and "highway_1lane" in out
 
 
+@pytest.mark.sumo
+def test_a_campaign_against_a_mixed_platoon_of_sumo_models_is_stored_exported_and_replayed(tmp_path, capsys):
+    db = tmp_path / "m.sqlite"
+    argv = ["falsify", "--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.v1.tau=0.5",
+            "--optimizer", "random", "--samples", "5", "--seed", "3", "--db", str(db), "--quiet", "--json"]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["samples"] == 5
+    csv_path = tmp_path / "m.csv"
+    assert main(["export", str(db), "--out", str(csv_path)]) == 0
+    header, first = csv_path.read_text().splitlines()[:2]
+    column = header.split(",").index("system")
+    assert first.split(",")[column] == "sumo:ACC(tau=0.5) / switching / sumo:IDM"
+    assert main(["replay", str(db), str(s["best"]["sample_id"]), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reproduced"] is True
+
+
+@pytest.mark.sumo
+def test_one_controller_flag_replaces_a_config_files_mixed_platoon(tmp_path, capsys):
+    cfg = tmp_path / "mixed.toml"
+    cfg.write_text('[[controller]]\nclass = "sumo:ACC"\n[[controller]]\nclass = "switching"\n'
+                   '[[controller]]\nclass = "sumo:IDM"\ntau = 1.5\n')
+    assert main(["simulate", "--config", str(cfg), "--duration", "5", "--json"]) == 0
+    assert [c["class"] for c in json.loads(capsys.readouterr().out)["config"]["controller"]] == ["sumo:ACC", "switching", "sumo:IDM"]
+    assert main(["simulate", "--config", str(cfg), "--controller", "timegap", "--duration", "5", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["config"]["controller"]["class"] == "timegap"
+
+
 @pytest.mark.parametrize(
     "argv, expected",
     [

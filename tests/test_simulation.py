@@ -201,10 +201,23 @@ def test_a_value_sumo_refuses_is_a_config_error_before_any_episode(road):
     config = EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 0.0),)))
     with pytest.raises(ConfigError) as err:
         simulate(config, np.full(config.steps, np.nan), road=road)
-    assert err.value.field == "controller" and "Must be greater than 0" in err.value.allowed
+    assert err.value.field == "controller.tau" and "Must be greater than 0" in err.value.allowed
 
 
 def test_sumo_models_cannot_run_without_sumo():
     config = EpisodeConfig(controller=ControllerConfig("sumo:IDM"))
     with pytest.raises(ConfigError, match="Python controllers only"):
         integrate(config, np.full(config.steps, np.nan))
+
+
+def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatch, road):
+    from d4sumo import simulation
+    from d4sumo.errors import SumoError
+
+    (tmp_path / "d4sumo").mkdir()
+    (tmp_path / "d4sumo" / "vtypes").write_text("a file where the folder should be")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(simulation, "_CHECKED", {})
+    config = EpisodeConfig(controller=ControllerConfig("sumo:IDM", (("tau", 0.77),)))
+    with pytest.raises(SumoError, match="cannot write SUMO's vehicle types"):
+        simulate(config, np.full(config.steps, np.nan), road=road)

@@ -354,3 +354,14 @@ def test_a_kill_while_the_database_is_created_never_leaves_one_the_next_run_refu
                 pass
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+def test_grid_points_that_are_one_campaign_are_refused_before_anything_runs(tmp_path):
+    # SUMO's ACC written out with d4sumo's default, and one table per follower alike: the same campaign twice
+    for axis in ('controller = ["sumo:Krauss", {class = "sumo:Krauss", sigma = 0.0}]',
+                 'controller = ["sumo:ACC", ["sumo:ACC", "sumo:ACC", "sumo:ACC"]]'):
+        with pytest.raises(ConfigError, match="grid points that are different campaigns"):
+            Sweep.load(write(tmp_path, TINY.replace("[grid]\n", f"[grid]\n{axis}\n")))
+    # a fixed [controller] beside a controller axis would be dropped: refused
+    with pytest.raises(ConfigError, match="no \\[controller\\] beside grid.controller"):
+        Sweep.load(write(tmp_path, TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC"]\n') + "[controller]\ntau = 0.5\n"))

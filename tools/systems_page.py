@@ -5,8 +5,8 @@ Usage:
     python tools/systems_page.py --db systems.db  # or read a database of that sweep
 
 Every number on the page comes from the sweep's database and from episodes this script plays itself:
-the no-attack baseline of each system (does it crash with the attacker only cruising?) and a check
-of whether the followers' speed mode changes anything. The worst counterexample of each system is
+the no-attack baseline of each system (does it crash with the attacker only cruising?). The worst
+counterexample of each system is
 replayed through SUMO into a time-space diagram under docs/systems/.
 """
 
@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from d4sumo import __version__
-from d4sumo.analysis import Record, count_noun, group, load_records, most_severe, table_systems
-from d4sumo.config import ControllerConfig, EpisodeConfig
+from d4sumo.analysis import count_noun, group, load_records, most_severe, table_systems
 from d4sumo.report import describe, plot_sample
 from d4sumo.simulation import simulate
 from d4sumo.sweep import Sweep, run_sweep
@@ -61,41 +60,24 @@ def baseline(sweep: Sweep) -> dict[str, list[str]]:
     return out
 
 
-def speed_mode_matters(record: Record, db: Path) -> bool:
-    """Whether SUMO-driven followers move differently under speed mode 0 (no checks) than 31 (SUMO's default)."""
-    from d4sumo.attacks import attack_signal
-    from d4sumo.campaign import Campaign
-    from d4sumo.store import Store
-
-    with Store(db, create=False) as store:
-        definition = next(c.definition for c in store.campaigns() if c.id == record.campaign_id)
-    campaign = Campaign.from_definition(definition)
-    positions = []
-    for mode in (0, 31):
-        controller = campaign.config.controller
-        controller = ControllerConfig(controller.cls, tuple({**dict(controller.params), "speed_mode": mode}.items()))
-        config = EpisodeConfig.from_dict({**campaign.config.to_dict(), "controller": controller.to_dict()})
-        signal = attack_signal(campaign.family(), record.params, steps=config.steps, step_s=config.step_s,
-                               start_step=config.attack_start_step)
-        trace = simulate(config, signal).trace
-        positions.append(np.column_stack([trace[f"pos_v{i}"] for i in range(config.followers + 1)]))
-    return positions[0].shape != positions[1].shape or not np.array_equal(positions[0], positions[1])
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--db", type=Path, help="a database of examples/sweeps/systems.toml (else the sweep runs)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     sweep = Sweep.load(SWEEP)
-    wall = None
-    if args.db is None:
-        folder = Path(tempfile.mkdtemp(prefix="d4sumo-systems-"))
-        args.db = folder / "systems.db"
+    if args.db is not None:
+        write_page(sweep, args.db, None, args.workers)
+        return
+    with tempfile.TemporaryDirectory(prefix="d4sumo-systems-") as folder:
+        db = Path(folder) / "systems.db"
         started = time.perf_counter()
-        run_sweep(sweep, args.db, workers=args.workers)
-        wall = time.perf_counter() - started
-    records = load_records([args.db])
+        run_sweep(sweep, db, workers=args.workers)
+        write_page(sweep, db, time.perf_counter() - started, args.workers)
+
+
+def write_page(sweep: Sweep, db: Path, wall: float | None, workers: int) -> None:
+    records = load_records([db])
     out = DOCS / "systems"
     out.mkdir(parents=True, exist_ok=True)
     for old in out.glob("*.png"):
@@ -118,7 +100,7 @@ def main() -> None:
         f"{', '.join(sorted({f'{r.speed_mps:g} m/s' for r in records}))}, start modes "
         f"{', '.join(sorted({s for _, s in conditions}))}, optimisers {', '.join(optimizers)}, knot attacks, "
         f"100 samples per campaign, seed 0: {len(records):,} samples"
-        + (f", {wall / 60:.1f} min on {args.workers} worker processes." if wall else "."),
+        + (f", {wall / 60:.1f} min on {workers} worker processes." if wall else "."),
         "",
         "Repeat it:",
         "",
@@ -130,9 +112,12 @@ def main() -> None:
         "",
         "A success is a collision between two followers with the attacker untouched. `sumo:MODEL` is SUMO's own "
         "car-following model driving every follower (the attacker is the same car, commanded by d4sumo), with "
-        "SUMO's defaults except where the name shows a parameter; the last system mixes SUMO's ACC (v1), the "
-        "paper's controller (v2) and SUMO's IDM (v3). The time-gap controller keeps s0 + 1 s x speed with s0 the "
-        "setpoint. `warmup` drives 15 s from rest before the attack, so every system starts from its own steady state.",
+        "SUMO's defaults except where the name shows a parameter (and a driver's random dawdling `sigma` at 0: "
+        "the followers are deterministic); the last system mixes SUMO's ACC (v1), the paper's controller (v2) and "
+        "SUMO's IDM (v3). The time-gap controller keeps s0 + 1 s x speed with s0 the setpoint. For SUMO's models the "
+        "setpoint is only the starting gap: they keep the gap their own parameters ask for (their `minGap` at "
+        "standstill, 2.5 m by default). `warmup` drives 15 s from rest before the attack, so every system starts "
+        "from its own steady state.",
         "",
         "## Results",
         "",
@@ -162,16 +147,6 @@ def main() -> None:
         lines.append(f"- `{s}`: {len(wins)} of {len(rs)} samples are successes "
                      f"({100 * len(wins) / len(rs):.0f}%), at setpoints {', '.join(sorted({f'{r.setpoint_m:g} m' for r in wins}))}; "
                      f"{sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes.{note}")
-    sumo_records = [r for r in records if r.system.startswith("sumo:") and "/" not in r.system]
-    worst_sumo = most_severe(sumo_records, 1) or sumo_records[:1]
-    if worst_sumo:
-        matters = speed_mode_matters(worst_sumo[0], args.db)
-        lines.append(f"- The followers' speed mode (`controller.speed_mode`, SUMO's default 31) "
-                     f"{'changes' if matters else 'does not change'} the motion of SUMO-driven followers: replaying "
-                     f"sample {worst_sumo[0].sample_id} (`{worst_sumo[0].system}`) with speed mode 0 and 31 gave "
-                     f"{'different' if matters else 'identical'} positions. SUMO consults it for speeds set through "
-                     "TraCI, and d4sumo sets none for these followers.")
-
     lines += ["", "## The worst counterexample of each system", "",
               "The success with the largest speed difference at the collision, replayed through SUMO: each car's "
               "position over time, coloured by speed, the collision marked.", ""]
