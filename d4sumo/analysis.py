@@ -197,6 +197,25 @@ def table_systems(records: Sequence[Record]) -> Table:
                   "worst speed difference km/h", "time from attack start to collision s, mean (std)"), tuple(rows))
 
 
+#: Two successes closer than this in every parameter (as a fraction of its range) are one attack.
+DISTINCT_RADIUS = 0.05
+
+
+def distinct_count(params: Sequence[Sequence[float]], lower: Sequence[float], upper: Sequence[float],
+                   radius: float = DISTINCT_RADIUS) -> int:
+    """How many of the given attacks are distinct: in order, an attack counts unless an attack already
+    counted lies within ``radius`` of its parameter range in every parameter (an optimiser that
+    resamples its best attack with tiny changes finds one attack, not many)."""
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    span = np.where(upper > lower, upper - lower, 1.0)
+    kept: list[np.ndarray] = []
+    for p in params:
+        z = (np.asarray(p, float) - lower) / span
+        if all(np.max(np.abs(z - k)) > radius for k in kept):
+            kept.append(z)
+    return len(kept)
+
+
 def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = None,
                  speeds: Sequence[float] | None = None) -> tuple[list[float], list[float], np.ndarray]:
     """Successes over setpoint (rows) x speed (columns); the axes default to the values in ``records``."""

@@ -5,8 +5,11 @@
 
 - ``random``: uniform samples in the box.
 - ``halton``: a scrambled Halton sequence (low discrepancy), scaled to the box.
-- ``ce``: cross-entropy: sample a batch from independent truncated normals, keep the elite quantile,
-  refit mean and standard deviation with smoothing.
+- ``ce``: cross-entropy: sample a batch from independent truncated normals, keep the elite quantile
+  (ties included), refit mean and standard deviation with smoothing; a batch that is all one plateau
+  leaves the distribution as it was.
+- ``ce-bucket``: VerifAI's cross-entropy over buckets, the sampler the paper ran, for comparison.
+- ``cmaes``: CMA-ES (pycma) with restarts and a growing population (IPOP).
 - ``bo``: Bayesian optimisation: scikit-optimize's Gaussian process (Matern 5/2 with a length scale
   per dimension, learned noise) and expected improvement, maximised over random candidates and
   perturbations of the incumbent. Kernel hyperparameters are re-learned every ``refit_every`` samples
@@ -29,7 +32,7 @@ from scipy.stats import qmc, truncnorm
 
 from .errors import ConfigError, check_int, check_number
 
-OPTIMIZERS = ("bo", "ce", "random", "halton")
+OPTIMIZERS = ("bo", "ce", "ce-bucket", "cmaes", "random", "halton")
 
 
 class Optimizer:
@@ -138,12 +141,102 @@ class CrossEntropy(Optimizer):
     def _refit(self) -> None:
         scores = np.array([s for _, s in self._batch])
         points = np.array([x for x, _ in self._batch])
-        elite = points[np.argsort(-scores, kind="stable")[: self.elite_count]]
+        self._batch = []
+        self._pending = []
+        # The elite is every sample scoring at least the elite quantile: ties at the threshold all
+        # count (which ones the batch happened to list first says nothing). On a plateau, where the
+        # elite would be the whole batch, the batch carries no information: the distribution stays.
+        threshold = np.sort(scores)[::-1][self.elite_count - 1]
+        elite = points[scores >= threshold]
+        if len(elite) == len(points):
+            return
         a = self.smoothing
         self.mean = a * elite.mean(axis=0) + (1 - a) * self.mean
         self.std = np.maximum(a * elite.std(axis=0) + (1 - a) * self.std, self.min_std)
-        self._batch = []
-        self._pending = []
+
+
+class BucketCrossEntropy(Optimizer):
+    """VerifAI's cross-entropy sampler, the one the paper ran (VerifAI's ContinuousCrossEntropySampler).
+
+    Each dimension of the box is cut into ``buckets`` equal buckets with a categorical distribution
+    over them; a sample draws a bucket per dimension, then a point uniformly inside it. When a sample
+    scores above ``threshold`` (0: a counterexample, in the paper's sign) its buckets gain weight:
+    dist = alpha * dist + (1 - alpha) * one-hot. Nothing changes otherwise: this sampler learns from
+    successes only, which is why it trails ``ce`` on the same budget.
+    """
+
+    name = "ce-bucket"
+    OPTIONS = {"buckets": (10, 2, 1000), "alpha": (0.9, 0.0, 1.0), "threshold": (0.0, -1e9, 1e9)}
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.buckets = self.options["buckets"]
+        self.dist = np.full((self.dimension, self.buckets), 1.0 / self.buckets)
+        self._buckets_of: list[np.ndarray] = []
+
+    def _ask(self) -> np.ndarray:
+        chosen = np.array([self.rng.choice(self.buckets, p=p / p.sum()) for p in self.dist])
+        self._buckets_of.append(chosen)
+        return self._unit_to_box((chosen + self.rng.random(self.dimension)) / self.buckets)
+
+    def tell(self, x: np.ndarray, score: float) -> None:
+        super().tell(x, score)
+        chosen = self._buckets_of.pop(0) if self._buckets_of else np.minimum(
+            (self._box_to_unit(x) * self.buckets).astype(int), self.buckets - 1)
+        if self.y[-1] > self.options["threshold"]:
+            one_hot = np.zeros_like(self.dist)
+            one_hot[np.arange(self.dimension), chosen] = 1.0
+            self.dist = self.options["alpha"] * self.dist + (1.0 - self.options["alpha"]) * one_hot
+
+
+class CMAES(Optimizer):
+    """CMA-ES (pycma) in the unit box, restarted with a doubled population when it converges or stalls
+    (IPOP-CMA-ES, as in falsification competitions). It draws its normals from the campaign's Generator,
+    never from numpy's global state. ``popsize`` 0 is pycma's default, 4 + 3 ln(dimension)."""
+
+    name = "cmaes"
+    OPTIONS = {"popsize": (0, 0, 10_000), "sigma0": (0.3, 1e-3, 1.0), "restart_factor": (2.0, 1.0, 10.0)}
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._popsize = self.options["popsize"] or 4 + int(3 * np.log(self.dimension))
+        self._pending: list[np.ndarray] = []
+        self._population: list[np.ndarray] = []
+        self._scores: list[float] = []
+        self.restarts = 0
+        self._es = self._start(np.full(self.dimension, 0.5))
+
+    def _start(self, x0: np.ndarray):
+        import cma
+
+        options = {"bounds": [0.0, 1.0], "popsize": self._popsize, "seed": np.nan, "verbose": -9,
+                   "randn": lambda lam, n: self.rng.standard_normal((lam, n))}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return cma.CMAEvolutionStrategy(list(x0), self.options["sigma0"], options)
+
+    def _ask(self) -> np.ndarray:
+        if not self._pending:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._population = [np.clip(np.asarray(z, float), 0.0, 1.0) for z in self._es.ask()]
+            self._pending = list(self._population)
+            self._scores = []
+        return self._unit_to_box(self._pending.pop(0))
+
+    def tell(self, x: np.ndarray, score: float) -> None:
+        super().tell(x, score)
+        self._scores.append(self.y[-1])
+        if len(self._scores) < len(self._population):
+            return
+        with warnings.catch_warnings():  # flat fitness is reported as a warning; CMA widens by itself
+            warnings.simplefilter("ignore")
+            self._es.tell(self._population, [-v for v in self._scores])  # pycma minimises
+        if self._es.stop():
+            self.restarts += 1
+            self._popsize = int(round(self._popsize * self.options["restart_factor"]))
+            self._es = self._start(self.rng.random(self.dimension))
+        self._pending, self._population, self._scores = [], [], []
 
 
 class BayesianOptimization(Optimizer):
@@ -220,6 +313,8 @@ class BayesianOptimization(Optimizer):
 _FACTORIES: dict[str, Callable[..., Optimizer]] = {
     "bo": BayesianOptimization,
     "ce": CrossEntropy,
+    "ce-bucket": BucketCrossEntropy,
+    "cmaes": CMAES,
     "random": RandomSearch,
     "halton": Halton,
 }

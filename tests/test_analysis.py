@@ -253,3 +253,13 @@ def test_tables_split_by_system_when_several_were_attacked():
     assert system_label({"controller": [{"class": "sumo:ACC", "tau": 0.5}, {"class": "switching"}, "sumo:IDM"]}) \
         == "sumo:ACC(tau=0.5) / switching / sumo:IDM"
     assert system_label({"controller": {"class": "nowhere.module:Ctl", "gain": 1}}) == "nowhere.module:Ctl"
+
+
+def test_near_copies_of_one_attack_count_once():
+    from d4sumo.analysis import distinct_count
+
+    lower, upper = [-1.0, -1.0], [1.0, 1.0]
+    same = [[0.5, 0.5], [0.55, 0.45], [0.59, 0.5]]  # within 5% of the range (0.1) of the first in every parameter
+    assert distinct_count(same, lower, upper) == 1
+    assert distinct_count(same + [[0.5, 0.75]], lower, upper) == 2  # 0.25 away in one parameter: another attack
+    assert distinct_count([], lower, upper) == 0

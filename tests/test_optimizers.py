@@ -28,8 +28,8 @@ def best_of(name, seed, budget=100, f=bowl):
     return best
 
 
-@pytest.mark.parametrize("name", ["bo", "ce"])
-def test_bo_and_ce_find_the_maximum_of_a_9d_function_far_better_than_random(name):
+@pytest.mark.parametrize("name", ["bo", "ce", "cmaes"])
+def test_bo_ce_and_cmaes_find_the_maximum_of_a_9d_function_far_better_than_random(name):
     random = np.mean([best_of("random", s) for s in range(3)])
     found = np.mean([best_of(name, s) for s in range(3)])
     assert found > random + 0.5, (found, random)  # random's best is around -1.5
@@ -75,7 +75,7 @@ def test_cross_entropy_samples_stay_in_the_box_near_its_edges():
 
 
 def test_unknown_optimizer_lists_the_allowed_ones():
-    with pytest.raises(ConfigError, match="bo, ce, random, halton"):
+    with pytest.raises(ConfigError, match="bo, ce, ce-bucket, cmaes, random, halton"):
         make_optimizer("annealing", LOWER, UPPER, budget=10, rng=np.random.default_rng(0))
 
 
@@ -128,3 +128,48 @@ def test_optimizer_options_are_checked_and_defaults_filled():
         resolve_options("random", {"x": 1})
     ce = make_optimizer("ce", LOWER, UPPER, budget=40, rng=np.random.default_rng(0), options={"batch_size": 20})
     assert ce.batch_size == 20 and ce.elite_count == 4
+
+
+# --- ties, plateaus, the paper's bucket sampler, CMA-ES restarts -----------------------------------
+
+
+def test_cross_entropy_keeps_its_distribution_on_a_plateau():
+    """Regression: on a plateau of equal scores, ce refit on whichever samples came first and collapsed."""
+    ce = CrossEntropy(LOWER, UPPER, 200, np.random.default_rng(0), batch_size=10)
+    start_mean, start_std = ce.mean.copy(), ce.std.copy()
+    for _ in range(100):
+        ce.tell(ce.ask(), -3.0)  # every no-crash episode of a one-sided spec scores alike
+    assert np.array_equal(ce.mean, start_mean) and np.array_equal(ce.std, start_std)
+
+
+def test_cross_entropy_counts_every_tie_at_the_elite_threshold():
+    ce = CrossEntropy(LOWER, UPPER, 20, np.random.default_rng(0), batch_size=10, elite_fraction=0.2, smoothing=1.0)
+    xs = [ce.ask() for _ in range(10)]
+    for i, x in enumerate(xs):  # one best, then five tied for second place, then worse
+        ce.tell(x, 1.0 if i == 0 else (0.5 if i <= 5 else 0.0))
+    assert np.allclose(ce.mean, np.mean(xs[:6], axis=0))
+
+
+def test_bucket_cross_entropy_learns_from_counterexamples_only():
+    from d4sumo.optimizers import BucketCrossEntropy
+
+    opt = BucketCrossEntropy(np.zeros(2), np.ones(2), 50, np.random.default_rng(0), buckets=5, alpha=0.9)
+    x = opt.ask()
+    opt.tell(x, -0.5)  # not a counterexample: VerifAI's sampler does not move
+    assert np.allclose(opt.dist, 0.2)
+    x = opt.ask()
+    opt.tell(x, 0.3)  # a counterexample: its buckets gain 1 - alpha
+    bucket = np.minimum((x * 5).astype(int), 4)
+    assert np.allclose(opt.dist[[0, 1], bucket], 0.9 * 0.2 + 0.1) and np.allclose(opt.dist.sum(axis=1), 1.0)
+
+
+def test_cmaes_restarts_with_a_larger_population_and_never_touches_numpys_global_state():
+    state = np.random.get_state()
+    opt = make_optimizer("cmaes", LOWER, UPPER, budget=600, rng=np.random.default_rng(0))
+    first = opt._popsize
+    for _ in range(600):
+        x = opt.ask()
+        opt.tell(x, -1.0 if np.all(x < 0.9) else 0.0)  # a plateau almost everywhere: CMA stalls and restarts
+    assert opt.restarts >= 1 and opt._popsize == first * 2 ** opt.restarts
+    after = np.random.get_state()
+    assert state[0] == after[0] and np.array_equal(state[1], after[1]) and state[2:] == after[2:]

@@ -4,10 +4,13 @@
 2. BO's own time per sample (ask + tell) against the simulation time per sample, 100 samples,
    9 knots (target: <= 1), for d4sumo's BO and for scikit-optimize's Optimizer with its defaults
    (with --skopt-defaults: it takes a few minutes), with the successes each found.
-3. Successes of bo, ce and random on the default scenario (7 m, 25 m/s, rest, knots, 100 samples),
-   3 seeds each.
+3. For every optimiser: distinct successes per campaign (knot attacks, 100 samples, seeds 0..2) at four
+   conditions: the paper's default (7 m, 25 m/s, from rest), a hard one (12 m, 20 m/s, steady), and
+   two more (5 m, 30 m/s, warm-up; 10 m, 25 m/s, steady); and the optimiser's own time per sample as a
+   ratio to the episode's. Successes within 5% of each parameter's range of one already counted are one
+   attack (`analysis.distinct_count`).
 
-Usage: python tools/bench_falsify.py [--seeds 3] [--samples 100] [--skopt-defaults]
+Usage: python tools/bench_falsify.py [--seeds 3] [--samples 100] [--skopt-defaults] [--optimizers ...]
 """
 
 from __future__ import annotations
@@ -86,15 +89,48 @@ def bo_overhead(samples: int, with_defaults: bool) -> None:
               f"successes {summary.count('success')}")
 
 
-def effectiveness(seeds: int, samples: int) -> None:
-    for optimizer in ("bo", "ce", "random"):
-        counts = []
-        for seed in range(seeds):
-            s = run_campaign(Campaign(optimizer=optimizer, samples=samples, seed=seed))
-            counts.append((s.count("success"), s.count("attacker_crash"), s.count("no_crash")))
-        succ = [c[0] for c in counts]
-        print(f"[effectiveness] {optimizer:6s}: successes per seed {succ} (mean {statistics.mean(succ):.1f}); "
-              f"attacker crashes {[c[1] for c in counts]}; no crash {[c[2] for c in counts]}")
+CONDITIONS = (("7 m, 25 m/s, rest", 7.0, 25.0, "rest"), ("12 m, 20 m/s, steady (hard)", 12.0, 20.0, "steady"),
+              ("5 m, 30 m/s, warmup", 5.0, 30.0, "warmup"), ("10 m, 25 m/s, steady", 10.0, 25.0, "steady"))
+
+
+def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:
+    from d4sumo.analysis import distinct_count
+    from d4sumo.config import EpisodeConfig
+
+    table: dict[str, dict[str, float]] = {o: {} for o in optimizers}
+    own: dict[str, list[float]] = {o: [] for o in optimizers}
+    for label, setpoint, speed, start in CONDITIONS:
+        config = EpisodeConfig(setpoint_m=setpoint, speed_mps=speed, start=start)
+        for optimizer in optimizers:
+            counts, raw = [], []
+            for seed in range(seeds):
+                campaign = Campaign(config=config, optimizer=optimizer, samples=samples, seed=seed)
+                family = campaign.family()
+                t0 = time.perf_counter()
+                s = run_campaign(campaign)
+                wall = time.perf_counter() - t0
+                sim = sum(r.wall_s for r in s.samples)
+                own[optimizer].append((wall - sim) / sim)
+                wins = [r.params for r in s.samples if r.outcome == "success"]
+                counts.append(distinct_count(wins, family.lower, family.upper))
+                raw.append(len(wins))
+            table[optimizer][label] = statistics.mean(counts)
+            print(f"[effectiveness] {label:28s} {optimizer:9s}: distinct successes {counts} (raw {raw}); "
+                  f"mean {statistics.mean(counts):.1f}", flush=True)
+    print(f"\ndistinct successes per {samples} samples, mean of {seeds} seeds; optimiser's own time / episode time")
+    print("optimizer  " + "".join(f"{c[0]:>30s}" for c in CONDITIONS) + "   own/episode")
+    for o in optimizers:
+        print(f"{o:10s} " + "".join(f"{table[o][c[0]]:30.1f}" for c in CONDITIONS) + f"   {statistics.mean(own[o]):11.2f}")
+    hard = CONDITIONS[1][0]
+    if "ce" in table:
+        best = max((o for o in optimizers if o != "ce"), key=lambda o: table[o][hard], default=None)
+        if best is not None and table["ce"][hard] > 0:
+            print(f"ratio best/ce on the hard condition ({best}): {table[best][hard] / table['ce'][hard]:.2f}")
+    if "random" in table:
+        for o in optimizers:
+            if o != "random":
+                beaten = [c[0] for c in CONDITIONS if table[o][c[0]] <= table["random"][c[0]]]
+                print(f"{o} beats random everywhere: {'yes' if not beaten else 'no (not at ' + '; '.join(beaten) + ')'}")
 
 
 def main() -> None:
@@ -102,11 +138,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--samples", type=int, default=100)
     parser.add_argument("--skopt-defaults", action="store_true")
+    parser.add_argument("--optimizers", nargs="+", default=["bo", "ce", "ce-bucket", "cmaes", "random"])
     args = parser.parse_args()
     print("default scenario: highway_4lane, 3 followers, setpoint 7 m, 25 m/s, rest, knots (9), 0.05 s steps")
     rtamt_ratio()
     bo_overhead(args.samples, args.skopt_defaults)
-    effectiveness(args.seeds, args.samples)
+    effectiveness(args.seeds, args.samples, args.optimizers)
 
 
 if __name__ == "__main__":
