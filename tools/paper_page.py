@@ -1,0 +1,322 @@
+"""Regenerate docs/paper.md: the paper's Tables 1-3 beside the same tables from our runs, claim by claim.
+
+Usage:
+    python tools/paper_page.py --runs paper-runs     # run (or resume, or just read) the five sweeps below
+                                                     # into paper-runs/, then write the page (about 8 min
+                                                     # on 2 cores from scratch)
+
+The sweeps are the grids of examples/sweeps/paper_parametric.toml and paper_nonparametric.toml as they
+are, and again with the paper's own cross-entropy sampler (VerifAI's buckets: `ce-bucket`) in place of
+our `ce`, and the parametric grid once more from the paper's 15 s warm-up instead of an exact steady
+state. Every number of ours on the page is read from those databases; the paper's are typed in from
+its LaTeX source (table and row named). The verdict of each claim follows the rule printed beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import importlib.metadata
+import time
+from pathlib import Path
+
+import numpy as np
+
+from d4sumo import __version__
+from d4sumo.analysis import Record, load_records, most_severe
+from d4sumo.config import read_toml
+from d4sumo.figures import heatmap_columns, heatmap_panels, heatmaps
+from d4sumo.report import describe, plot_sample
+from d4sumo.store import Store
+from d4sumo.sweep import Sweep, run_sweep
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+SWEEPS = {  # name -> (sweep file, grid values replaced)
+    "parametric": ("paper_parametric.toml", {}),
+    "parametric-ce-bucket": ("paper_parametric.toml", {"optimizer": ["ce-bucket"]}),
+    "parametric-warmup": ("paper_parametric.toml", {"start": ["warmup"]}),
+    "nonparametric": ("paper_nonparametric.toml", {}),
+    "nonparametric-ce-bucket": ("paper_nonparametric.toml", {"optimizer": ["ce-bucket"]}),
+}
+
+# --- the paper's numbers, from its LaTeX source ---------------------------------------------------
+
+#: Table 1 (tab:res_statistics), per row: crashes, v1-v2 crashes, time till collision mean (std) s,
+#: collision location mean (std) m, speed difference mean (std) km/h
+PAPER_TABLE_1 = {
+    ("persistent", "bo"): (246, 155, (18.3, 3.6), (87.6, 55.6), (8.9, 4.0)),
+    ("persistent", "ce"): (185, 112, (17.8, 2.9), (79.0, 40.7), (8.7, 3.3)),
+    ("intermittent", "bo"): (178, 82, (17.1, 6.5), (70.6, 112.6), (6.7, 3.8)),
+    ("intermittent", "ce"): (169, 83, (28.9, 10.4), (258.8, 166.2), (5.9, 4.7)),
+}
+#: Table 2 (tab:res_attack_crash): (attacker crashes, no crash) at setpoints 2, 3, 4, 5 m
+PAPER_TABLE_2 = {
+    ("persistent", "bo"): ((100, 0), (100, 0), (100, 0), (9, 0)),
+    ("persistent", "ce"): ((100, 0), (99, 1), (96, 3), (32, 4)),
+    ("intermittent", "bo"): ((84, 9), (89, 11), (90, 8), (0, 11)),
+    ("intermittent", "ce"): ((40, 38), (33, 27), (32, 36), (0, 32)),
+}
+#: Table 3 (tab:res_statistics_2): successes in all, and at 20, 25, 30 m/s ("Stable" is steady state)
+PAPER_TABLE_3 = {
+    ("bo", "rest"): (1594, (467, 473, 654)),
+    ("ce", "rest"): (369, (122, 77, 170)),
+    ("bo", "steady"): (1840, (664, 619, 557)),
+    ("ce", "steady"): (869, (244, 281, 344)),
+}
+
+
+def sweep_of(name: str) -> Sweep:
+    file, grid = SWEEPS[name]
+    doc = read_toml(ROOT / "examples" / "sweeps" / file, "SWEEP")
+    doc = copy.deepcopy(doc)
+    doc["name"] = f"paper-{name}"
+    doc["grid"].update(grid)
+    return Sweep.from_dict(doc, source=file)
+
+
+def run_all(folder: Path, workers: int) -> dict[str, float | None]:
+    """Run or resume every sweep; the wall time of each one this call ran (None: it was complete)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    walls: dict[str, float | None] = {}
+    for name in SWEEPS:
+        db = folder / f"{name}.sqlite"
+        before = 0
+        if db.exists():
+            with Store(db, create=False) as store:
+                before = sum(store.count_samples(c.id) for c in store.campaigns())
+        started = time.perf_counter()
+        result = run_sweep(sweep_of(name), db, workers=workers)
+        ran = result.samples - before
+        walls[name] = time.perf_counter() - started if before == 0 else None  # a whole run, timed
+        print(f"{name}: {ran} samples run in {time.perf_counter() - started:.0f} s", flush=True)
+    return walls
+
+
+# --- our numbers ----------------------------------------------------------------------------------
+
+
+def wins(records: list[Record], **where) -> list[Record]:
+    return [r for r in records if r.outcome == "success" and all(getattr(r, k) == v for k, v in where.items())]
+
+
+def mean_std(values: list[float]) -> tuple[float, float] | None:
+    return (float(np.mean(values)), float(np.std(values))) if values else None
+
+
+def fmt_ms(pair) -> str:
+    return "-" if pair is None else f"{pair[0]:.1f} ({pair[1]:.1f})"
+
+
+def table_1(records: list[Record]) -> list[str]:
+    lines = ["| attack | | successes | v1-v2 crashes | time to collision s | collision location m | speed difference km/h |",
+             "|---|---|---|---|---|---|---|"]
+    for (attack, optimizer), paper in PAPER_TABLE_1.items():
+        ours = wins(records, attack=attack, optimizer=optimizer)
+        v12 = sum(r.pair == "v1-v2" for r in ours)
+        lines.append(f"| {attack} {optimizer.upper()} | paper | {paper[0]} | {paper[1]} ({100 * paper[1] / paper[0]:.0f}%) | "
+                     f"{fmt_ms(paper[2])} | {fmt_ms(paper[3])} | {fmt_ms(paper[4])} |")
+        lines.append(f"| | ours | {len(ours)} | {v12} ({100 * v12 / len(ours):.0f}%) | " if ours else "| | ours | 0 | - | ")
+        if ours:
+            lines[-1] += (f"{fmt_ms(mean_std([r.time_from_attack_start_s for r in ours]))} | "
+                          f"{fmt_ms(mean_std([r.position_m for r in ours]))} | {fmt_ms(mean_std([r.speed_diff_kmh for r in ours]))} |")
+        else:
+            lines[-1] += "- | - | - |"
+    return lines
+
+
+def table_2(records: list[Record]) -> list[str]:
+    lines = ["| attack | | 2 m | 3 m | 4 m | 5 m |", "|---|---|---|---|---|---|"]
+    for (attack, optimizer), paper in PAPER_TABLE_2.items():
+        lines.append(f"| {attack} {optimizer.upper()} | paper | " + " | ".join(f"{a} / {n}" for a, n in paper) + " |")
+        cells = []
+        for d in (2.0, 3.0, 4.0, 5.0):
+            rs = [r for r in records if r.attack == attack and r.optimizer == optimizer and r.setpoint_m == d]
+            cells.append(f"{sum(r.outcome == 'attacker_crash' for r in rs)} / {sum(r.outcome == 'no_crash' for r in rs)}")
+        lines.append("| | ours | " + " | ".join(cells) + " |")
+    return lines
+
+
+def table_3(records: list[Record], bucket: list[Record]) -> list[str]:
+    lines = ["| knots | | successes | 20 m/s | 25 m/s | 30 m/s |", "|---|---|---|---|---|---|"]
+    for (optimizer, start), (total, by_speed) in PAPER_TABLE_3.items():
+        label = f"{optimizer.upper()} {'rest' if start == 'rest' else 'steady'}"
+        lines.append(f"| {label} | paper | {total} | " + " | ".join(f"{n} ({100 * n / total:.1f}%)" for n in by_speed) + " |")
+        rows = [("ours", records, optimizer)] + ([("ours, ce-bucket", bucket, "ce-bucket")] if optimizer == "ce" else [])
+        for who, rs, opt in rows:
+            ours = wins(rs, optimizer=opt, start=start)
+            cells = [f"{n} ({100 * n / len(ours):.1f}%)" if ours else "0" for n in
+                     (sum(r.speed_mps == v for r in ours) for v in (20.0, 25.0, 30.0))]
+            lines.append(f"| | {who} | {len(ours)} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def claims(par: list[Record], par_bucket: list[Record], par_warm: list[Record], non: list[Record],
+           non_bucket: list[Record]) -> list[str]:
+    """Each of the paper's claims, the rule that decides it on our data, and the verdict."""
+    out = ["| # | the paper says | rule applied to our runs | paper | ours | verdict |", "|---|---|---|---|---|---|"]
+
+    def row(claim, rule, paper, ours, verdict):
+        out.append(f"| {len(out) - 1} | {claim} | {rule} | {paper} | {ours} | **{verdict}** |")
+
+    def share_v12(rs):
+        return sum(r.pair == "v1-v2" for r in rs) / len(rs) if rs else float("nan")
+
+    p_v12, i_v12 = share_v12(wins(par, attack="persistent")), share_v12(wins(par, attack="intermittent"))
+    row("persistent attacks tend to crash v1-v2, intermittent ones v2-v3 (Table 1)",
+        "share of v1-v2 crashes: persistent > 50%, intermittent < 50%", "62% / 47%", f"{p_v12:.0%} / {i_v12:.0%}",
+        "reproduced" if p_v12 > 0.5 and i_v12 < 0.5 else ("half reproduced" if p_v12 > 0.5 or i_v12 < 0.5 else "contradicted"))
+
+    worst = {a: max((r.speed_diff_kmh for r in wins(par, attack=a)), default=0.0) for a in ("persistent", "intermittent")}
+    row("the most dangerous crashes (largest speed difference) come from persistent attacks (Table 1, Fig. 6)",
+        "largest speed difference: persistent > intermittent", "25 km/h, persistent BO",
+        f"{worst['persistent']:.1f} / {worst['intermittent']:.1f} km/h",
+        "reproduced" if worst["persistent"] > worst["intermittent"] else "contradicted")
+
+    total_par = len(wins(par))
+    in_5_7 = sum(5.0 <= r.setpoint_m <= 7.0 for r in wins(par))
+    row("most parametric attacks happen at setpoints of 5-7 m (Fig. 5)", "share of successes at 5-7 m > 3/8 (3 of 8 setpoints)",
+        "most", f"{in_5_7} of {total_par} ({in_5_7 / max(total_par, 1):.0%})",
+        "reproduced" if total_par and in_5_7 / total_par > 3 / 8 else "contradicted")
+
+    close = [r for r in par if r.setpoint_m <= 4.0]
+    crash_share = sum(r.outcome == "attacker_crash" for r in close) / len(close)
+    paper_close = sum(a for rows in PAPER_TABLE_2.values() for a, _ in rows[:3]) / 1200
+    row("at 2-4 m the attacker crashes most of the time (Table 2)", "attacker crashes among all samples at 2-4 m > 50%",
+        f"{paper_close:.0%}", f"{crash_share:.0%}", "reproduced" if crash_share > 0.5 else "contradicted")
+    warm_close = [r for r in par_warm if r.setpoint_m <= 4.0]
+    warm_share = sum(r.outcome == "attacker_crash" for r in warm_close) / len(warm_close)
+    row("... (the same, from the paper's 15 s warm-up instead of an exact steady state)", "as above",
+        f"{paper_close:.0%}", f"{warm_share:.0%}", "reproduced" if warm_share > 0.5 else "contradicted")
+
+    far = wins(non, setpoint_m=14.0) + wins(non, setpoint_m=15.0)
+    row("from a setpoint of 14 m no attack succeeds (Sec. V)", "no success at 14-15 m (knots, every speed and start)",
+        "0", str(len(far)), "reproduced" if not far else "contradicted")
+
+    for start, paper_ratio in (("rest", 1594 / 369), ("steady", 1840 / 869)):
+        bo, ce, bucket = (len(wins(non, optimizer="bo", start=start)), len(wins(non, optimizer="ce", start=start)),
+                          len(wins(non_bucket, optimizer="ce-bucket", start=start)))
+        ratio_ce = bo / ce if ce else float("inf")
+        ratio_bucket = bo / bucket if bucket else float("inf")
+        row(f"BO finds {paper_ratio:.1f} times the successes of CE from {'rest' if start == 'rest' else 'steady state'} (Table 3)",
+            "BO / CE > 1.5 with our ce, and with the paper's bucket sampler (ce-bucket)", f"{paper_ratio:.1f}",
+            f"{ratio_ce:.2f} (ce); {ratio_bucket:.2f} (ce-bucket)",
+            "reproduced" if ratio_ce > 1.5 else ("reproduced with the paper's sampler only" if ratio_bucket > 1.5 else "contradicted"))
+
+    rest, steady = len(wins(non, optimizer="bo", start="rest")), len(wins(non, optimizer="bo", start="steady"))
+    row("the platoon is more vulnerable in steady state than from rest (Table 3, BO: 1840 vs 1594)",
+        "BO successes: steady > rest", "1840 / 1594", f"{steady} / {rest}", "reproduced" if steady > rest else "contradicted")
+
+    by_setpoint = {d: len(wins(non, setpoint_m=d)) for d in sorted({r.setpoint_m for r in non})}
+    peak = max(by_setpoint, key=by_setpoint.get)
+    row("most knot attacks succeed at setpoints of 7-9 m (Fig. 8)", "the setpoint with the most successes is in 7-9 m",
+        "7-9 m", f"{peak:g} m ({by_setpoint[peak]})", "reproduced" if 7.0 <= peak <= 9.0 else "contradicted")
+    bucket_par = len(wins(par_bucket))
+    ce_par = len(wins(par, optimizer="ce"))
+    row("(our addition) our ce against the paper's bucket sampler on the parametric grid, same budget and seed",
+        "successes of ce and ce-bucket", "-", f"{ce_par} / {bucket_par}", "measured")
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=Path, default=Path("paper-runs"), help="folder of the sweeps' databases [paper-runs]")
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    walls = run_all(args.runs, args.workers)
+    data = {name: load_records([args.runs / f"{name}.sqlite"]) for name in SWEEPS}
+    par, non = data["parametric"], data["nonparametric"]
+    out = DOCS / "paper"
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob("*.png"):
+        old.unlink()
+
+    heatmaps(heatmap_panels(non), "Knot attacks: successes over setpoint and target speed", out / "heatmaps.png",
+             columns=heatmap_columns(non))
+    heatmaps(heatmap_panels(data["nonparametric-ce-bucket"]), "Knot attacks with the paper's bucket CE",
+             out / "heatmaps_ce_bucket.png", columns=heatmap_columns(data["nonparametric-ce-bucket"]))
+    figures_md = []
+    for family, rs in (("persistent", par), ("intermittent", par), ("knots", non)):
+        chosen = most_severe([r for r in rs if r.attack == family], 1)
+        if not chosen:
+            figures_md.append(f"No successful {family} attack.")
+            continue
+        r = chosen[0]
+        ts = plot_sample(r, "time-space", out / f"time_space_{family}.png")
+        acc = plot_sample(r, "accel", out / f"accel_{family}.png")
+        figures_md += [f"### {family}", "", describe(r) + ".", "",
+                       f"![time-space diagram, {family}](paper/{ts.name}) ![accelerations, {family}](paper/{acc.name})", ""]
+
+    samples = {name: len(rs) for name, rs in data.items()}
+    ran = {k: v for k, v in walls.items() if v is not None}
+    sumo = importlib.metadata.version("eclipse-sumo")
+    seeds = sorted({r.seed for rs in data.values() for r in rs})
+    lines = [
+        "# The paper, reproduced: where and where not",
+        "",
+        f"Generated by `python tools/paper_page.py --runs paper-runs` with d4sumo {__version__} and SUMO {sumo}; seed "
+        f"{', '.join(map(str, seeds))}, 100 samples per campaign. Runs: "
+        + "; ".join(f"`{name}` {samples[name]:,} samples" + (f" in {ran[name] / 60:.1f} min" if name in ran else "")
+                    for name in SWEEPS)
+        + (f" (wall times on 2 worker processes, {sum(ran.values()) / 60:.1f} min in all)." if ran else "."),
+        "",
+        "```bash",
+        "d4sumo sweep examples/sweeps/paper_parametric.toml --db parametric.sqlite        # Tables 1 and 2",
+        "d4sumo sweep examples/sweeps/paper_nonparametric.toml --db nonparametric.sqlite  # Table 3 and the heatmaps",
+        "python tools/paper_page.py --runs paper-runs   # all five grids below, then this page",
+        "```",
+        "",
+        "The paper ran CARLA with VerifAI and Scenic; we run SUMO with our own samplers. The grids: persistent and "
+        "intermittent attacks at 2-9 m, 20 m/s, from steady state (Tables 1-2); knot attacks at 3-15 m, 20/25/30 m/s, "
+        "from rest and from steady state (Table 3). `ce` is our cross-entropy (truncated normals refit on an elite); "
+        "`ce-bucket` is the sampler the paper ran (VerifAI's cross-entropy over buckets), run on the same grids. "
+        "Our `steady` start is an exact equilibrium; the paper drove 15 s first, which the `parametric-warmup` grid "
+        "reproduces. The paper's counts are per row of its tables; its figures' numbers are not in its source, so "
+        "the heatmaps below are ours alone.",
+        "",
+        "## Claim by claim",
+        "",
+        *claims(par, data["parametric-ce-bucket"], data["parametric-warmup"], non, data["nonparametric-ce-bucket"]),
+        "",
+        "## Table 1: successful parametric attacks",
+        "",
+        "Paper: Table 1 (tab:res_statistics). Times count from the attack's start. Ours: `parametric`, "
+        f"{samples['parametric']:,} samples.",
+        "",
+        *table_1(par),
+        "",
+        "## Table 2: attacker crashes / no-crash samples at 2-5 m",
+        "",
+        "Paper: Table 2 (tab:res_attack_crash). Ours: `parametric`; then from the 15 s warm-up (`parametric-warmup`).",
+        "",
+        *table_2(par),
+        "",
+        "From the 15 s warm-up:",
+        "",
+        *table_2(data["parametric-warmup"]),
+        "",
+        "## Table 3: successful knot attacks by target speed",
+        "",
+        "Paper: Table 3 (tab:res_statistics_2; its 'Interpol.' rows, 'Stable' = steady). Ours: `nonparametric` and, for "
+        "CE, also `nonparametric-ce-bucket`. (The paper's CE-rest row prints 28.87% for 77 of 369; it is 20.9%.)",
+        "",
+        *table_3(non, data["nonparametric-ce-bucket"]),
+        "",
+        "## Successes over setpoint and target speed (the paper's Fig. 8, ours)",
+        "",
+        "![heatmaps](paper/heatmaps.png)",
+        "",
+        "![heatmaps with the bucket sampler](paper/heatmaps_ce_bucket.png)",
+        "",
+        "## One representative success per attack family (the paper's Figs. 6-7)",
+        "",
+        "The success with the largest speed difference at the collision in each family, replayed through SUMO.",
+        "",
+        *figures_md,
+    ]
+    (DOCS / "paper.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print(f"wrote {DOCS / 'paper.md'} and {len(list(out.glob('*.png')))} figures")
+
+
+if __name__ == "__main__":
+    main()
