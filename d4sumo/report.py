@@ -13,7 +13,7 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Sequence
 
-from . import __version__, figures
+from . import __version__, figures, paper
 from .analysis import (
     Record,
     Table,
@@ -169,6 +169,14 @@ def build_report(
                      columns=figures.heatmap_columns(records))
     parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
 
+    compared = paper.comparisons(records)
+    if compared:
+        parts.append("<h2>Compare with the paper</h2><p>The paper's tables (typed in from its source) with ours under "
+                     "each of its rows, for the parts of its grids these databases cover (the paper's controller only). "
+                     "<span class='far'>Highlighted</span>: ours more than twice or less than half the paper's. "
+                     "docs/paper.md discusses each difference.</p>")
+        parts += [_comparison_html(c) for c in compared]
+
     if compare_systems:
         step("worst counterexample per system")
         parts.append("<h2>Worst counterexample per system under test</h2><p>For each system, its successful attack "
@@ -227,7 +235,8 @@ def build_report(
         "<!doctype html><html><head><meta charset='utf-8'><title>d4sumo report</title><style>"
         "body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right;font-size:13px}td:first-child,th:first-child{text-align:left}"
-        ".row{display:flex;flex-wrap:wrap;gap:12px}img{max-width:100%;border:1px solid #eee}</style></head><body>"
+        ".row{display:flex;flex-wrap:wrap;gap:12px}img{max-width:100%;border:1px solid #eee}.far{background:#ffe08a}"
+        "</style></head><body>"
         f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
@@ -242,6 +251,16 @@ def clusters_caption(c) -> str:
     return (f"{count_noun(len(c.vectors), 'success', 'successes')}. k-means with the elbow rule: "
             f"{count_noun(c.k, 'cluster')} ({sizes}; median times from the attack's start). DBSCAN: "
             f"{count_noun(c.dbscan_clusters, 'cluster')}, {count_noun(c.dbscan_noise, 'noise point')}.")
+
+
+def _comparison_html(c) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in c.header)
+    body = "".join(
+        "<tr>" + f"<td>{html.escape(label)}</td><td>{html.escape(who)}</td>"
+        + "".join(f"<td class='far'>{html.escape(cell)}</td>" if far else f"<td>{html.escape(cell)}</td>"
+                  for cell, far in zip(cells, flags)) + "</tr>"
+        for label, who, cells, flags in c.rows)
+    return f"<h3>{html.escape(c.title)}</h3><table><tr>{head}</tr>{body}</table>"
 
 
 def _table_html(t: Table) -> str:
