@@ -45,6 +45,9 @@ class Campaign:
     delta_s: float = 6.0  # knot spacing (knots/spline)
     horizon_s: float = 48.0  # last knot (knots/spline)
     optimizer_options: tuple[tuple[str, Any], ...] = ()  # the [search.<optimizer>] table, resolved
+    #: score the specification from the attack's start (after a warm-up); campaigns stored before this
+    #: existed scored the whole episode, and keep doing so
+    score_from_attack_start: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -64,13 +67,19 @@ class Campaign:
         if isinstance(options, dict):
             options = tuple(options.items())
         fix("optimizer_options", tuple(resolve_options(self.optimizer, dict(options)).items()))
+        if self.config.attack_start_step == 0:  # nothing before the attack: the same window either way
+            fix("score_from_attack_start", True)
+        elif not isinstance(self.score_from_attack_start, bool):
+            raise ConfigError("spec.from_attack_start", self.score_from_attack_start, "true or false")
 
     def family(self) -> AttackFamily:
         return make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s)
 
     def specification(self) -> Specification:
-        return Specification(followers=self.config.followers, step_s=self.config.step_s, formula=self.formula,
-                             d_safe_m=self.d_safe_m, duration_s=self.config.total_s)
+        c = self.config
+        start = c.attack_start_step if self.score_from_attack_start else 0
+        return Specification(followers=c.followers, step_s=c.step_s, formula=self.formula, d_safe_m=self.d_safe_m,
+                             duration_s=c.total_s - start * c.step_s, start_step=start)
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""
@@ -83,7 +92,9 @@ class Campaign:
             "optimizer": self.optimizer,
             "optimizer_options": dict(self.optimizer_options),
             "seed": self.seed,
-            "spec": {"formula": self.formula, "d_safe_m": self.d_safe_m},
+            "spec": {"formula": self.formula, "d_safe_m": self.d_safe_m,
+                     # only where it matters, so that campaigns stored before it keep their identity
+                     **({"from_attack_start": True} if self.config.attack_start_step and self.score_from_attack_start else {})},
         }
 
     @classmethod
@@ -102,6 +113,7 @@ class Campaign:
                 delta_s=attack.get("delta_s", 6.0),
                 horizon_s=attack.get("horizon_s", 48.0),
                 optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
+                score_from_attack_start=definition["spec"].get("from_attack_start", False),
             )
         except ConfigError as exc:
             raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})", exc.field) from None

@@ -217,7 +217,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     spec = None
     if formula is not None or config.followers >= 2:
         spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
-                             duration_s=config.total_s)
+                             duration_s=config.duration_s, start_step=config.attack_start_step)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
     road = build_road(config.network)

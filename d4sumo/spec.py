@@ -58,15 +58,19 @@ def trace_signals(followers: int) -> tuple[str, ...]:
 class Specification:
     """An STL formula over the trace's signals, scored by rtamt (discrete time, sampled at the step).
 
-    The formula is parsed once; ``robustness(trace)`` evaluates it at t = 0. Without a formula it is
-    the paper's psi with ``d_safe_m``. Time bounds in a formula are in seconds.
+    The formula is parsed once; ``robustness(trace)`` evaluates it at t = 0 of the window that starts at
+    ``start_step`` (the attack's start after a warm-up: the warm-up drive is not the attack's doing, and
+    its first instant, every gap at the setpoint, would otherwise bound the paper's psi for every attack).
+    Without a formula it is the paper's psi with ``d_safe_m``. Time bounds in a formula are in seconds,
+    ``duration_s`` the window's length.
     """
 
     def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0,
-                 duration_s: float | None = None):
+                 duration_s: float | None = None, start_step: int = 0):
         import rtamt
 
         self.followers = followers
+        self.start_step = start_step
         self.d_safe_m = d_safe_m
         self.formula = formula if formula is not None else paper_formula(followers, d_safe_m)
         if not isinstance(self.formula, str) or not self.formula.strip():
@@ -93,7 +97,7 @@ class Specification:
         _speed_up_predicates(spec.offline_interpreter)
         self._spec = spec
         if duration_s is not None:  # a formula that passes the checks never fails at evaluation
-            samples = int(round(duration_s / step_s)) + 1
+            samples = start_step + int(round(duration_s / step_s)) + 1
             trial = Trace(np.arange(samples) * step_s, {n: np.zeros(samples) for n in declared}, followers)
             try:
                 value = self.robustness(trial)
@@ -103,6 +107,9 @@ class Specification:
                 raise ConfigError("spec.formula", self.formula, "an STL formula with a defined robustness (it gave NaN)")
 
     def robustness(self, trace: Trace) -> float:
+        """The robustness at ``start_step`` (the attack's start; 0 unless scored after a warm-up), the
+        window's own t = 0. An episode that ended before it is scored at its end, the collision."""
+        trace = trace.window(self.start_step)
         data = {"time": trace.times_s.tolist()}
         for name in self.variables:
             values = trace.signals.get(name)

@@ -35,6 +35,15 @@ class Trace:
     def names(self) -> tuple[str, ...]:
         return tuple(self.signals)
 
+    def window(self, start: int) -> "Trace":
+        """The trace from sample ``start`` on, its clock restarted at 0; at least its last two samples
+        (a trace that ended before ``start`` is seen at its end: rtamt needs two samples)."""
+        start = min(start, len(self) - 2)
+        if start <= 0:
+            return self
+        return Trace(self.times_s[start:] - self.times_s[start], {k: v[start:] for k, v in self.signals.items()},
+                     self.followers)
+
     def gaps(self) -> np.ndarray:
         """Bumper gaps, shape (samples, N): column i is gap_i."""
         return np.column_stack([self.signals[f"gap_{i}"] for i in range(self.followers)])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -156,3 +158,24 @@ def test_numpy_scalars_are_accepted_and_7_and_7_0_are_the_same_campaign():
     b = Campaign(config=EpisodeConfig(setpoint_m=7.0, followers=3, speed_mps=25.0), samples=5, seed=1, delta_s=6.0)
     assert campaign_key(a.definition()) == campaign_key(b.definition())
     assert type(a.config.setpoint_m) is float and type(a.seed) is int
+
+
+@pytest.mark.sumo
+def test_after_a_warm_up_the_specification_is_scored_from_the_attacks_start():
+    """Regression: scored over the whole episode, the paper's psi was bounded by the warm-up's first
+    instant (every gap at the setpoint), so every attack of a warm-up campaign scored -d alike."""
+    from d4sumo.config import EpisodeConfig
+
+    campaign = Campaign(config=EpisodeConfig(start="warmup", setpoint_m=3.0, speed_mps=20.0), attack="persistent",
+                        optimizer="random", samples=8, seed=0)
+    assert campaign.definition()["spec"]["from_attack_start"] is True
+    scores = {r.robustness for r in run_campaign(campaign).samples}
+    assert len(scores) > 1 and -3.0 not in scores
+    # a campaign stored before (no key) keeps scoring the whole episode: its samples replay as stored
+    old = copy.deepcopy(campaign.definition())
+    del old["spec"]["from_attack_start"]
+    before = Campaign.from_definition(old, samples=8)
+    assert before.score_from_attack_start is False and before.specification().start_step == 0
+    assert {r.robustness for r in run_campaign(before).samples} == {-3.0}
+    # without a warm-up nothing changes, not even the stored definition
+    assert "from_attack_start" not in Campaign().definition()["spec"]

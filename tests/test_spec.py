@@ -113,3 +113,20 @@ def test_rtamt_agrees_with_numpy_on_sumo_traces(road):
     for knots in (SUCCESS_KNOTS, ATTACKER_CRASH_KNOTS, [0.0] * 9):
         trace = simulate(config, knots_signal(knots, config), road=road).trace
         assert spec.robustness(trace) == pytest.approx(psi_robustness(trace), abs=1e-9)
+
+
+def test_a_window_restarts_the_clock_and_an_episode_that_ended_before_it_is_scored_at_its_collision():
+    from d4sumo.spec import Specification
+    from d4sumo.trace import Trace
+
+    times = np.arange(6) * 0.05
+    gaps = {"gap_0": np.full(6, 5.0), "gap_1": np.array([7.0, 6.0, 5.0, 4.0, 3.0, 2.0]), "gap_2": np.full(6, 7.0)}
+    trace = Trace(times, gaps, followers=3)
+    w = trace.window(2)
+    assert np.allclose(w.times_s, [0.0, 0.05, 0.1, 0.15]) and np.array_equal(w["gap_1"], [5.0, 4.0, 3.0, 2.0])
+    assert trace.window(0) is trace
+    spec = Specification(followers=3, step_s=0.05, start_step=2)
+    assert spec.robustness(trace) == pytest.approx(-2.0)  # the closest gap in the window, not the 7 m before it
+    crashed = Trace(times[:2], {"gap_0": np.array([5.0, 5.0]), "gap_1": np.array([1.0, -0.2]), "gap_2": np.array([7.0, 7.0])}, 3)
+    assert crashed.window(2) is crashed  # at least two samples (rtamt needs them)
+    assert spec.robustness(crashed) == pytest.approx(0.2)  # it ended (v1-v2 collided) before the window: scored there

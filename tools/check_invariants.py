@@ -96,7 +96,7 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
     episode = simulate(config, evaluator.signal(row.params), road=evaluator.road)
-    if config.followers >= 2 and abs(psi_robustness(episode.trace) - row.robustness) > 1e-9:
+    if config.followers >= 2 and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step)) - row.robustness) > 1e-9:
         broken.append("rtamt/numpy psi")
     positions = read_fcd_positions(fcd, config.vehicle_ids)
     trace_positions = np.column_stack([episode.trace[f"pos_v{i}"] for i in range(config.followers + 1)])
