@@ -90,7 +90,8 @@ def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict
             if isinstance(part, int):  # a follower's table in a mixed platoon
                 table = table[part]
                 continue
-            if not isinstance(table.get(part, {}), (dict, list)) or (isinstance(table.get(part), list) and part != "controller"):
+            child = table.get(part, {})
+            if not (isinstance(child, dict) or (part == "controller" and isinstance(child, list))):
                 raise ConfigError(dotted, _short(value), f"a key inside a table ({part} is not one)")
             table = table.setdefault(part, {})
         table[parts[-1]] = value

@@ -175,7 +175,8 @@ class Platoon:
         for i, follower in enumerate(self.followers, start=1):
             if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
                 ahead = np.append(accel[1:, i], accel[-1, i])
-                cmds[:, i] = [acceleration_to_command(a, vehicle) for a in ahead]
+                u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
+                cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
         signals: dict[str, np.ndarray] = {}
         for i in range(n):
             signals[f"pos_v{i}"] = positions[:, i]

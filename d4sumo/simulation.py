@@ -50,10 +50,11 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
         )
 
 
-def check_episode(config: EpisodeConfig, road: Road) -> None:
-    """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters."""
+def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
+    """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters.
+    Returns the followers' checked vehicle-type file (None when no follower is SUMO-driven)."""
     check_road(config, road)
-    followers_file(config, road)
+    return followers_file(config, road)
 
 
 # --- followers driven by SUMO's car-following models ---------------------------------------------
@@ -64,6 +65,8 @@ _CHECKED: dict[str, Path] = {}  # vehicle-type XML -> its checked file, in this 
 def follower_types(config: EpisodeConfig) -> dict[ControllerConfig, tuple[str, SumoFollower]]:
     """The SUMO-driven followers' distinct controllers -> their vehicle-type id and one such follower."""
     types: dict = {}
+    if not config.sumo_driven:  # the common case: nothing to build
+        return types
     for follower in followers_of(config):
         if follower.sumo_driven and follower.config not in types:
             types[follower.config] = (f"d4{follower.model}{len(types)}", follower)
@@ -141,8 +144,10 @@ def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) 
     raise ConfigError(field, config.system_label, f"parameters SUMO accepts (SUMO: {message})")
 
 
-def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo") -> list[str]:
-    """The SUMO command line, as one explicit list."""
+def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo", *,
+                 types_file: Path | None = None) -> list[str]:
+    """The SUMO command line, as one explicit list; ``types_file``: the followers' vehicle types, as
+    `check_episode` returns them."""
     cmd = [
         binary,
         "--net-file", str(road.net_file),
@@ -158,9 +163,8 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         "--no-warnings", "true",
         "--duration-log.disable", "true",
     ]
-    types = followers_file(config, road)
-    if types is not None:
-        cmd += ["--additional-files", str(types)]
+    if types_file is not None:
+        cmd += ["--additional-files", str(types_file)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
@@ -217,16 +221,16 @@ def simulate(
     """Play one episode in SUMO. ``attack_u`` holds the attacker's command at each step's start
     (``config.steps`` values in [-1, 1], NaN where the attacker cruises)."""
     road = road or build_road(config.network)
-    check_episode(config, road)
+    types_file = check_episode(config, road)
     platoon = Platoon(config, attack_u, attacker_max_speed_mps=road.speed_limit_mps)
     if gui:
         import traci as api  # libsumo has no window; traci drives sumo-gui with the same API
 
-        cmd = sumo_command(config, road, fcd_path, binary=sumo_binary("sumo-gui"))
+        cmd = sumo_command(config, road, fcd_path, binary=sumo_binary("sumo-gui"), types_file=types_file)
     else:
         import libsumo as api
 
-        cmd = sumo_command(config, road, fcd_path)
+        cmd = sumo_command(config, road, fcd_path, types_file=types_file)
     try:
         api.start(cmd)
     except Exception as exc:  # libsumo/traci raise their own types, or FatalTraCIError

@@ -20,12 +20,12 @@ import numpy as np
 
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.scenarios import build_road
-from d4sumo.simulation import load_platoon, simulate, sumo_command
+from d4sumo.simulation import check_episode, load_platoon, simulate, sumo_command
 
 
 def bare(config: EpisodeConfig, road) -> float:
     t0 = time.perf_counter()
-    libsumo.start(sumo_command(config, road))
+    libsumo.start(sumo_command(config, road, types_file=check_episode(config, road)))
     load_platoon(libsumo, config, road)
     for _ in range(config.steps):
         libsumo.simulationStep()

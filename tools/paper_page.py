@@ -79,20 +79,6 @@ def wins(records: list[Record], **where) -> list[Record]:
     return [r for r in records if r.outcome == "success" and all(getattr(r, k) == v for k, v in where.items())]
 
 
-def table_3(records: list[Record], bucket: list[Record]) -> list[str]:
-    lines = ["| knots | | successes | 20 m/s | 25 m/s | 30 m/s |", "|---|---|---|---|---|---|"]
-    for (optimizer, start), (total, by_speed) in paper.TABLE_3.items():
-        label = f"{optimizer.upper()} {'rest' if start == 'rest' else 'steady'}"
-        lines.append(f"| {label} | paper | {total} | " + " | ".join(f"{n} ({100 * n / total:.1f}%)" for n in by_speed) + " |")
-        rows = [("ours", records, optimizer)] + ([("ours, ce-bucket", bucket, "ce-bucket")] if optimizer == "ce" else [])
-        for who, rs, opt in rows:
-            ours = wins(rs, optimizer=opt, start=start)
-            cells = [f"{n} ({100 * n / len(ours):.1f}%)" if ours else "0" for n in
-                     (sum(r.speed_mps == v for r in ours) for v in (20.0, 25.0, 30.0))]
-            lines.append(f"| | {who} | {len(ours)} | " + " | ".join(cells) + " |")
-    return lines
-
-
 def plateaus(records: list[Record]) -> tuple[int, int]:
     """How many campaigns scored every sample alike (the optimiser had nothing to follow), of how many."""
     by_campaign: dict[int, set] = {}
@@ -270,7 +256,11 @@ def main() -> None:
         "Paper: Table 3 (tab:res_statistics_2; its 'Interpol.' rows, 'Stable' = steady). Ours: `nonparametric` and, for "
         "CE, also `nonparametric-ce-bucket`. (The paper's CE-rest row prints 28.87% for 77 of 369; it is 20.9%.)",
         "",
-        *table_3(non, data["nonparametric-ce-bucket"]),
+        *paper.to_markdown(paper.table_3(non)),
+        "",
+        "With the paper's sampler (`nonparametric-ce-bucket`) in the CE rows:",
+        "",
+        *paper.to_markdown(paper.table_3([dataclasses.replace(r, optimizer="ce") for r in data["nonparametric-ce-bucket"]])),
         "",
         "## Successes over setpoint and target speed (the paper's Fig. 8, ours)",
         "",
