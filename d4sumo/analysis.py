@@ -42,6 +42,7 @@ class Record:
     speed_diff_kmh: float | None
     attack_start_s: float = 0.0  # simulation time at which the attack starts (after a warm-up, else 0)
     system: str = "switching"  # the system under test: its controller(s), see EpisodeConfig.system_label
+    maneuver: str = "inlane"  # the attacker's maneuver: inlane (the paper's), cutin or cutout
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -52,7 +53,7 @@ class Record:
     def configuration(self) -> tuple:
         """What makes two campaigns different experiments (the seed does not)."""
         return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,
-                self.system, self.attack, self.optimizer)
+                self.system, self.maneuver, self.attack, self.optimizer)
 
 
 def attack_start_s(scenario: dict) -> float:
@@ -83,7 +84,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     str(path), s.id, s.campaign_id, sc["network"], sc["followers"], float(sc["setpoint_m"]),
                     float(sc["speed_mps"]), sc["start"], d["attack"]["family"], d["optimizer"], d["seed"],
                     d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
-                    s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id],
+                    s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id], sc.get("maneuver", "inlane"),
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
@@ -98,8 +99,8 @@ def group(records: Iterable[Record], *fields: str) -> dict[tuple, list[Record]]:
 
 
 def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict[tuple, list[Record]]]:
-    """Group by ``fields``, led by the system under test when the records hold more than one."""
-    lead = ("system",) if len({r.system for r in records}) > 1 else ()
+    """Group by ``fields``, led by the maneuver and the system under test when the records hold more than one."""
+    lead = tuple(f for f in ("maneuver", "system") if len({getattr(r, f) for r in records}) > 1)
     return lead + fields, group(records, *lead, *fields)
 
 

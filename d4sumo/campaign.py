@@ -19,9 +19,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .attacks import AttackFamily, attack_signal, make_attack
+from .attacks import AttackFamily, make_attack
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError, check_int, check_number
+from .maneuvers import AttackPlan, attack_plan, maneuver_of
 from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
 from .scenarios import Road, build_road
 from .simulation import check_episode, simulate
@@ -73,13 +74,14 @@ class Campaign:
             raise ConfigError("spec.from_attack_start", self.score_from_attack_start, "true or false")
 
     def family(self) -> AttackFamily:
-        return make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s)
+        """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes."""
+        return maneuver_of(self.config).family(make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s))
 
     def specification(self) -> Specification:
         c = self.config
         start = c.attack_start_step if self.score_from_attack_start else 0
         return Specification(followers=c.followers, step_s=c.step_s, formula=self.formula, d_safe_m=self.d_safe_m,
-                             duration_s=c.total_s - start * c.step_s, start_step=start)
+                             duration_s=c.total_s - start * c.step_s, start_step=start, maneuver=c.maneuver)
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""
@@ -163,15 +165,15 @@ class Evaluator:
         self.road = road or build_road(campaign.config.network)
         check_episode(campaign.config, self.road)
 
-    def signal(self, params) -> np.ndarray:
-        c = self.campaign.config
-        return attack_signal(self.family, params, steps=c.steps, step_s=c.step_s, start_step=c.attack_start_step)
+    def plan(self, params) -> AttackPlan:
+        """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
+        return attack_plan(self.family, params, self.campaign.config)
 
     def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
         t0 = time.perf_counter()
         x = tuple(float(v) for v in params)
         try:
-            episode = simulate(self.campaign.config, self.signal(x), road=self.road, fcd_path=fcd_path)
+            episode = simulate(self.campaign.config, self.plan(x), road=self.road, fcd_path=fcd_path)
             rho = self.spec.robustness(episode.trace)
             if not math.isfinite(rho):
                 raise ValueError(f"robustness is {rho}")

@@ -18,11 +18,10 @@ import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
-import numpy as np
 
 from . import __version__
-from .attacks import FAMILIES, attack_signal
-from .config import START_MODES, EpisodeConfig
+from .attacks import FAMILIES
+from .config import MANEUVERS, START_MODES, EpisodeConfig
 from .errors import ConfigError, D4sumoError, check_number
 from .optimizers import OPTIMIZERS
 
@@ -35,6 +34,7 @@ FLAG_KEYS = {
     "setpoint": "scenario.setpoint_m",
     "speed": "scenario.speed_mps",
     "start": "scenario.start",
+    "maneuver": "scenario.maneuver",
     "warmup": "scenario.warmup_s",
     "step": "scenario.step_s",
     "duration": "scenario.duration_s",
@@ -64,6 +64,10 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--start", choices=START_MODES,
                    help="rest: all at 0 m/s; steady: all at the target speed; warmup: drive from rest for --warmup s, "
                         "attack after [rest]")
+    g.add_argument("--maneuver", choices=MANEUVERS,
+                   help="inlane: the attacker leads the platoon in its lane (the paper); cutin: it changes into the "
+                        "platoon's lane in front of a follower; cutout: it leads, then leaves the lane to reveal a "
+                        "slower car (multi-lane roads; the optimiser picks the lane change time t_lc_s) [inlane]")
     g.add_argument("--warmup", type=float, help="seconds driven from rest before the attack with --start warmup [15]")
     g.add_argument("--step", type=float, help="simulation step in s [0.05]")
     g.add_argument("--duration", type=float, help="seconds from the attack's start to the episode's end [60]")
@@ -145,9 +149,11 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
     return with_overrides(doc, flags), flags
 
 
-def episode_signal(family, params, config: EpisodeConfig) -> np.ndarray:
-    """The attacker's command at every step's start; NaN (cruise) before the attack or with none."""
-    return attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+def episode_plan(family, params, config: EpisodeConfig):
+    """The attacker's command at every step's start (NaN, cruise, before the attack or with none) and its lane change."""
+    from .maneuvers import attack_plan
+
+    return attack_plan(family, params, config)
 
 
 def check_output_file(option: str, path: Path | None) -> Path | None:
@@ -215,13 +221,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
     formula = spec_table.get("formula")
     spec = None
-    if formula is not None or config.followers >= 2:
+    if formula is not None or config.followers >= 2 or config.maneuver != "inlane":
         spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
-                             duration_s=config.duration_s, start_step=config.attack_start_step)  # as a campaign scores
+                             duration_s=config.duration_s, start_step=config.attack_start_step,
+                             maneuver=config.maneuver)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
     road = build_road(config.network)
-    episode = simulate(config, episode_signal(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
+    episode = simulate(config, episode_plan(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
     check_fcd_written(fcd)
     robustness = spec.robustness(episode.trace) if spec else None
     summary = episode_summary(config, family, params, episode, robustness, d_safe, fcd)
@@ -257,7 +264,8 @@ def _print_summary(s: dict, road_name: str) -> None:
     sc = s["config"]["scenario"]
     attack = s["attack"]
     what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
-    print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, start {sc['start']}; {what}")
+    maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
+    print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, start {sc['start']}{maneuver}; {what}")
     c = s["first_collision"]
     if c is None:
         print(f"outcome: {s['outcome']} in {s['simulated_s']:.2f} s")
@@ -314,7 +322,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"campaign {summary.campaign_id} ({campaign.attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
+    attack = campaign.attack if campaign.config.maneuver == "inlane" else f"{campaign.config.maneuver}, {campaign.attack}"
+    print(f"campaign {summary.campaign_id} ({attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     if top is not None:
         c = top.collision
@@ -338,7 +347,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
     evaluator = Evaluator(campaign)
-    episode = simulate(campaign.config, evaluator.signal(row.params), road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    episode = simulate(campaign.config, evaluator.plan(row.params), road=evaluator.road, fcd_path=fcd, gui=args.gui)
     check_fcd_written(fcd)
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
@@ -369,7 +378,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         for cid, c in campaigns.items():
             names[cid] = Campaign.from_definition(c.definition, where=str(args.db)).family().names
             columns += [n for n in names[cid] if n not in columns]
-        header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "system",
+        header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "maneuver", "system",
                   "attack", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
                   "error"] + columns
         out_path = check_output_file("--out", args.out)
@@ -384,7 +393,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                 sc = d["config"]["scenario"]
                 params = dict(zip(names[s.campaign_id], s.params))
                 writer.writerow([s.id, s.campaign_id, s.index, sc["network"], sc["followers"], sc["setpoint_m"], sc["speed_mps"],
-                                 sc["start"], systems[s.campaign_id], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
+                                 sc["start"], sc.get("maneuver", "inlane"), systems[s.campaign_id], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
                                  s.time_s, s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
                                 + [params.get(n, "") for n in columns])
                 rows += 1

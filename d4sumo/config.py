@@ -22,6 +22,17 @@ from .errors import ConfigError, check_int, check_number
 #: attack after (every system then starts from its own steady state).
 START_MODES = ("rest", "steady", "warmup")
 MAX_FOLLOWERS = 10
+#: inlane: the paper's attacker, leading the platoon in its lane; cutin: it changes into the platoon's lane
+#: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car (see `maneuvers`)
+MANEUVERS = ("inlane", "cutin", "cutout")
+#: the car each maneuver adds: a benign lead car ahead of the platoon, or the obstacle the attacker reveals
+OTHER_CAR = {"cutin": "lead", "cutout": "obstacle"}
+#: scenario keys each maneuver reads (the others have no effect there and are not stored with it)
+MANEUVER_KEYS = {
+    "inlane": (),
+    "cutin": ("maneuver", "cutin_follower", "cutin_offset_m", "lane_change_s", "sublane"),
+    "cutout": ("maneuver", "obstacle_distance_m", "obstacle_speed_mps", "lane_change_s", "sublane"),
+}
 
 
 @dataclass(frozen=True)
@@ -109,6 +120,13 @@ class EpisodeConfig:
     #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
     #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
     attacker_declared_decel_mps2: float | None = None
+    maneuver: str = "inlane"  # see MANEUVERS
+    cutin_follower: int = 1  # cutin: the attacker starts beside, and aims in front of, this follower (1 = v1)
+    cutin_offset_m: float = 0.0  # cutin: the attacker's rear bumper ahead of that follower's front bumper at t = 0
+    lane_change_s: float = 2.0  # cutin/cutout: how long SUMO takes to move the attacker across (0: in one step)
+    sublane: bool = False  # cutin/cutout: SUMO's sublane model moves the attacker sideways (its lateral speed)
+    obstacle_distance_m: float = 150.0  # cutout: bumper gap from the attacker to the car ahead of it at t = 0
+    obstacle_speed_mps: float = 0.0  # cutout: the constant speed of that car (0: stopped)
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -143,6 +161,21 @@ class EpisodeConfig:
         declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
                                                          "m/s^2 (positive)", low_open=True))
+        if self.maneuver not in MANEUVERS:
+            raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
+        fix("cutin_follower", check_int("scenario.cutin_follower", self.cutin_follower, 1, self.followers,
+                                        f"(a follower: 1 for v1 .. {self.followers} for v{self.followers})"))
+        fix("cutin_offset_m", check_number("scenario.cutin_offset_m", self.cutin_offset_m, -500.0, 500.0, "metres"))
+        fix("lane_change_s", check_number("scenario.lane_change_s", self.lane_change_s, 0.0, 20.0, "seconds"))
+        if not _on_grid(self.lane_change_s, self.step_s):  # SUMO rounds it to whole steps, silently
+            raise ConfigError("scenario.lane_change_s", self.lane_change_s, f"a whole number of steps of {self.step_s:g} s")
+        if not isinstance(self.sublane, bool):
+            raise ConfigError("scenario.sublane", self.sublane, "true or false")
+        if self.sublane and self.lane_change_s == 0.0:
+            raise ConfigError("scenario.lane_change_s", 0.0, "more than 0 s with scenario.sublane (it sets the lateral speed)")
+        fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 3000.0, "metres"))
+        fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,
+                                               f"m/s (at most the target speed, {self.speed_mps:g})"))
 
     @property
     def attack_start_step(self) -> int:
@@ -183,7 +216,9 @@ class EpisodeConfig:
 
     @property
     def vehicle_ids(self) -> tuple[str, ...]:
-        return tuple(f"v{i}" for i in range(self.followers + 1))
+        """The attacker v0, the followers v1..vN, then the maneuver's other car (lead or obstacle), if any."""
+        other = (OTHER_CAR[self.maneuver],) if self.maneuver in OTHER_CAR else ()
+        return tuple(f"v{i}" for i in range(self.followers + 1)) + other
 
     # --- TOML/JSON round trip -----------------------------------------------------------------
 
@@ -194,6 +229,8 @@ class EpisodeConfig:
             del scenario["warmup_s"]
         if not self.sumo_driven:  # only SUMO's models read what the attacker declares
             del scenario["attacker_declared_decel_mps2"]
+        for key in set(MANEUVER_KEYS["cutin"] + MANEUVER_KEYS["cutout"]) - set(MANEUVER_KEYS[self.maneuver]):
+            del scenario[key]
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         return {"scenario": scenario, "vehicle": dataclasses.asdict(self.vehicle), "controller": controller}

@@ -2,7 +2,9 @@
 
 A document is the tables of a config file:
 
-    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s
+    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s, maneuver
+                 (lead, cutin, cutout) and its settings (cutin_follower, cutin_offset_m, lane_change_s,
+                 sublane, obstacle_distance_m, obstacle_speed_mps)
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
     [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
@@ -27,6 +29,7 @@ from .attacks import FAMILIES, AttackFamily, make_attack
 from .campaign import Campaign
 from .config import EpisodeConfig, VehicleParams, read_toml
 from .errors import ConfigError, check_number, is_number
+from .maneuvers import maneuver_of
 from .optimizers import OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
@@ -129,6 +132,12 @@ def _family(doc: Mapping[str, Any], choices=FAMILIES) -> AttackFamily:
     return make_attack(name, delta_s=_get(doc, "attack.delta_s"), horizon_s=_get(doc, "attack.horizon_s"))
 
 
+def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
+    """The attack family of an episode: the signal family, with the lane change time when the
+    maneuver changes lanes."""
+    return maneuver_of(episode_config(doc)).family(_family(doc))
+
+
 def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
     """The one attack an episode plays: (family, parameter vector), or (None, None) for no attack."""
     attack = doc.get("attack", {})
@@ -139,7 +148,7 @@ def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray |
         if "params" in attack:
             raise ConfigError("attack.params", _short(attack["params"]), "parameters with an attack family (--attack or [attack] family)")
         return None, None
-    family = _family(doc)
+    family = _attack_box(doc)
     if "params" not in attack:
         raise ConfigError("attack.params", None, f"{family.dimension} values for {family.name}: {', '.join(family.names)}")
     params = attack["params"]

@@ -69,12 +69,12 @@ def _far(ours: float, paper: float) -> bool:
 
 def _parametric(records: Sequence[Record]) -> list[Record]:
     return [r for r in records if r.attack in ("persistent", "intermittent") and r.start == "steady"
-            and r.speed_mps == PARAMETRIC_SPEED_MPS and r.system == "switching"]
+            and r.speed_mps == PARAMETRIC_SPEED_MPS and r.system == "switching" and r.maneuver == "inlane"]
 
 
 def _knots(records: Sequence[Record]) -> list[Record]:
     return [r for r in records if r.attack == "knots" and r.start in ("rest", "steady")
-            and r.speed_mps in TABLE_3_SPEEDS and r.system == "switching"]
+            and r.speed_mps in TABLE_3_SPEEDS and r.system == "switching" and r.maneuver == "inlane"]
 
 
 def table_1(records: Sequence[Record]) -> Comparison | None:

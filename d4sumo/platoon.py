@@ -17,6 +17,7 @@ from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
 from .errors import ConfigError, D4sumoError
+from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Episode, Trace
 
 
@@ -24,37 +25,22 @@ class ControllerError(D4sumoError, ValueError):
     """A follower controller returned something that is not a command."""
 
 
-#: The rearmost car's front bumper starts this far from the road's start [m].
-REAR_START_M = 10.0
-
-
-def initial_state(config: EpisodeConfig) -> tuple[list[float], list[float]]:
-    """Front-bumper positions and speeds at t = 0, front (attacker) to back, spaced at the setpoint."""
-    n = config.followers + 1
-    spacing = config.vehicle.length_m + config.setpoint_m
-    rear = config.vehicle.length_m + REAR_START_M
-    positions = [rear + spacing * (n - 1 - i) for i in range(n)]
-    speed = config.speed_mps if config.start == "steady" else 0.0  # rest and warmup start standing
-    return positions, [speed] * n
-
-
 def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
-    """Road length an episode may use: the attacker, clamped to the limit, is always in front."""
-    return initial_state(config)[0][0] + speed_limit_mps * config.total_s
+    """Road length an episode may use: no car, clamped to the limit, passes the frontmost car's start."""
+    return max(car.position_m for car in maneuver_of(config).cars()) + speed_limit_mps * config.total_s
 
 
-def collisions_at(time_s: float, positions: list[float], speeds: list[float], length_m: float) -> tuple[Collision, ...]:
-    """Every bumper overlap (gap < 0) at the end of a step, frontmost pair first.
+def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], speeds: list[float],
+                  ids: tuple[str, ...]) -> tuple[Collision, ...]:
+    """Every bumper overlap (a pair's gap < 0) at the end of a step, frontmost pair first.
 
     This is the definition of a collision, whether SUMO reports it or not (SUMO ignores overlaps up to
-    1 mm). The gap is computed with the trace's arithmetic, so the outcome, the collision record and
-    the trace's minimum gaps always agree. The position is the follower's front bumper, where it hit.
+    1 mm). The gaps are the maneuver's pairs, from which the trace's gaps come too, so the outcome, the
+    collision record and the trace's minimum gaps always agree. The position is the follower's front
+    bumper, where it hit.
     """
-    return tuple(
-        Collision(f"v{i}", f"v{i + 1}", time_s, positions[i + 1], (speeds[i + 1] - speeds[i]) * 3.6)
-        for i in range(len(positions) - 1)
-        if positions[i] - length_m - positions[i + 1] < 0.0
-    )
+    return tuple(Collision(ids[a], ids[b], time_s, positions[b], (speeds[b] - speeds[a]) * 3.6)
+                 for a, b, gap in pairs if gap < 0.0)
 
 
 class PythonFollower:
@@ -113,14 +99,18 @@ def followers_of(config: EpisodeConfig) -> list[PythonFollower | SumoFollower]:
 
 
 class Platoon:
+    """Every car Python knows of: the attacker, the followers and the maneuver's other car (a benign
+    lead that cruises at the target speed, or an obstacle at its constant speed)."""
+
     def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float):
         attack_u = np.asarray(attack_u, dtype=float)
         if attack_u.shape != (config.steps,):
             raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
         self.config = config
+        self.maneuver = maneuver_of(config)
+        self.ids = config.vehicle_ids
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
         vehicle, dt = config.vehicle, config.step_s
-        self.length_m = vehicle.length_m
         self.followers = followers_of(config)
         # The attacker is the same kind of car: it cruises with the followers' PID gains when they
         # all run the paper's controller (or its time-gap variant), with the default gains otherwise.
@@ -129,17 +119,25 @@ class Platoon:
         cruise_params = params if isinstance(params, SwitchingParams) else SwitchingParams()
         self.attacker_cruise = CruiseControl(cruise_params, config.speed_mps, dt)
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
-        #: the cars Python commands (the attacker, then the Python-commanded followers): advance returns their speeds
-        self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven))
+        n = config.followers + 1
+        #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
+        self._others = [(i, CruiseControl(cruise_params, config.speed_mps, dt) if config.maneuver == "cutin" else None,
+                         Actuator(vehicle, dt, attacker_max_speed_mps)) for i, vid in enumerate(self.ids[n:], start=n)]
+        #: the cars Python commands (the attacker, the Python-commanded followers, the other car): advance
+        #: returns their speeds
+        self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven),
+                          *(i for i, _, _ in self._others))
         self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
+        self.pairs: list[list[Pair]] = []  # per sample, lane-changing maneuvers only: who followed whom
 
-    def advance(self, k: int, positions: list[float], speeds: list[float]) -> list[float]:
-        """Commands for step k from the sensed state; returns the speed at the step's end of each car
-        in ``commanded`` (SUMO moves its own followers)."""
+    def advance(self, k: int, positions: list[float], speeds: list[float], pairs: list[Pair]) -> list[float]:
+        """Commands for step k from the sensed state and the maneuver's ``pairs`` (who follows whom in
+        each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
+        own followers)."""
         u = self.attack_u[k]
         if u != u:  # NaN: no attack here, the attacker cruises like everyone else
             if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
@@ -150,25 +148,40 @@ class Platoon:
             self._attacking = True
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
-        length = self.length_m
+        ahead: dict[int, tuple[int, float]] = {}
+        for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
+            if b not in ahead or gap < ahead[b][1]:
+                ahead[b] = (a, gap)
         for i, follower in self._python:
-            c = follower.command(positions[i - 1] - length - positions[i], speeds[i], speeds[i - 1])
+            leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
+            c = follower.command(gap, speeds[i], speeds[leader])
             if not -1.0 <= c <= 1.0:  # NaN fails too: a user's controller must not corrupt the trace
                 raise ControllerError(f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
             commands.append(c)
             new_speeds.append(follower.actuator.apply(c, speeds[i]))
+        for i, cruise, actuator in self._others:
+            if cruise is None:  # the obstacle holds its speed
+                commands.append(0.0)
+                new_speeds.append(self.config.obstacle_speed_mps)
+                continue
+            c = acceleration_to_command(cruise.acceleration(speeds[i]), self.config.vehicle)
+            commands.append(c)
+            new_speeds.append(actuator.apply(c, speeds[i]))
         self.commands.append(commands)
         if self._with_mode:
             self.modes.append([c.mode for c in self._with_mode])
         return new_speeds
 
-    def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray) -> Trace:
-        """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands."""
+    def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray,
+              lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float]]:
+        """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands (and, for a
+        lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
+        gap of every pair of cars that followed each other."""
         n_samples = times_s.size
-        n = self.config.followers + 1
+        ids = self.ids
         accel = np.zeros_like(speeds)
         accel[1:] = np.diff(speeds, axis=0) / self.config.step_s
-        cmds = np.empty((n_samples, n))
+        cmds = np.empty((n_samples, len(ids)))
         recorded = _hold_last(np.array(self.commands, dtype=float).reshape(-1, len(self.commanded)), n_samples)
         cmds[:, list(self.commanded)] = recorded
         vehicle = self.config.vehicle
@@ -178,19 +191,63 @@ class Platoon:
                 u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
                 cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
         signals: dict[str, np.ndarray] = {}
-        for i in range(n):
-            signals[f"pos_v{i}"] = positions[:, i]
-            signals[f"speed_v{i}"] = speeds[:, i]
-            signals[f"accel_v{i}"] = accel[:, i]
-            signals[f"cmd_v{i}"] = cmds[:, i]
-        for i in range(n - 1):  # the same arithmetic as collisions_at: verdicts and trace agree exactly
-            signals[f"gap_{i}"] = positions[:, i] - self.length_m - positions[:, i + 1]
+        for i, vid in enumerate(ids):
+            signals[f"pos_{vid}"] = positions[:, i]
+            signals[f"speed_{vid}"] = speeds[:, i]
+            signals[f"accel_{vid}"] = accel[:, i]
+            signals[f"cmd_{vid}"] = cmds[:, i]
+        if self.maneuver.lateral:
+            min_gaps = self._lane_gaps(signals, lateral_m)
+        else:
+            min_gaps = self._column_gaps(signals, positions)
         if self._with_mode and self.modes:
             modes = _hold_last(np.array(self.modes, dtype=float), n_samples)
             with_mode = [i for i, f in enumerate(self.followers, start=1) if f.has_mode]
             for column, i in enumerate(with_mode):
                 signals[f"mode_v{i}"] = modes[:, column]
-        return Trace(times_s=times_s, signals=signals, followers=self.config.followers)
+        return Trace(times_s=times_s, signals=signals, followers=self.config.followers), min_gaps
+
+    def _column_gaps(self, signals: dict, positions: np.ndarray) -> dict[str, float]:
+        """The paper's column v0, v1, .., vN: gap_I between vI and vI+1, vectorised (the same arithmetic as
+        the maneuver's pairs), and the named gaps every maneuver's trace has."""
+        n = positions.shape[1]
+        for i in range(n - 1):
+            signals[f"gap_{i}"] = positions[:, i] - self.length_m - positions[:, i + 1]
+        free = np.full(positions.shape[0], FREE_ROAD_GAP_M)
+        signals["gap_v0"] = free
+        for i in range(1, n):
+            signals[f"gap_v{i}"] = signals[f"gap_{i - 1}"]
+        signals["attacker_gap"] = signals["gap_0"]
+        signals["victim_gap"] = np.min([signals[f"gap_{i}"] for i in range(1, n - 1)], axis=0) if n > 2 else free
+        return {f"v{i}-v{i + 1}": float(signals[f"gap_{i}"].min()) for i in range(n - 1)}
+
+    def _lane_gaps(self, signals: dict, lateral_m: np.ndarray) -> dict[str, float]:
+        """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
+        pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions."""
+        ids, n_samples = self.ids, len(self.pairs)
+        gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
+        victim = np.full(n_samples, FREE_ROAD_GAP_M)
+        attacker = np.full(n_samples, FREE_ROAD_GAP_M)
+        min_gaps: dict[str, float] = {}
+        for k, pairs in enumerate(self.pairs):
+            for a, b, gap in pairs:
+                gaps[k, b] = min(gaps[k, b], gap)
+                if a == 0 or b == 0:
+                    attacker[k] = min(attacker[k], gap)
+                else:
+                    victim[k] = min(victim[k], gap)
+                name = f"{ids[a]}-{ids[b]}"
+                min_gaps[name] = min(min_gaps.get(name, gap), gap)
+        for i, vid in enumerate(ids):
+            signals[f"gap_{vid}"] = gaps[:, i]
+            signals[f"y_{vid}"] = lateral_m[:, i]
+        signals["victim_gap"] = victim
+        signals["attacker_gap"] = attacker
+        return min_gaps
+
+    @property
+    def length_m(self) -> float:
+        return self.config.vehicle.length_m
 
 
 def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:
@@ -202,22 +259,28 @@ def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:
 
 def integrate(config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float = float("inf")) -> Episode:
     """Run the platoon without SUMO: ballistic positions (mean of old and new speed, as SUMO's
-    --step-method.ballistic), stopping at the first bumper overlap. For physics tests and checks."""
+    --step-method.ballistic), stopping at the first bumper overlap. For physics tests and checks of
+    the paper's maneuver (lane changes need SUMO)."""
     if config.sumo_driven:
         raise ConfigError("controller.class", config.system_label, "Python controllers only: this runs without SUMO")
+    if config.maneuver != "inlane":
+        raise ConfigError("scenario.maneuver", config.maneuver, "inlane: lane changes need SUMO")
     platoon = Platoon(config, attack_u, attacker_max_speed_mps)
     positions, speeds = initial_state(config)
-    dt, length = config.step_s, config.vehicle.length_m
+    dt, ids, pairs_at = config.step_s, config.vehicle_ids, platoon.maneuver.pairs
     rows_x, rows_v = [positions], [speeds]
     collisions: tuple[Collision, ...] = ()
+    pairs = pairs_at(positions)
     for k in range(config.steps):
-        new_speeds = platoon.advance(k, positions, speeds)
+        new_speeds = platoon.advance(k, positions, speeds, pairs)
         positions = [x + 0.5 * (v + w) * dt for x, v, w in zip(positions, speeds, new_speeds)]
         speeds = new_speeds
         rows_x.append(positions)
         rows_v.append(speeds)
-        collisions = collisions_at((k + 1) * dt, positions, speeds, length)
+        pairs = pairs_at(positions)
+        collisions = collisions_at((k + 1) * dt, pairs, positions, speeds, ids)
         if collisions:
             break
     times = np.arange(len(rows_x)) * dt
-    return Episode(platoon.trace(times, np.array(rows_x), np.array(rows_v)), tuple(collisions))
+    trace, min_gaps = platoon.trace(times, np.array(rows_x), np.array(rows_v))
+    return Episode(trace, tuple(collisions), min_gaps)

@@ -44,7 +44,7 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
         definition = store.campaign(record.campaign_id).definition
     campaign = Campaign.from_definition(definition)
     evaluator = Evaluator(campaign)
-    simulate(campaign.config, evaluator.signal(record.params), road=evaluator.road, fcd_path=fcd_path)
+    simulate(campaign.config, evaluator.plan(record.params), road=evaluator.road, fcd_path=fcd_path)
     return figures.read_fcd(fcd_path)
 
 

@@ -39,6 +39,7 @@ class Road:
     length_m: float
     speed_limit_mps: float  # the lowest limit along the chain
     lanes: int
+    lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
 
 
 def default_cache_dir() -> Path:
@@ -138,7 +139,8 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     net_file = cache / f"{source.name}-{source.digest}.net.xml"
     info_file = net_file.with_suffix(".json")
-    if not (net_file.is_file() and info_file.is_file()):
+    info = _read_info(info_file) if net_file.is_file() else None
+    if info is None:
         try:
             cache.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -148,8 +150,8 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
             nodes.write_bytes(source.nodes_xml)
             edges.write_bytes(source.edges_xml)
             _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
-        _write_atomic(info_file, json.dumps(_describe(net_file)))
-    info = json.loads(info_file.read_text())
+        info = _describe(net_file)
+        _write_atomic(info_file, json.dumps(info))
     return Road(
         name=source.name,
         net_file=net_file,
@@ -157,7 +159,17 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         length_m=info["length_m"],
         speed_limit_mps=info["speed_limit_mps"],
         lanes=info["lanes"],
+        lane_width_m=info["lane_width_m"],
     )
+
+
+def _read_info(path: Path) -> dict | None:
+    """A built road's description, or None when missing or written by an older d4sumo (then rebuilt)."""
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return info if isinstance(info, dict) and "lane_width_m" in info else None
 
 
 def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> None:
@@ -199,6 +211,7 @@ def _describe(net_file: Path) -> dict:
         "length_m": sum(e.getLength() for e in chain),
         "speed_limit_mps": min(e.getSpeed() for e in chain),
         "lanes": min(e.getLaneNumber() for e in chain),
+        "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
     }
 
 

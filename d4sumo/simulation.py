@@ -24,7 +24,8 @@ import numpy as np
 
 from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
-from .platoon import Platoon, SumoFollower, collisions_at, followers_of, initial_state, road_needed_m
+from .maneuvers import CAR_WIDTH_M, AttackPlan, check_road_lanes, maneuver_of, occupied_lanes
+from .platoon import Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
 from .scenarios import Road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
 
@@ -34,11 +35,14 @@ ROUTE_ID = "platoon"
 VTYPE_ID = "d4car"
 ATTACKER_VTYPE_ID = "d4attacker"
 SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
+LANE_CHANGE_MODE_OFF = 0  # no lane change of SUMO's own; a TraCI request is carried out without regard to others
+SUBLANE_RESOLUTION_M = 0.4  # width of SUMO's sublanes with scenario.sublane
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
 
 
 def check_road(config: EpisodeConfig, road: Road) -> None:
     """Refuse episodes the road cannot hold: a target speed above the limit, or a road too short."""
+    check_road_lanes(config, road.name, road.lanes)
     if config.speed_mps > road.speed_limit_mps + 1e-9:
         raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
     needed = road_needed_m(config, road.speed_limit_mps)
@@ -165,6 +169,11 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     ]
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
+    if config.maneuver != "inlane" and config.lane_change_s > 0:  # the attacker moves across over this time
+        if config.sublane:  # its lateral speed (the vehicle type's maxSpeedLat) sets the duration
+            cmd += ["--lateral-resolution", repr(SUBLANE_RESOLUTION_M)]
+        else:
+            cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
@@ -173,10 +182,12 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
 
 
 def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
+    """Insert every car of the maneuver, each in its lane, and hand Python the ones it commands."""
     api.route.add(ROUTE_ID, list(road.route_edges))
     api.vehicletype.copy("DEFAULT_VEHTYPE", VTYPE_ID)
     v = config.vehicle
     api.vehicletype.setLength(VTYPE_ID, v.length_m)
+    api.vehicletype.setWidth(VTYPE_ID, CAR_WIDTH_M)
     api.vehicletype.setMinGap(VTYPE_ID, 0.0)
     api.vehicletype.setMaxSpeed(VTYPE_ID, 100.0)  # Python clamps speeds itself
     api.vehicletype.setAccel(VTYPE_ID, v.max_accel_mps2)
@@ -186,23 +197,28 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
     api.vehicletype.setSpeedDeviation(VTYPE_ID, 0.0)
     types = follower_types(config)
     attacker_type = VTYPE_ID
-    if types:  # what SUMO's models behind the attacker believe of its brakes
+    if types or config.sublane:  # the attacker's own type: what SUMO's models believe of its brakes, its lateral speed
         attacker_type = ATTACKER_VTYPE_ID
         api.vehicletype.copy(VTYPE_ID, attacker_type)
         api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
+        if config.sublane and config.maneuver != "inlane":
+            api.vehicletype.setMaxSpeedLat(attacker_type, road.lane_width_m / config.lane_change_s)
+    n = config.followers + 1
     type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
-    positions, speeds = initial_state(config)
-    for vid, type_id, x, s in zip(config.vehicle_ids, type_ids, positions, speeds):
-        api.vehicle.add(vid, ROUTE_ID, typeID=type_id, depart="0", departLane="0", departPos=repr(x), departSpeed=repr(s))
+    type_ids += [VTYPE_ID] * (len(config.vehicle_ids) - n)  # the benign lead or the obstacle
+    for car, type_id in zip(maneuver_of(config).cars(), type_ids):
+        api.vehicle.add(car.id, ROUTE_ID, typeID=type_id, depart="0", departLane=str(car.lane),
+                        departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
     api.simulationStep()  # inserts the cars: this state is t = 0
     present = set(api.vehicle.getIDList())
     missing = [vid for vid in config.vehicle_ids if vid not in present]
     if missing:
         raise SumoError(f"SUMO did not insert {', '.join(missing)} on {road.name}")
     for vid in config.vehicle_ids:
-        api.vehicle.setLaneChangeMode(vid, 0)
-    api.vehicle.setSpeedMode(config.vehicle_ids[0], SPEED_MODE_PYTHON)
-    for vid, controller in zip(config.vehicle_ids[1:], config.controllers):
+        api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_OFF)
+    for vid in (config.vehicle_ids[0], *config.vehicle_ids[n:]):
+        api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
+    for vid, controller in zip(config.vehicle_ids[1:n], config.controllers):
         if controller not in types:
             api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
             continue
@@ -212,17 +228,18 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
 
 def simulate(
     config: EpisodeConfig,
-    attack_u: np.ndarray,
+    attack: AttackPlan | np.ndarray,
     *,
     road: Road | None = None,
     fcd_path: str | Path | None = None,
     gui: bool = False,
 ) -> Episode:
-    """Play one episode in SUMO. ``attack_u`` holds the attacker's command at each step's start
-    (``config.steps`` values in [-1, 1], NaN where the attacker cruises)."""
+    """Play one episode in SUMO. ``attack``: the attacker's plan (`maneuvers.attack_plan`), or only its
+    command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises)."""
     road = road or build_road(config.network)
     types_file = check_episode(config, road)
-    platoon = Platoon(config, attack_u, attacker_max_speed_mps=road.speed_limit_mps)
+    plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
+    platoon = Platoon(config, plan.u, attacker_max_speed_mps=road.speed_limit_mps)
     if gui:
         import traci as api  # libsumo has no window; traci drives sumo-gui with the same API
 
@@ -237,14 +254,14 @@ def simulate(
         raise SumoError(f"SUMO did not start: {exc}") from None
     try:
         load_platoon(api, config, road)
-        return _run(api, config, platoon)
+        return _run(api, config, platoon, road, plan.lane_change_step)
     except api.TraCIException as exc:
         raise SumoError(f"SUMO failed during the episode: {exc}") from None
     finally:
         api.close()
 
 
-def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
+def _run(api, config: EpisodeConfig, platoon: Platoon, road: Road, lane_change_step: int | None) -> Episode:
     ids = config.vehicle_ids
     commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
     get_position = api.vehicle.getLanePosition
@@ -252,13 +269,20 @@ def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
     set_speed = api.vehicle.setSpeed
     step = api.simulationStep
     advance = platoon.advance
-    length, dt = config.vehicle.length_m, config.step_s
+    maneuver = platoon.maneuver
+    pairs_at = maneuver.pairs
+    dt = config.step_s
+    lateral = _Lateral(api, maneuver, road) if maneuver.lateral else None
     positions = [get_position(v) for v in ids]
     speeds = [get_speed(v) for v in ids]
+    lanes = lateral.sense() if lateral else None
+    pairs = pairs_at(positions, lanes)
     rows_x, rows_v = [positions], [speeds]
     collisions: tuple = ()
     for k in range(config.steps):
-        speeds_out = advance(k, positions, speeds)
+        if k == lane_change_step:
+            lateral.change_lane()
+        speeds_out = advance(k, positions, speeds, pairs)
         for vid, v in zip(commanded, speeds_out):
             set_speed(vid, v)
         step()
@@ -266,9 +290,42 @@ def _run(api, config: EpisodeConfig, platoon: Platoon) -> Episode:
         speeds = [get_speed(v) for v in ids]
         rows_x.append(positions)
         rows_v.append(speeds)
-        collisions = collisions_at((k + 1) * dt, positions, speeds, length)
+        if lateral:
+            platoon.pairs.append(pairs)  # the pairs of the sample before
+            lanes = lateral.sense()
+        pairs = pairs_at(positions, lanes)
+        collisions = collisions_at((k + 1) * dt, pairs, positions, speeds, ids)
         if collisions:
             break
+    if lateral:
+        platoon.pairs.append(pairs)
     times = np.arange(len(rows_x)) * config.step_s
-    return Episode(platoon.trace(times, np.array(rows_x), np.array(rows_v)), collisions)
+    trace, min_gaps = platoon.trace(times, np.array(rows_x), np.array(rows_v), lateral.rows() if lateral else None)
+    return Episode(trace, collisions, min_gaps)
 
+
+class _Lateral:
+    """The attacker's lane change, and where it is across the road at each step: the lanes it covers."""
+
+    def __init__(self, api, maneuver, road: Road):
+        self.api = api
+        self.width = road.lane_width_m
+        self.target = maneuver.target_lane()
+        lanes = maneuver.start_lanes()
+        self.fixed = [(lane,) for lane in lanes[1:]]  # only the attacker changes lanes
+        self.fixed_y = [(lane + 0.5) * self.width for lane in lanes[1:]]
+        self.y: list[float] = []
+        self.get_lane = api.vehicle.getLaneIndex
+        self.get_lateral = api.vehicle.getLateralLanePosition
+
+    def change_lane(self) -> None:
+        # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds for the episode
+        self.api.vehicle.changeLane("v0", self.target, 1e6)
+
+    def sense(self) -> list[tuple[int, ...]]:
+        y = (self.get_lane("v0") + 0.5) * self.width + self.get_lateral("v0")
+        self.y.append(y)
+        return [occupied_lanes(y, self.width), *self.fixed]
+
+    def rows(self) -> np.ndarray:
+        return np.column_stack([self.y, *(np.full(len(self.y), y) for y in self.fixed_y)])

@@ -3,7 +3,13 @@
     psi = F( OR_{i=1..N-1} gap_i <= d_safe )  and  G( gap_0 > d_safe )
 
 rho > 0: the followers came within d_safe of each other (with d_safe = 0: collided) while the attacker
-stayed clear of v1 the whole time: a successful attack. The optimisers maximise rho.
+stayed clear of v1 the whole time: a successful attack. The optimisers maximise rho. When the attacker
+changes lanes (a cut-in or cut-out) the same meaning is said over whoever follows whom in each lane:
+
+    psi = F( victim_gap <= d_safe )  and  G( attacker_gap > d_safe )
+
+victim_gap: the smallest gap between two cars neither of which is the attacker; attacker_gap: the
+smallest gap between the attacker and the car ahead of or behind it (see `trace`).
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .config import OTHER_CAR
 from .errors import ConfigError
 from .trace import Trace
 
@@ -25,6 +32,15 @@ def paper_formula(followers: int, d_safe_m: float = 0.0) -> str:
     _needs_pair(followers)
     pairs = " or ".join(f"(gap_{i} <= {d_safe_m!r})" for i in range(1, followers))
     return f"(eventually({pairs})) and (always(gap_0 > {d_safe_m!r}))"
+
+
+def lane_formula(d_safe_m: float = 0.0) -> str:
+    """psi for a lane-changing attacker, over the gaps between whoever follows whom."""
+    return f"(eventually(victim_gap <= {d_safe_m!r})) and (always(attacker_gap > {d_safe_m!r}))"
+
+
+def default_formula(maneuver: str, followers: int, d_safe_m: float = 0.0) -> str:
+    return paper_formula(followers, d_safe_m) if maneuver == "inlane" else lane_formula(d_safe_m)
 
 
 def psi_robustness(trace: Trace, d_safe_m: float = 0.0) -> float:
@@ -46,13 +62,21 @@ def _needs_pair(followers: int) -> None:
         )
 
 
-def trace_signals(followers: int) -> tuple[str, ...]:
-    """Every signal a trace of N followers carries: the variables a formula may name."""
-    cars = range(followers + 1)
-    names = [f"{kind}_v{i}" for kind in ("pos", "speed", "accel", "cmd") for i in cars]
-    names += [f"gap_{i}" for i in range(followers)]
+def trace_signals(followers: int, maneuver: str = "inlane") -> tuple[str, ...]:
+    """Every signal a trace of N followers carries in a maneuver: the variables a formula may name."""
+    cars = _car_ids(followers, maneuver)
+    names = [f"{kind}_{c}" for kind in ("pos", "speed", "accel", "cmd", "gap") for c in cars]
+    names += ["victim_gap", "attacker_gap"]
+    if maneuver == "inlane":
+        names += [f"gap_{i}" for i in range(followers)]
+    else:
+        names += [f"y_{c}" for c in cars]
     names += [f"mode_v{i}" for i in range(1, followers + 1)]
     return tuple(names)
+
+
+def _car_ids(followers: int, maneuver: str) -> list[str]:
+    return [f"v{i}" for i in range(followers + 1)] + ([OTHER_CAR[maneuver]] if maneuver in OTHER_CAR else [])
 
 
 class Specification:
@@ -66,16 +90,17 @@ class Specification:
     """
 
     def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0,
-                 duration_s: float | None = None, start_step: int = 0):
+                 duration_s: float | None = None, start_step: int = 0, maneuver: str = "inlane"):
         import rtamt
 
         self.followers = followers
         self.start_step = start_step
         self.d_safe_m = d_safe_m
-        self.formula = formula if formula is not None else paper_formula(followers, d_safe_m)
+        self.formula = formula if formula is not None else default_formula(maneuver, followers, d_safe_m)
         if not isinstance(self.formula, str) or not self.formula.strip():
-            raise ConfigError("spec.formula", formula, "an STL formula in rtamt syntax, e.g. eventually(gap_1 <= 0)")
-        declared = trace_signals(followers)
+            raise ConfigError("spec.formula", formula, "an STL formula in rtamt syntax, e.g. eventually(gap_v2 <= 0)")
+        declared = trace_signals(followers, maneuver)
+        self._help = _signal_help(followers, maneuver)
         spec = rtamt.StlDiscreteTimeSpecification()
         for name in declared:
             spec.declare_var(name, "float")
@@ -86,12 +111,12 @@ class Specification:
             with _quiet_rtamt():
                 spec.parse()
         except KeyError as exc:  # rtamt's way of meeting an undeclared variable
-            raise ConfigError("spec.formula", self.formula, f"signals among {_signal_help(followers)} (unknown: {exc.args[0]})") from None
+            raise ConfigError("spec.formula", self.formula, f"signals among {self._help} (unknown: {exc.args[0]})") from None
         except Exception as exc:  # rtamt raises RTAMTException or ANTLR errors
             raise ConfigError("spec.formula", self.formula, f"an STL formula rtamt can parse ({str(exc).splitlines()[0].split(' expecting')[0][:200]})") from None
         implicit = set(spec.ast.var_object_dict) - set(declared) - {"out"}
         if implicit or unknown:
-            raise ConfigError("spec.formula", self.formula, f"signals among {_signal_help(followers)} (unknown: {', '.join(sorted(implicit | unknown))})")
+            raise ConfigError("spec.formula", self.formula, f"signals among {self._help} (unknown: {', '.join(sorted(implicit | unknown))})")
         _check_time_bounds(spec.ast, self.formula, step_s, duration_s)
         self.variables = tuple(n for n in declared if re.search(rf"\b{n}\b", self.formula))
         _speed_up_predicates(spec.offline_interpreter)
@@ -144,8 +169,11 @@ def _check_time_bounds(ast, formula: str, step_s: float, duration_s: float | Non
             raise ConfigError("spec.formula", formula, f"time bounds within the episode of {duration_s:g} s (the {where})")
 
 
-def _signal_help(followers: int) -> str:
-    return f"pos_vI, speed_vI, accel_vI, cmd_vI (I = 0..{followers}), gap_I (I = 0..{followers - 1}), mode_vI (I = 1..{followers})"
+def _signal_help(followers: int, maneuver: str) -> str:
+    cars = _car_ids(followers, maneuver)
+    per_car = f"pos_X, speed_X, accel_X, cmd_X, gap_X{', y_X' if maneuver != 'inlane' else ''} (X = {', '.join(cars)})"
+    column = f", gap_I (I = 0..{followers - 1})" if maneuver == "inlane" else ""
+    return f"{per_car}, victim_gap, attacker_gap{column}, mode_vI (I = 1..{followers})"
 
 
 _KEYWORDS = {

@@ -8,6 +8,7 @@ A sweep file is TOML:
     setpoint_m = [3, 5, 7]
     speed_mps = [20, 25, 30]
     start = ["rest", "steady"]
+    maneuver = ["inlane", "cutin"]      # and cutin_follower, cutin_offset_m, lane_change_s, obstacle_*: optional
     controller = ["switching", "timegap", "sumo:ACC", {class = "sumo:IDM", tau = 1.5}]   # optional
     attack = ["knots"]
     optimizer = ["bo", "ce"]
@@ -49,10 +50,12 @@ from .store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
 
-GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "controller", "attack", "optimizer", "seed")
+SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "maneuver", "cutin_follower",
+                      "cutin_offset_m", "lane_change_s", "obstacle_distance_m", "obstacle_speed_mps")
+GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "attack", "optimizer", "seed")
 #: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
 #: table, or a list of them for a mixed platoon)
-GRID_TO_KEY = {**{k: f"scenario.{k}" for k in GRID_KEYS[:5]}, "controller": "controller", "attack": "attack.family",
+GRID_TO_KEY = {**{k: f"scenario.{k}" for k in SCENARIO_GRID_KEYS}, "controller": "controller", "attack": "attack.family",
                "optimizer": "search.optimizer", "seed": "search.seed"}
 
 
@@ -116,7 +119,7 @@ class Sweep:
             check_episode(c.config, roads[c.config.network])
         seen = set()
         for c in self.campaigns:
-            key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m)
+            key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m, c.config.maneuver)
             if key not in seen:
                 seen.add(key)
                 c.specification()

@@ -1,12 +1,19 @@
 """What an episode produces: a Trace (times and named signals) and the collisions SUMO reported.
 
-Signals (N followers, cars v0 = attacker .. vN, front to back):
-    pos_vI    front-bumper position along the road [m]
-    speed_vI  speed [m/s]
-    accel_vI  realised acceleration over the last step [m/s^2]
-    cmd_vI    throttle/brake command applied from this sample on [-1, 1]
-    gap_I     bumper gap between vI and vI+1, I = 0..N-1 (gap_0: attacker to v1) [m]
-    mode_vI   follower controller mode (0 cruise, 1 ACC), I >= 1, when the controller has one
+Signals (N followers; cars v0 = attacker, v1 .. vN, and in a cut-in `lead`, in a cut-out `obstacle`):
+    pos_X         front-bumper position along the road [m]
+    speed_X       speed [m/s]
+    accel_X       realised acceleration over the last step [m/s^2]
+    cmd_X         throttle/brake command applied from this sample on [-1, 1]
+    gap_X         bumper gap from car X to the car ahead of it in its lane, whoever that is [m]
+                  (1000 m with nobody ahead; a car changing lanes covers both)
+    victim_gap    the smallest gap between two cars neither of which is the attacker [m]
+    attacker_gap  the smallest gap between the attacker and the car ahead of or behind it [m]
+    mode_vI       follower controller mode (0 cruise, 1 ACC), I >= 1, when the controller has one
+The paper's maneuver (`inlane`: the attacker leads the platoon in its lane) also has
+    gap_I         bumper gap between vI and vI+1, I = 0..N-1 (gap_0: attacker to v1) [m]
+and the lane-changing ones (`cutin`, `cutout`)
+    y_X           lateral position of the car's centre from the road's right edge [m]
 """
 
 from __future__ import annotations
@@ -51,7 +58,8 @@ class Trace:
 
 @dataclass(frozen=True)
 class Collision:
-    """A rear-end collision: ``follower`` ran into ``leader`` (the car just ahead of it)."""
+    """A collision: ``follower`` ran into ``leader`` (the car just ahead of it in a lane; in a cut-in, the
+    attacker may also land on a car beside it, the one ahead counting as the leader)."""
 
     leader: str
     follower: str
@@ -80,6 +88,8 @@ class Episode:
 
     trace: Trace
     collisions: tuple[Collision, ...] = field(default=())
+    #: the minimum gap of every pair of cars that followed each other in a lane ("v1-v2": metres)
+    min_gaps: Mapping[str, float] | None = None
 
     @property
     def first_collision(self) -> Collision | None:
@@ -95,5 +105,7 @@ class Episode:
         return "success"
 
     def min_gaps_m(self) -> dict[str, float]:
+        if self.min_gaps is not None:
+            return dict(self.min_gaps)
         gaps = self.trace.gaps()
         return {f"v{i}-v{i + 1}": float(gaps[:, i].min()) for i in range(self.trace.followers)}

@@ -10,6 +10,7 @@ import pytest
 from d4sumo.attacks import attack_signal, make_attack
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.control import MODE_ACC, CruiseControl, SwitchingParams, acceleration_to_command, register_controller
+from d4sumo.maneuvers import Maneuver
 from d4sumo.platoon import ControllerError, Platoon, collisions_at, initial_state, integrate
 
 ALTERNATING = [1, -1, 1, -1, 1, -1, 1, -1, 1]
@@ -41,12 +42,15 @@ def test_setpoints_a_nanometre_apart_give_the_same_verdict():
 
 
 def test_an_overlap_below_a_millimetre_is_a_collision_and_a_touch_is_not():
+    lead = Maneuver(EpisodeConfig(followers=2))
+    ids = ("v0", "v1", "v2")
     positions = [100.0, 100.0 - 4.5 - 3.0, 100.0 - 4.5 - 3.0 - 4.5 + 0.0004]  # v1-v2 overlap 0.4 mm
-    hits = collisions_at(7.4, positions, [20.0, 21.0, 22.5], 4.5)
+    hits = collisions_at(7.4, lead.pairs(positions), positions, [20.0, 21.0, 22.5], ids)
     assert [c.pair for c in hits] == ["v1-v2"]
     assert hits[0].time_s == 7.4 and hits[0].position_m == positions[2]
     assert hits[0].speed_diff_kmh == pytest.approx(1.5 * 3.6)
-    assert collisions_at(7.4, [100.0, 95.5], [20.0, 20.0], 4.5) == ()  # bumpers touch: gap exactly 0
+    touching = [100.0, 95.5, 80.0]  # v0-v1 bumpers touch: gap exactly 0
+    assert collisions_at(7.4, lead.pairs(touching), touching, [20.0, 20.0, 20.0], ids) == ()
 
 
 def test_the_episode_ends_at_the_first_overlap_and_the_verdicts_agree():
@@ -68,9 +72,9 @@ def test_the_attackers_cruise_pid_starts_afresh_after_an_attack_window():
     platoon = Platoon(config, u, attacker_max_speed_mps=40.0)
     positions, speeds = initial_state(config)
     for k in range(40):
-        speeds = platoon.advance(k, positions, speeds)
+        speeds = platoon.advance(k, positions, speeds, platoon.maneuver.pairs(positions))
     fresh = CruiseControl(SwitchingParams(), config.speed_mps, config.step_s)
-    platoon.advance(40, positions, speeds)
+    platoon.advance(40, positions, speeds, platoon.maneuver.pairs(positions))
     expected = acceleration_to_command(fresh.acceleration(speeds[0]), config.vehicle)
     assert platoon.commands[-1][0] == expected
 

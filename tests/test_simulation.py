@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
 from sumolib.xml import parse_fast_nested
 
+from d4sumo.campaign import Campaign, Evaluator
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.control import SwitchingController, register_controller
 from d4sumo.errors import ConfigError
 from d4sumo.platoon import integrate
+from d4sumo.maneuvers import AttackPlan
 from d4sumo.simulation import simulate
+from d4sumo.spec import Specification
 
 pytestmark = pytest.mark.sumo
 
@@ -221,3 +226,104 @@ def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatc
     config = EpisodeConfig(controller=ControllerConfig("sumo:IDM", (("tau", 0.77),)))
     with pytest.raises(SumoError, match="cannot write SUMO's vehicle types"):
         simulate(config, np.full(config.steps, np.nan), road=road)
+
+
+# --- attackers that change lanes ---------------------------------------------------------------
+
+CUTIN = EpisodeConfig(maneuver="cutin", start="steady", cutin_follower=2, cutin_offset_m=2.0, lane_change_s=0.0)
+LANE_CHANGE_STEP = 100  # the attacker starts its lane change at 5 s
+
+
+def _fcd_lanes(path) -> dict[str, dict[float, tuple[float, float, str]]]:
+    """FCD as {vehicle: {time: (y, pos, lane)}}."""
+    rows: dict = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos", "lane"]):
+        rows.setdefault(v.id, {})[round(float(step.time), 6)] = (float(v.y), float(v.pos), v.lane)
+    return rows
+
+
+def _fcd_gap(fcd, vid: str, t: float) -> float:
+    """The bumper gap from ``vid`` to the nearest car ahead of it in its lane, from the FCD alone."""
+    _, pos, lane = fcd[vid][t]
+    ahead = [p for other, rows in fcd.items() if other != vid for _, p, ln in [rows[t]] if ln == lane and p > pos]
+    return min(ahead) - 4.5 - pos
+
+
+def test_the_attacker_changes_lane_at_the_chosen_time_and_the_followers_gap_jumps_then(road, tmp_path):
+    path = tmp_path / "fcd.xml"
+    episode = simulate(CUTIN, AttackPlan(np.full(CUTIN.steps, np.nan), LANE_CHANGE_STEP), road=road, fcd_path=path)
+    fcd = _fcd_lanes(path)
+    times = sorted(fcd["v0"])
+    start_lane = fcd["v0"][0.0][2]
+    changed = [t for t in times if fcd["v0"][t][2] != start_lane]
+    assert changed[0] == pytest.approx((LANE_CHANGE_STEP + 1) * 0.05)  # SUMO carries it out in the step at 5 s
+    assert fcd["v0"][changed[0]][2] == fcd["v2"][changed[0]][2]  # into the platoon's lane
+    before, after = times[LANE_CHANGE_STEP], changed[0]
+    assert _fcd_gap(fcd, "v2", before) == pytest.approx(7.0, abs=0.01)  # v2 followed v1 at the setpoint
+    assert _fcd_gap(fcd, "v2", after) == pytest.approx(2.0, abs=0.01)  # now the attacker, 2 m ahead
+    trace = episode.trace
+    fcd_gaps = np.array([_fcd_gap(fcd, "v2", t) for t in times[:len(trace)]])
+    assert np.max(np.abs(fcd_gaps - trace["gap_v2"])) < 0.01
+    assert trace["gap_v2"][LANE_CHANGE_STEP] == pytest.approx(7.0) and trace["gap_v2"][LANE_CHANGE_STEP + 1] == pytest.approx(2.0)
+    assert trace["speed_v2"][LANE_CHANGE_STEP + 20] < 25.0 - 0.5  # v2 brakes for the car that cut in
+
+
+def test_a_lane_change_that_takes_time_covers_both_lanes_once_the_body_crosses_the_line(road):
+    config = EpisodeConfig(maneuver="cutin", start="steady", cutin_follower=2, cutin_offset_m=2.0, lane_change_s=2.0)
+    trace = simulate(config, AttackPlan(np.full(config.steps, np.nan), LANE_CHANGE_STEP), road=road).trace
+    y = trace["y_v0"]
+    assert y[LANE_CHANGE_STEP] == pytest.approx(1.5 * road.lane_width_m) and y[LANE_CHANGE_STEP + 1] < y[LANE_CHANGE_STEP]
+    assert y[LANE_CHANGE_STEP + 40] == pytest.approx(0.5 * road.lane_width_m, abs=0.05)  # across in about 2 s
+    crossing = road.lane_width_m + 0.9  # its right side on the line
+    inside = np.flatnonzero(y < crossing)[0]
+    assert trace["gap_v2"][inside - 1] == pytest.approx(7.0, abs=0.01) and trace["gap_v2"][inside] < 2.5
+
+
+def test_sumos_own_models_answer_the_car_that_cut_in(road):
+    config = dataclasses.replace(CUTIN, controller=ControllerConfig("sumo:ACC"))
+    cut = simulate(config, AttackPlan(np.full(config.steps, np.nan), LANE_CHANGE_STEP), road=road).trace
+    stay = simulate(config, AttackPlan(np.full(config.steps, np.nan), None), road=road).trace
+    after = LANE_CHANGE_STEP + 1
+    behind = [i for i in (1, 2, 3) if cut[f"gap_v{i}"][after] != stay[f"gap_v{i}"][after]]
+    assert len(behind) == 1  # one follower has the attacker ahead now (SUMO's ACC fell back from 7 m meanwhile)
+    v = f"speed_v{behind[0]}"
+    assert cut[f"gap_v{behind[0]}"][after] < stay[f"gap_v{behind[0]}"][after]
+    assert cut[v][after + 40] < stay[v][after + 40] - 0.5  # and slows down for it
+
+
+def test_a_cut_out_reveals_a_stopped_car_and_the_first_follower_hits_it(road):
+    config = EpisodeConfig(maneuver="cutout", start="steady", obstacle_distance_m=120.0, lane_change_s=2.0)
+    episode = simulate(config, AttackPlan(np.full(config.steps, np.nan), 20), road=road)
+    assert episode.outcome == "success" and episode.first_collision.pair == "obstacle-v1"
+    gaps = episode.min_gaps_m()
+    assert gaps["obstacle-v1"] < 0 and gaps["obstacle-v0"] > 0 and all(v >= 0 for k, v in gaps.items() if k != "obstacle-v1")
+    spec = Specification(followers=3, step_s=0.05, maneuver="cutout")
+    assert spec.robustness(episode.trace) > 0
+
+
+@pytest.mark.parametrize("maneuver", ["cutin", "cutout"])
+def test_lane_change_verdicts_agree_sample_by_sample(road, maneuver):
+    """Outcome, collision record, the sign of robustness and the minimum gaps, for random attacks."""
+    config = EpisodeConfig(maneuver=maneuver, start="steady", cutin_offset_m=1.0, setpoint_m=6.0)
+    evaluator = Evaluator(Campaign(config=config, attack="knots", optimizer="random"), road=road)
+    rng = np.random.default_rng(7)
+    outcomes = set()
+    for i in range(16):
+        r = evaluator(i, rng.uniform(evaluator.family.lower, evaluator.family.upper))
+        outcomes.add(r.outcome)
+        assert r.outcome != "error", r.error
+        hit = {k for k, v in r.min_gaps.items() if v < 0}
+        assert hit == ({r.collision["pair"]} if r.collision else set()) or (r.collision and r.collision["pair"] in hit)
+        assert (r.robustness > 0) == (r.outcome == "success") or r.robustness == 0
+        if r.outcome == "attacker_crash":
+            assert "v0" in r.collision["pair"].split("-")
+    assert len(outcomes) >= 2  # the random attacks do not all end alike
+
+
+def test_a_one_lane_road_has_no_room_for_a_lane_change():
+    from d4sumo.scenarios import build_road
+    from d4sumo.simulation import check_episode
+
+    with pytest.raises(ConfigError, match="at least 2 lanes .highway_1lane has 1") as e:
+        check_episode(EpisodeConfig(maneuver="cutin", network="highway_1lane"), build_road("highway_1lane"))
+    assert e.value.field == "scenario.maneuver"

@@ -54,7 +54,7 @@ def rtamt_ratio(repeats: int = 20) -> None:
     rng = np.random.default_rng(0)
     t_sim, t_spec = [], []
     for _ in range(repeats):
-        u = ev.signal(rng.uniform(-1, 1, ev.family.dimension))
+        u = ev.plan(rng.uniform(-1, 1, ev.family.dimension))
         t0 = time.perf_counter()
         episode = simulate(campaign.config, u, road=ev.road)
         t1 = time.perf_counter()

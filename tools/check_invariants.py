@@ -95,7 +95,7 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         if (row.robustness > 0) != (row.outcome == "success"):
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
-    episode = simulate(config, evaluator.signal(row.params), road=evaluator.road)
+    episode = simulate(config, evaluator.plan(row.params), road=evaluator.road)
     if config.followers >= 2 and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step)) - row.robustness) > 1e-9:
         broken.append("rtamt/numpy psi")
     positions = read_fcd_positions(fcd, config.vehicle_ids)
