@@ -50,6 +50,11 @@ class Record:
         return None if self.time_s is None else self.time_s - self.attack_start_s
 
     @property
+    def lane_change_at_s(self) -> float | None:
+        """When the attacker began its lane change, in simulation time (None: the paper's maneuver)."""
+        return None if self.maneuver == "inlane" else self.attack_start_s + self.params[-1]
+
+    @property
     def configuration(self) -> tuple:
         """What makes two campaigns different experiments (the seed does not)."""
         return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,

@@ -166,8 +166,17 @@ def _collision_lane(fcd: dict, collision: dict, lane_ids: list[str]) -> str:
     return lane_ids[0]
 
 
+def _mark_moments(ax, attack_start_s: float, lane_change_s: float | None) -> None:
+    """The attack's start after a warm-up, and the moment the attacker began its lane change."""
+    if attack_start_s > 0:
+        ax.axvline(attack_start_s, color="0.3", linestyle=":", linewidth=1, label=f"attack starts at {attack_start_s:g} s")
+    if lane_change_s is not None:
+        ax.axvline(lane_change_s, color="0.1", linestyle="-.", linewidth=1,
+                   label=f"attacker changes lane at {lane_change_s:.2f} s")
+
+
 def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, speed_max_mps: float | None = None,
-                      attack_start_s: float = 0.0):
+                      attack_start_s: float = 0.0, lane_change_s: float | None = None):
     """Position over time of every car, coloured by speed on one scale for the whole figure (0 to
     ``speed_max_mps``, default the fastest car), one panel per lane when the cars use several, the
     collision marked; returns the laid-out Figure."""
@@ -197,8 +206,7 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
             last = np.flatnonzero(inside)
             if last.size:
                 ends[i].append((_vehicle_label(vid), float(d["time"][last[-1]]), float(d["pos"][last[-1]])))
-        if attack_start_s > 0:
-            ax.axvline(attack_start_s, color="0.3", linestyle=":", linewidth=1, label=f"attack starts at {attack_start_s:g} s")
+        _mark_moments(ax, attack_start_s, lane_change_s)
         if collision and lane == crash_lane:
             ax.plot([collision["time_s"]], [collision["position_m"]], marker="X", color="red", markeredgecolor="white",
                     markersize=10, linestyle="none", zorder=4,
@@ -226,21 +234,22 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
 
 
 def time_space(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *,
-               speed_max_mps: float | None = None, attack_start_s: float = 0.0) -> Path:
+               speed_max_mps: float | None = None, attack_start_s: float = 0.0, lane_change_s: float | None = None) -> Path:
     """Position over time of every car, coloured by speed, the collision marked (see time_space_figure)."""
     check_figure_path(path)
-    return _save(time_space_figure(fcd, title, collision, speed_max_mps=speed_max_mps, attack_start_s=attack_start_s), path)
+    return _save(time_space_figure(fcd, title, collision, speed_max_mps=speed_max_mps, attack_start_s=attack_start_s,
+                                   lane_change_s=lane_change_s), path)
 
 
-def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *, attack_start_s: float = 0.0):
+def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *, attack_start_s: float = 0.0,
+                         lane_change_s: float | None = None):
     """Every car's acceleration over time."""
     fig = _figure(figsize=(8.0, 3.8))
     ax = fig.subplots()
     for vid, d in fcd.items():
         ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" else 1.1,
                 color="black" if vid == "v0" else None, zorder=3 if vid == "v0" else 2)
-    if attack_start_s > 0:
-        ax.axvline(attack_start_s, color="0.3", linestyle=":", linewidth=1, label=f"attack starts at {attack_start_s:g} s")
+    _mark_moments(ax, attack_start_s, lane_change_s)
     if collision:
         ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
     ax.set_xlabel("time [s]")
@@ -251,9 +260,10 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
     return fig
 
 
-def accelerations(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *, attack_start_s: float = 0.0) -> Path:
+def accelerations(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *, attack_start_s: float = 0.0,
+                  lane_change_s: float | None = None) -> Path:
     check_figure_path(path)
-    return _save(accelerations_figure(fcd, title, collision, attack_start_s=attack_start_s), path)
+    return _save(accelerations_figure(fcd, title, collision, attack_start_s=attack_start_s, lane_change_s=lane_change_s), path)
 
 
 # --- heatmaps ---------------------------------------------------------------------------------------

@@ -58,7 +58,8 @@ def describe(record: Record) -> str:
         f"{record.followers} followers, " if record.followers != 3 else "")
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
     system = f"{record.system}, " if record.system != "switching" else ""
-    head = (f"sample {record.sample_id}: {system}{record.attack} {record.optimizer}, {where}{start}, "
+    maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""
+    head = (f"sample {record.sample_id}: {system}{maneuver}{record.attack} {record.optimizer}, {where}{start}, "
             f"setpoint {record.setpoint_m:g} m, {record.speed_mps:g} m/s")
     if record.pair is None:
         return f"{head}; {record.outcome.replace('_', ' ')}"
@@ -68,10 +69,10 @@ def describe(record: Record) -> str:
 
 def _sample_figure(record: Record, kind: str, fcd: dict, out: Path, speed_max_mps: float | None = None) -> Path:
     title = describe(record)
+    moments = dict(attack_start_s=record.attack_start_s, lane_change_s=record.lane_change_at_s)
     if kind == "time-space":
-        return figures.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps,
-                                  attack_start_s=record.attack_start_s)
-    return figures.accelerations(fcd, title, out, collision_of(record), attack_start_s=record.attack_start_s)
+        return figures.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps, **moments)
+    return figures.accelerations(fcd, title, out, collision_of(record), **moments)
 
 
 def _check_kind(kind: str, allowed: Sequence[str]) -> None:

@@ -137,10 +137,36 @@ def test_falsify_then_export_and_replay_a_stored_sample(tmp_path, capsys):
     assert fcd.is_file()
 
 
+@pytest.mark.sumo
+def test_a_cut_in_campaign_is_stored_exported_replayed_and_plotted_by_lane(tmp_path, capsys):
+    db = tmp_path / "r.sqlite"
+    argv = ["falsify", "--maneuver", "cutin", "--set", "scenario.cutin_follower=2", "--start", "steady",
+            "--optimizer", "random", "--samples", "8", "--db", str(db), "--quiet", "--json"]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert sum(s["outcomes"].values()) == 8 and s["outcomes"].get("error", 0) == 0
+    csv_path = tmp_path / "r.csv"
+    assert main(["export", str(db), "--out", str(csv_path)]) == 0
+    header, first = csv_path.read_text().splitlines()[:2]
+    assert header.split(",")[8] == "maneuver" and header.endswith(",m8,t_lc_s") and first.split(",")[8] == "cutin"
+    for sample in range(1, 9):
+        assert main(["replay", str(db), str(sample), "--json"]) == 0
+        replay = json.loads(capsys.readouterr().out)
+        assert replay["reproduced"] is True
+        assert replay["config"]["scenario"]["maneuver"] == "cutin" and "lead-v1" in replay["min_gaps_m"]
+    png = tmp_path / "ts.png"
+    assert main(["plot", "time-space", str(db), "--sample", "1", "--out", str(png)]) == 0
+    assert png.stat().st_size > 10_000
+
+
 @pytest.mark.parametrize(
     "argv, expected",
     [
         (["--samples", "0"], "--samples (search.samples): got 0"),
+        (["--maneuver", "cutin", "--network", "highway_1lane"],
+         "--maneuver (scenario.maneuver): got 'cutin'; allowed: a road with at least 2 lanes (highway_1lane has 1)"),
+        (["--maneuver", "cutin", "--set", "scenario.cutin_follower=5"], "scenario.cutin_follower: got 5"),
+        (["--maneuver", "cutin", "--formula", "eventually(gap_1 <= 0)"], "unknown: gap_1"),
         (["--formula", "eventually(foo < 1)"], "unknown: foo"),
         (["--formula", "always(gap_1 >"], "rtamt can parse"),
         (["--attack", "knots", "--delta", "5"], "attack.horizon_s: got 48.0; allowed: a whole multiple of delta_s=5 s"),

@@ -54,10 +54,26 @@ def test_a_sweep_grid_ranges_over_systems_under_test(tmp_path):
     sweep.check()  # SUMO loads the models' types
 
 
+def test_a_sweep_grid_ranges_over_the_cut_in_target_follower_and_offset(tmp_path):
+    grid = '[grid]\nmaneuver = ["cutin"]\ncutin_follower = [1, 2, 3]\ncutin_offset_m = [-2.0, 0.0]\n'
+    sweep = Sweep.load(write(tmp_path, TINY.replace("[grid]\n", grid, 1)))
+    assert len(sweep.campaigns) == 24
+    assert {(c.config.cutin_follower, c.config.cutin_offset_m) for c in sweep.campaigns} == {
+        (k, d) for k in (1, 2, 3) for d in (-2.0, 0.0)}
+    assert all(c.family().names[-1] == "t_lc_s" for c in sweep.campaigns)
+    sweep.check()
+    # without a cut-in the follower changes nothing: the same campaign twice, refused
+    with pytest.raises(ConfigError, match="grid points that are different campaigns"):
+        Sweep.load(write(tmp_path, TINY.replace("[grid]\n", "[grid]\ncutin_follower = [1, 2]\n", 1)))
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
         (TINY.replace("setpoint_m", "setpoint"), "grid.setpoint"),
+        (TINY.replace("[grid]\n", '[grid]\nmaneuver = ["cutout"]\n') + '[scenario]\nnetwork = "highway_1lane"\n',
+         "at least 2 lanes"),
+        (TINY.replace("[grid]\n", '[grid]\ncutin_follower = [4]\nmaneuver = ["cutin"]\n'), "scenario.cutin_follower"),
         (TINY.replace("[5.0, 7.0]", "[]"), "non-empty list"),
         (TINY.replace("[5.0, 7.0]", "[5.0, -7.0]"), "scenario.setpoint_m"),
         (TINY.replace('["random"]', '["anneal"]'), "optimizer"),

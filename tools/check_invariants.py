@@ -2,18 +2,20 @@
 
 Plays N random episodes (every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
-SUMO's models, a quarter of the platoons mixed), each scored and stored exactly as a campaign stores a
-sample, and counts the samples where any of these disagree:
+SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
+target follower, offset, obstacle and lane change duration), each scored and stored exactly as a
+campaign stores a sample, and counts the samples where any of these disagree:
 
 - outcome and collision record: no collision <=> no_crash; a collision involving v0 <=> attacker_crash;
-- outcome and the stored minimum gaps: no_crash <=> every minimum gap >= 0; success <=> v0-v1 >= 0 and
-  some other pair < 0; attacker_crash <=> v0-v1 < 0;
-- outcome and the sign of the stored robustness (the paper's psi, d_safe 0): success <=> rho > 0;
-  rtamt's robustness and a direct numpy evaluation of psi agree;
+- outcome and the stored minimum gaps: no_crash <=> every minimum gap >= 0; attacker_crash <=> a pair
+  with v0 < 0; success <=> no pair with v0 < 0 and some other pair < 0;
+- outcome and the sign of the stored robustness (psi, d_safe 0): success <=> rho > 0; for the paper's
+  maneuver, rtamt's robustness and a direct numpy evaluation of psi agree;
 - the collision time is the last simulated step, and the collision pair has a negative gap there;
 - the FCD file SUMO wrote: every car's position at every step agrees with the trace to the FCD's
-  precision (6 decimals), and no gap recomputed from the FCD is negative (beyond that precision)
-  before the stored collision time, nor is the collision pair's FCD gap positive at it.
+  precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
+  coordinate) is negative (beyond that precision) before the stored collision time, nor is the
+  collision pair's FCD gap positive at it.
 
 Usage: python tools/check_invariants.py [N] [--seed S]. Prints the counts; exits 1 if any is non-zero.
 """
@@ -33,6 +35,7 @@ from sumolib.xml import parse_fast_nested
 from d4sumo.attacks import FAMILIES
 from d4sumo.campaign import Campaign, Evaluator
 from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
+from d4sumo.maneuvers import maneuver_of, occupied_lanes
 from d4sumo.scenarios import build_road
 from d4sumo.simulation import simulate
 from d4sumo.spec import psi_robustness
@@ -56,20 +59,43 @@ def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         start=str(rng.choice(START_MODES)),
         # one system for the whole platoon, or (one time in four) a mixed platoon
         controller=systems if rng.random() < 0.25 else systems[0],
+        **(lane_change(rng, followers) if rng.random() < 0.25 else {}),
     )
     family = str(rng.choice(FAMILIES))
     # with one follower the paper's psi is undefined: score the attacker's gap instead
-    formula = None if config.followers >= 2 else "always(gap_0 > 0)"
+    formula = None if config.followers >= 2 or config.maneuver != "inlane" else "always(gap_0 > 0)"
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
 
 
-def read_fcd_positions(path: Path, ids: tuple[str, ...]) -> np.ndarray:
-    rows: dict[float, dict[str, float]] = {}
-    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "pos"]):
-        rows.setdefault(float(step.time), {})[v.id] = float(v.pos)
-    return np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
+def lane_change(rng: np.random.Generator, followers: int) -> dict:
+    """The settings of a random cut-in or cut-out."""
+    if rng.random() < 0.5:
+        return dict(maneuver="cutin", cutin_follower=int(rng.integers(1, followers + 1)),
+                    cutin_offset_m=float(rng.uniform(-10, 15)), lane_change_s=float(rng.choice([0.0, 1.0, 2.0, 3.5])))
+    return dict(maneuver="cutout", obstacle_distance_m=float(rng.uniform(20, 400)),
+                obstacle_speed_mps=float(rng.choice([0.0, 5.0, 12.5])), lane_change_s=float(rng.choice([0.0, 2.0])))
+
+
+def read_fcd(path: Path, ids: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Positions along the road and lateral coordinates, samples x cars."""
+    rows: dict[float, dict[str, tuple[float, float]]] = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos"]):
+        rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y))
+    table = np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
+    return table[:, :, 0], table[:, :, 1]
+
+
+def fcd_pairs(config: EpisodeConfig, positions: np.ndarray, y: np.ndarray, lane_width_m: float) -> list[list[tuple]]:
+    """Who follows whom at each FCD sample, from the FCD alone: lanes from the lateral coordinate (lane 0's
+    centre is where v1, which never changes lanes, drives)."""
+    maneuver = maneuver_of(config)
+    out = []
+    for xs, ys in zip(positions, y):
+        lanes = [occupied_lanes(yi - ys[1] + 0.5 * lane_width_m, lane_width_m) for yi in ys] if maneuver.lateral else None
+        out.append(maneuver.pairs(list(xs), lanes))
+    return out
 
 
 def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: Store, campaign_id: int, index: int,
@@ -82,35 +108,39 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     store.add_sample(campaign_id, index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps, r.wall_s, r.error)
     row = store.samples(campaign_id)[-1]  # what a reader of the database sees
     broken = []
-    gaps = [row.min_gaps[f"v{i}-v{i + 1}"] for i in range(config.followers)]
     c = row.collision
     if (c is None) != (row.outcome == "no_crash"):
         broken.append("outcome/collision")
     if c is not None and ("v0" in c["pair"].split("-")) != (row.outcome == "attacker_crash"):
         broken.append("outcome/collision pair")
-    expected = "attacker_crash" if gaps[0] < 0 else ("success" if min(gaps[1:], default=0.0) < 0 else "no_crash")
+    with_attacker = [g for pair, g in row.min_gaps.items() if "v0" in pair.split("-")]
+    others = [g for pair, g in row.min_gaps.items() if "v0" not in pair.split("-")]
+    expected = ("attacker_crash" if min(with_attacker, default=0.0) < 0 else
+                "success" if min(others, default=0.0) < 0 else "no_crash")
     if expected != row.outcome:
         broken.append("outcome/min gaps")
-    if config.followers >= 2:
+    if config.followers >= 2 or config.maneuver != "inlane":
         if (row.robustness > 0) != (row.outcome == "success"):
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
     episode = simulate(config, evaluator.plan(row.params), road=evaluator.road)
-    if config.followers >= 2 and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step)) - row.robustness) > 1e-9:
+    if (config.followers >= 2 and config.maneuver == "inlane"
+            and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step)) - row.robustness) > 1e-9):
         broken.append("rtamt/numpy psi")
-    positions = read_fcd_positions(fcd, config.vehicle_ids)
-    trace_positions = np.column_stack([episode.trace[f"pos_v{i}"] for i in range(config.followers + 1)])
+    positions, y = read_fcd(fcd, config.vehicle_ids)
+    trace_positions = np.column_stack([episode.trace[f"pos_{vid}"] for vid in config.vehicle_ids])
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > 0.6e-6:
         broken.append("FCD/trace positions")
         return broken
-    fcd_gaps = positions[:, :-1] - config.vehicle.length_m - positions[:, 1:]
-    if np.any(fcd_gaps[:-1] < -FCD_TOLERANCE_M):
+    pairs = fcd_pairs(config, positions, y, evaluator.road.lane_width_m)
+    if any(g < -FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
         broken.append("FCD overlap before the end")
     if c is not None:
         if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
             broken.append("collision time/end of episode")
-        i = int(c["pair"].split("-")[0][1:])
-        if fcd_gaps[-1, i] > FCD_TOLERANCE_M or episode.trace[f"gap_{i}"][-1] >= 0:
+        ids = config.vehicle_ids
+        last = {f"{ids[a]}-{ids[b]}": g for a, b, g in pairs[-1]}
+        if last.get(c["pair"], np.inf) > FCD_TOLERANCE_M or row.min_gaps[c["pair"]] >= 0:
             broken.append("collision pair/gap")
     elif len(episode.trace) != config.steps + 1:
         broken.append("no collision but the episode ended early")
