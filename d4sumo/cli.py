@@ -221,7 +221,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
     formula = spec_table.get("formula")
     spec = None
-    if formula is not None or config.followers >= 2 or config.maneuver != "inlane":
+    if formula is not None or config.followers >= 2 or config.maneuver_class.lateral:
         spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
                              duration_s=config.duration_s, start_step=config.attack_start_step,
                              maneuver=config.maneuver)  # as a campaign scores
@@ -322,7 +322,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    attack = campaign.attack if campaign.config.maneuver == "inlane" else f"{campaign.config.maneuver}, {campaign.attack}"
+    attack = f"{campaign.config.maneuver}, {campaign.attack}" if campaign.config.maneuver_class.lateral else campaign.attack
     print(f"campaign {summary.campaign_id} ({attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     if top is not None:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import carfollowing
+from .maneuvers import MANEUVERS as MANEUVER_CLASSES
 from .control import VehicleParams, build_params, resolve_controller
 from .errors import ConfigError, check_int, check_number
 
@@ -24,15 +25,7 @@ START_MODES = ("rest", "steady", "warmup")
 MAX_FOLLOWERS = 10
 #: inlane: the paper's attacker, leading the platoon in its lane; cutin: it changes into the platoon's lane
 #: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car (see `maneuvers`)
-MANEUVERS = ("inlane", "cutin", "cutout")
-#: the car each maneuver adds: a benign lead car ahead of the platoon, or the obstacle the attacker reveals
-OTHER_CAR = {"cutin": "lead", "cutout": "obstacle"}
-#: scenario keys each maneuver reads (the others have no effect there and are not stored with it)
-MANEUVER_KEYS = {
-    "inlane": (),
-    "cutin": ("maneuver", "cutin_follower", "cutin_offset_m", "lane_change_s", "sublane"),
-    "cutout": ("maneuver", "obstacle_distance_m", "obstacle_speed_mps", "lane_change_s", "sublane"),
-}
+MANEUVERS = tuple(MANEUVER_CLASSES)
 
 
 @dataclass(frozen=True)
@@ -173,9 +166,11 @@ class EpisodeConfig:
             raise ConfigError("scenario.sublane", self.sublane, "true or false")
         if self.sublane and self.lane_change_s == 0.0:
             raise ConfigError("scenario.lane_change_s", 0.0, "more than 0 s with scenario.sublane (it sets the lateral speed)")
-        fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 3000.0, "metres"))
+        fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 5000.0,
+                                                "metres", low_open=True))
         fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,
                                                f"m/s (at most the target speed, {self.speed_mps:g})"))
+        self.maneuver_class.check(self)
 
     @property
     def attack_start_step(self) -> int:
@@ -217,8 +212,13 @@ class EpisodeConfig:
     @property
     def vehicle_ids(self) -> tuple[str, ...]:
         """The attacker v0, the followers v1..vN, then the maneuver's other car (lead or obstacle), if any."""
-        other = (OTHER_CAR[self.maneuver],) if self.maneuver in OTHER_CAR else ()
-        return tuple(f"v{i}" for i in range(self.followers + 1)) + other
+        other = self.maneuver_class.other_car
+        return tuple(f"v{i}" for i in range(self.followers + 1)) + ((other,) if other else ())
+
+    @property
+    def maneuver_class(self) -> type:
+        """The attacker's maneuver (a class of `maneuvers`)."""
+        return MANEUVER_CLASSES[self.maneuver]
 
     # --- TOML/JSON round trip -----------------------------------------------------------------
 
@@ -229,8 +229,8 @@ class EpisodeConfig:
             del scenario["warmup_s"]
         if not self.sumo_driven:  # only SUMO's models read what the attacker declares
             del scenario["attacker_declared_decel_mps2"]
-        for key in set(MANEUVER_KEYS["cutin"] + MANEUVER_KEYS["cutout"]) - set(MANEUVER_KEYS[self.maneuver]):
-            del scenario[key]
+        for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
+            del scenario[key]  # a maneuver's settings have no effect on another
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         return {"scenario": scenario, "vehicle": dataclasses.asdict(self.vehicle), "controller": controller}

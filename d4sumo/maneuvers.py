@@ -22,13 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .attacks import AttackFamily, Parameter
-from .config import EpisodeConfig
 from .errors import ConfigError
+
+if TYPE_CHECKING:
+    from .config import EpisodeConfig
 
 #: the gap a car with nobody ahead in its lane sees [m]: beyond any ACC's range, and finite for rtamt
 FREE_ROAD_GAP_M = 1000.0
@@ -48,7 +50,7 @@ class Car:
     speed_mps: float
 
 
-def initial_state(config: EpisodeConfig) -> tuple[list[float], list[float]]:
+def initial_state(config: "EpisodeConfig") -> tuple[list[float], list[float]]:
     """Front-bumper positions and speeds at t = 0 of a column of followers + 1 cars in one lane, front to
     back, spaced at the setpoint (the attacker and the followers; in a cut-in, the benign lead and the followers)."""
     n = config.followers + 1
@@ -79,12 +81,19 @@ class Maneuver:
     name = "inlane"
     lateral = False  # whether the attacker changes lanes
     lanes_needed = 1
+    other_car: str | None = None  # the id of the car the maneuver adds to the attacker and the followers
+    other_cruises = False  # that car cruises at the target speed (else it holds its own constant speed)
+    settings: tuple[str, ...] = ()  # the scenario keys the maneuver reads
 
-    def __init__(self, config: EpisodeConfig):
+    def __init__(self, config: "EpisodeConfig"):
         self.config = config
         self.ids = config.vehicle_ids
         self.length_m = config.vehicle.length_m
         self.attacker_lane = self.start_lanes()[0]
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        """Refuse settings this maneuver cannot play (each value's own range is checked by the config)."""
 
     def cars(self) -> list[Car]:
         """Every car at t = 0, in the order of ``config.vehicle_ids``."""
@@ -113,6 +122,7 @@ class LaneChange(Maneuver):
 
     lateral = True
     lanes_needed = 2
+    settings = ("maneuver", "lane_change_s", "sublane")
 
     def family(self, longitudinal: AttackFamily) -> AttackFamily:
         return LaneChangeAttack(longitudinal, self.config.duration_s)
@@ -134,6 +144,9 @@ class LaneChange(Maneuver):
 
 class CutIn(LaneChange):
     name = "cutin"
+    other_car = "lead"
+    other_cruises = True
+    settings = (*LaneChange.settings, "cutin_follower", "cutin_offset_m")
 
     def cars(self) -> list[Car]:
         positions, speeds = initial_state(self.config)  # the benign lead where the paper's attacker would be
@@ -148,6 +161,16 @@ class CutIn(LaneChange):
 
 class CutOut(LaneChange):
     name = "cutout"
+    other_car = "obstacle"
+    settings = (*LaneChange.settings, "obstacle_distance_m", "obstacle_speed_mps")
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        closed = (config.speed_mps - config.obstacle_speed_mps) * config.attack_start_s  # at most, cruising
+        if config.obstacle_distance_m <= closed:
+            raise ConfigError("scenario.obstacle_distance_m", config.obstacle_distance_m,
+                              f"more than the attacker may close on the obstacle during the {config.warmup_s:g} s warm-up "
+                              f"({closed:g} m), or it hits it before the attack starts")
 
     def cars(self) -> list[Car]:
         column = super().cars()
@@ -158,11 +181,12 @@ class CutOut(LaneChange):
         return 1
 
 
-_MANEUVERS = {m.name: m for m in (Maneuver, CutIn, CutOut)}
+#: every maneuver by name: a new kind of attacker is a new class here
+MANEUVERS: dict[str, type[Maneuver]] = {m.name: m for m in (Maneuver, CutIn, CutOut)}
 
 
-def maneuver_of(config: EpisodeConfig) -> Maneuver:
-    return _MANEUVERS[config.maneuver](config)
+def maneuver_of(config: "EpisodeConfig") -> Maneuver:
+    return MANEUVERS[config.maneuver](config)
 
 
 class LaneChangeAttack(AttackFamily):
@@ -192,7 +216,7 @@ class AttackPlan:
     lane_change_step: int | None = None
 
 
-def attack_plan(family: AttackFamily | None, params, config: EpisodeConfig) -> AttackPlan:
+def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") -> AttackPlan:
     """The plan of an attack that begins after the warm-up (if any): the longitudinal signal, and the
     lane change at the step nearest to t_lc_s after the attack's start."""
     from .attacks import attack_signal
@@ -205,8 +229,8 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeConfig) -> A
     return AttackPlan(u, step if step < config.steps else None)
 
 
-def check_road_lanes(config: EpisodeConfig, road_name: str, lanes: int) -> None:
-    maneuver = _MANEUVERS[config.maneuver]
+def check_road_lanes(config: "EpisodeConfig", road_name: str, lanes: int) -> None:
+    maneuver = MANEUVERS[config.maneuver]
     if lanes < maneuver.lanes_needed:
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road with at least {maneuver.lanes_needed} lanes ({road_name} has {lanes}), or maneuver inlane")

@@ -121,7 +121,7 @@ class Platoon:
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
         n = config.followers + 1
         #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
-        self._others = [(i, CruiseControl(cruise_params, config.speed_mps, dt) if config.maneuver == "cutin" else None,
+        self._others = [(i, CruiseControl(cruise_params, config.speed_mps, dt) if self.maneuver.other_cruises else None,
                          Actuator(vehicle, dt, attacker_max_speed_mps)) for i, vid in enumerate(self.ids[n:], start=n)]
         #: the cars Python commands (the attacker, the Python-commanded followers, the other car): advance
         #: returns their speeds
@@ -263,7 +263,7 @@ def integrate(config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mp
     the paper's maneuver (lane changes need SUMO)."""
     if config.sumo_driven:
         raise ConfigError("controller.class", config.system_label, "Python controllers only: this runs without SUMO")
-    if config.maneuver != "inlane":
+    if config.maneuver_class.lateral:
         raise ConfigError("scenario.maneuver", config.maneuver, "inlane: lane changes need SUMO")
     platoon = Platoon(config, attack_u, attacker_max_speed_mps)
     positions, speeds = initial_state(config)

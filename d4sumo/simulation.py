@@ -169,7 +169,7 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     ]
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
-    if config.maneuver != "inlane" and config.lane_change_s > 0:  # the attacker moves across over this time
+    if config.maneuver_class.lateral and config.lane_change_s > 0:  # the attacker moves across over this time
         if config.sublane:  # its lateral speed (the vehicle type's maxSpeedLat) sets the duration
             cmd += ["--lateral-resolution", repr(SUBLANE_RESOLUTION_M)]
         else:
@@ -201,7 +201,7 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
         attacker_type = ATTACKER_VTYPE_ID
         api.vehicletype.copy(VTYPE_ID, attacker_type)
         api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
-        if config.sublane and config.maneuver != "inlane":
+        if config.sublane and config.maneuver_class.lateral:
             api.vehicletype.setMaxSpeedLat(attacker_type, road.lane_width_m / config.lane_change_s)
     n = config.followers + 1
     type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]

@@ -22,8 +22,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .config import OTHER_CAR
 from .errors import ConfigError
+from .maneuvers import MANEUVERS
 from .trace import Trace
 
 
@@ -40,7 +40,7 @@ def lane_formula(d_safe_m: float = 0.0) -> str:
 
 
 def default_formula(maneuver: str, followers: int, d_safe_m: float = 0.0) -> str:
-    return paper_formula(followers, d_safe_m) if maneuver == "inlane" else lane_formula(d_safe_m)
+    return lane_formula(d_safe_m) if MANEUVERS[maneuver].lateral else paper_formula(followers, d_safe_m)
 
 
 def psi_robustness(trace: Trace, d_safe_m: float = 0.0) -> float:
@@ -67,16 +67,17 @@ def trace_signals(followers: int, maneuver: str = "inlane") -> tuple[str, ...]:
     cars = _car_ids(followers, maneuver)
     names = [f"{kind}_{c}" for kind in ("pos", "speed", "accel", "cmd", "gap") for c in cars]
     names += ["victim_gap", "attacker_gap"]
-    if maneuver == "inlane":
-        names += [f"gap_{i}" for i in range(followers)]
-    else:
+    if MANEUVERS[maneuver].lateral:
         names += [f"y_{c}" for c in cars]
+    else:  # the paper's column of cars
+        names += [f"gap_{i}" for i in range(followers)]
     names += [f"mode_v{i}" for i in range(1, followers + 1)]
     return tuple(names)
 
 
 def _car_ids(followers: int, maneuver: str) -> list[str]:
-    return [f"v{i}" for i in range(followers + 1)] + ([OTHER_CAR[maneuver]] if maneuver in OTHER_CAR else [])
+    other = MANEUVERS[maneuver].other_car
+    return [f"v{i}" for i in range(followers + 1)] + ([other] if other else [])
 
 
 class Specification:
@@ -171,8 +172,9 @@ def _check_time_bounds(ast, formula: str, step_s: float, duration_s: float | Non
 
 def _signal_help(followers: int, maneuver: str) -> str:
     cars = _car_ids(followers, maneuver)
-    per_car = f"pos_X, speed_X, accel_X, cmd_X, gap_X{', y_X' if maneuver != 'inlane' else ''} (X = {', '.join(cars)})"
-    column = f", gap_I (I = 0..{followers - 1})" if maneuver == "inlane" else ""
+    lateral = MANEUVERS[maneuver].lateral
+    per_car = f"pos_X, speed_X, accel_X, cmd_X, gap_X{', y_X' if lateral else ''} (X = {', '.join(cars)})"
+    column = "" if lateral else f", gap_I (I = 0..{followers - 1})"
     return f"{per_car}, victim_gap, attacker_gap{column}, mode_vI (I = 1..{followers})"
 
 

@@ -8,7 +8,7 @@ A sweep file is TOML:
     setpoint_m = [3, 5, 7]
     speed_mps = [20, 25, 30]
     start = ["rest", "steady"]
-    maneuver = ["inlane", "cutin"]      # and cutin_follower, cutin_offset_m, lane_change_s, obstacle_*: optional
+    maneuver = ["inlane", "cutin"]      # optional, and its settings: cutin_follower, cutin_offset_m, lane_change_s, ...
     controller = ["switching", "timegap", "sumo:ACC", {class = "sumo:IDM", tau = 1.5}]   # optional
     attack = ["knots"]
     optimizer = ["bo", "ce"]
@@ -44,14 +44,15 @@ from .campaign import Campaign, CampaignRunner, Evaluator, SampleResult, stored_
 from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
+from .maneuvers import MANEUVERS
 from .scenarios import NetworkSource, build_road, network_source
 from .simulation import check_episode
 from .store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
 
-SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start", "maneuver", "cutin_follower",
-                      "cutin_offset_m", "lane_change_s", "obstacle_distance_m", "obstacle_speed_mps")
+SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start",
+                      *dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings))  # maneuver, cutin_follower, ...
 GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "attack", "optimizer", "seed")
 #: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
 #: table, or a list of them for a mixed platoon)

@@ -113,10 +113,14 @@ def test_maneuver_settings_are_checked_and_only_the_ones_in_use_are_part_of_the_
                           ({"maneuver": "cutin", "lane_change_s": 1.01}, "scenario.lane_change_s"),
                           ({"maneuver": "cutin", "lane_change_s": 0.0, "sublane": True}, "scenario.lane_change_s"),
                           ({"maneuver": "cutin", "sublane": "yes"}, "scenario.sublane"),
-                          ({"maneuver": "cutout", "obstacle_speed_mps": 30.0}, "scenario.obstacle_speed_mps")):
+                          ({"maneuver": "cutout", "obstacle_speed_mps": 30.0}, "scenario.obstacle_speed_mps"),
+                          ({"maneuver": "cutout", "obstacle_distance_m": 0.0}, "scenario.obstacle_distance_m"),
+                          # from the 15 s warm-up the cruising attacker would reach a stopped car 150 m ahead
+                          ({"maneuver": "cutout", "start": "warmup"}, "scenario.obstacle_distance_m")):
         with pytest.raises(ConfigError) as e:
             EpisodeConfig(**kwargs)
         assert e.value.field == field
+    assert EpisodeConfig(maneuver="cutout", start="warmup", obstacle_distance_m=400.0).obstacle_distance_m == 400.0
     keys = set(EpisodeConfig().to_dict()["scenario"])
     assert keys == {"network", "followers", "setpoint_m", "speed_mps", "start", "step_s", "duration_s"}
     assert EpisodeConfig(cutin_offset_m=3.0).to_dict() == EpisodeConfig().to_dict()  # no effect: not stored
