@@ -14,7 +14,11 @@ import numpy as np
 
 from .config import EpisodeConfig
 from .errors import ConfigError
+from .maneuvers import MANEUVERS
 from .store import Store
+
+#: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart
+MANEUVER_SETTINGS = tuple(dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"))
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,7 @@ class Record:
     attack_start_s: float = 0.0  # simulation time at which the attack starts (after a warm-up, else 0)
     system: str = "switching"  # the system under test: its controller(s), see EpisodeConfig.system_label
     maneuver: str = "inlane"  # the attacker's maneuver: inlane (the paper's), cutin or cutout
+    maneuver_settings: str = ""  # its settings ("cutin_follower=2, cutin_offset_m=0.0, lane_change_s=2.0")
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -58,7 +63,7 @@ class Record:
     def configuration(self) -> tuple:
         """What makes two campaigns different experiments (the seed does not)."""
         return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,
-                self.system, self.maneuver, self.attack, self.optimizer)
+                self.system, self.maneuver, self.maneuver_settings, self.attack, self.optimizer)
 
 
 def attack_start_s(scenario: dict) -> float:
@@ -90,6 +95,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     float(sc["speed_mps"]), sc["start"], d["attack"]["family"], d["optimizer"], d["seed"],
                     d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
                     s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id], sc.get("maneuver", "inlane"),
+                    ", ".join(f"{k}={v}" for k, v in sc.items() if k in MANEUVER_SETTINGS),
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
@@ -105,7 +111,7 @@ def group(records: Iterable[Record], *fields: str) -> dict[tuple, list[Record]]:
 
 def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict[tuple, list[Record]]]:
     """Group by ``fields``, led by the maneuver and the system under test when the records hold more than one."""
-    lead = tuple(f for f in ("maneuver", "system") if len({getattr(r, f) for r in records}) > 1)
+    lead = tuple(f for f in ("maneuver", "maneuver_settings", "system") if len({getattr(r, f) for r in records}) > 1)
     return lead + fields, group(records, *lead, *fields)
 
 
@@ -377,9 +383,10 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
 
     wins = [r for r in records if r.outcome == "success" and r.attack in ("knots", "spline")
             and r.time_from_attack_start_s is not None and r.time_from_attack_start_s > 0]  # else no knot mattered
-    if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s) for r in wins}) != 1:
+    if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s, r.maneuver == "inlane") for r in wins}) != 1:
         return None
-    X = np.array([r.params for r in wins], dtype=float)
+    # the knots only: a lane-changing attack's last parameter is its lane change time, not a knot
+    X = np.array([r.params if r.maneuver == "inlane" else r.params[:-1] for r in wins], dtype=float)
     delta_s = wins[0].delta_s or 6.0
     knot_times_s = np.arange(X.shape[1]) * delta_s
     collision_times_s = np.array([r.time_from_attack_start_s for r in wins], dtype=float)

@@ -117,7 +117,6 @@ class EpisodeConfig:
     cutin_follower: int = 1  # cutin: the attacker starts beside, and aims in front of, this follower (1 = v1)
     cutin_offset_m: float = 0.0  # cutin: the attacker's rear bumper ahead of that follower's front bumper at t = 0
     lane_change_s: float = 2.0  # cutin/cutout: how long SUMO takes to move the attacker across (0: in one step)
-    sublane: bool = False  # cutin/cutout: SUMO's sublane model moves the attacker sideways (its lateral speed)
     obstacle_distance_m: float = 150.0  # cutout: bumper gap from the attacker to the car ahead of it at t = 0
     obstacle_speed_mps: float = 0.0  # cutout: the constant speed of that car (0: stopped)
 
@@ -156,16 +155,12 @@ class EpisodeConfig:
                                                          "m/s^2 (positive)", low_open=True))
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
-        fix("cutin_follower", check_int("scenario.cutin_follower", self.cutin_follower, 1, self.followers,
+        fix("cutin_follower", check_int("scenario.cutin_follower", self.cutin_follower, 1, MAX_FOLLOWERS,
                                         f"(a follower: 1 for v1 .. {self.followers} for v{self.followers})"))
         fix("cutin_offset_m", check_number("scenario.cutin_offset_m", self.cutin_offset_m, -500.0, 500.0, "metres"))
         fix("lane_change_s", check_number("scenario.lane_change_s", self.lane_change_s, 0.0, 20.0, "seconds"))
         if not _on_grid(self.lane_change_s, self.step_s):  # SUMO rounds it to whole steps, silently
             raise ConfigError("scenario.lane_change_s", self.lane_change_s, f"a whole number of steps of {self.step_s:g} s")
-        if not isinstance(self.sublane, bool):
-            raise ConfigError("scenario.sublane", self.sublane, "true or false")
-        if self.sublane and self.lane_change_s == 0.0:
-            raise ConfigError("scenario.lane_change_s", 0.0, "more than 0 s with scenario.sublane (it sets the lateral speed)")
         fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 5000.0,
                                                 "metres", low_open=True))
         fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,

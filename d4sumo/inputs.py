@@ -4,7 +4,7 @@ A document is the tables of a config file:
 
     [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s, maneuver
                  (lead, cutin, cutout) and its settings (cutin_follower, cutin_offset_m, lane_change_s,
-                 sublane, obstacle_distance_m, obstacle_speed_mps)
+                 obstacle_distance_m, obstacle_speed_mps)
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
     [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon

@@ -122,7 +122,7 @@ class LaneChange(Maneuver):
 
     lateral = True
     lanes_needed = 2
-    settings = ("maneuver", "lane_change_s", "sublane")
+    settings = ("maneuver", "lane_change_s")
 
     def family(self, longitudinal: AttackFamily) -> AttackFamily:
         return LaneChangeAttack(longitudinal, self.config.duration_s)
@@ -147,6 +147,17 @@ class CutIn(LaneChange):
     other_car = "lead"
     other_cruises = True
     settings = (*LaneChange.settings, "cutin_follower", "cutin_offset_m")
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        if config.cutin_follower > config.followers:
+            raise ConfigError("scenario.cutin_follower", config.cutin_follower,
+                              f"a follower: 1 for v1 .. {config.followers} for v{config.followers}")
+        positions, _ = initial_state(config)
+        rear = positions[config.cutin_follower] + config.cutin_offset_m  # the attacker's rear bumper
+        if rear < 0.0:  # SUMO would read a negative position from the road's end
+            raise ConfigError("scenario.cutin_offset_m", config.cutin_offset_m,
+                              f"at least {-(rear - config.cutin_offset_m):g} m: the attacker starts on the road")
 
     def cars(self) -> list[Car]:
         positions, speeds = initial_state(self.config)  # the benign lead where the paper's attacker would be

@@ -36,7 +36,6 @@ VTYPE_ID = "d4car"
 ATTACKER_VTYPE_ID = "d4attacker"
 SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
 LANE_CHANGE_MODE_OFF = 0  # no lane change of SUMO's own; a TraCI request is carried out without regard to others
-SUBLANE_RESOLUTION_M = 0.4  # width of SUMO's sublanes with scenario.sublane
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
 
 
@@ -170,10 +169,7 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
     if config.maneuver_class.lateral and config.lane_change_s > 0:  # the attacker moves across over this time
-        if config.sublane:  # its lateral speed (the vehicle type's maxSpeedLat) sets the duration
-            cmd += ["--lateral-resolution", repr(SUBLANE_RESOLUTION_M)]
-        else:
-            cmd += ["--lanechange.duration", repr(config.lane_change_s)]
+        cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
@@ -197,12 +193,10 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
     api.vehicletype.setSpeedDeviation(VTYPE_ID, 0.0)
     types = follower_types(config)
     attacker_type = VTYPE_ID
-    if types or config.sublane:  # the attacker's own type: what SUMO's models believe of its brakes, its lateral speed
+    if types:  # the attacker's own type: what SUMO's models believe of its brakes
         attacker_type = ATTACKER_VTYPE_ID
         api.vehicletype.copy(VTYPE_ID, attacker_type)
         api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
-        if config.sublane and config.maneuver_class.lateral:
-            api.vehicletype.setMaxSpeedLat(attacker_type, road.lane_width_m / config.lane_change_s)
     n = config.followers + 1
     type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
     type_ids += [VTYPE_ID] * (len(config.vehicle_ids) - n)  # the benign lead or the obstacle

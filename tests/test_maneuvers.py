@@ -110,9 +110,9 @@ def test_the_lane_change_time_joins_the_attack_box_and_becomes_a_step():
 def test_maneuver_settings_are_checked_and_only_the_ones_in_use_are_part_of_the_campaign():
     for kwargs, field in (({"maneuver": "swerve"}, "scenario.maneuver"),
                           ({"maneuver": "cutin", "cutin_follower": 4}, "scenario.cutin_follower"),
+                          # regression: SUMO reads a negative start position from the road's end
+                          ({"maneuver": "cutin", "cutin_follower": 3, "cutin_offset_m": -45.0}, "scenario.cutin_offset_m"),
                           ({"maneuver": "cutin", "lane_change_s": 1.01}, "scenario.lane_change_s"),
-                          ({"maneuver": "cutin", "lane_change_s": 0.0, "sublane": True}, "scenario.lane_change_s"),
-                          ({"maneuver": "cutin", "sublane": "yes"}, "scenario.sublane"),
                           ({"maneuver": "cutout", "obstacle_speed_mps": 30.0}, "scenario.obstacle_speed_mps"),
                           ({"maneuver": "cutout", "obstacle_distance_m": 0.0}, "scenario.obstacle_distance_m"),
                           # from the 15 s warm-up the cruising attacker would reach a stopped car 150 m ahead
@@ -124,8 +124,9 @@ def test_maneuver_settings_are_checked_and_only_the_ones_in_use_are_part_of_the_
     keys = set(EpisodeConfig().to_dict()["scenario"])
     assert keys == {"network", "followers", "setpoint_m", "speed_mps", "start", "step_s", "duration_s"}
     assert EpisodeConfig(cutin_offset_m=3.0).to_dict() == EpisodeConfig().to_dict()  # no effect: not stored
+    assert EpisodeConfig(followers=1, cutin_follower=2).followers == 1  # no cut-in: its follower is not checked
     cutin = EpisodeConfig(maneuver="cutin").to_dict()["scenario"]
-    assert {"maneuver", "cutin_follower", "cutin_offset_m", "lane_change_s", "sublane"} <= set(cutin)
+    assert {"maneuver", "cutin_follower", "cutin_offset_m", "lane_change_s"} <= set(cutin)
     assert "obstacle_speed_mps" not in cutin
     assert EpisodeConfig.from_dict(EpisodeConfig(maneuver="cutout", obstacle_speed_mps=3.0).to_dict()).obstacle_speed_mps == 3.0
 
