@@ -89,7 +89,6 @@ class Maneuver:
         self.config = config
         self.ids = config.vehicle_ids
         self.length_m = config.vehicle.length_m
-        self.attacker_lane = self.start_lanes()[0]
 
     @classmethod
     def check(cls, config: "EpisodeConfig") -> None:
@@ -241,7 +240,7 @@ def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") ->
 
 
 def check_road_lanes(config: "EpisodeConfig", road_name: str, lanes: int) -> None:
-    maneuver = MANEUVERS[config.maneuver]
+    maneuver = config.maneuver_class
     if lanes < maneuver.lanes_needed:
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road with at least {maneuver.lanes_needed} lanes ({road_name} has {lanes}), or maneuver inlane")
