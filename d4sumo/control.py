@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Protocol
 
+import numpy as np
+
 from .errors import ConfigError, check_number
 
 #: Mode values recorded in traces (signal ``mode_vI``).
@@ -297,3 +299,105 @@ def build_params(cls: type, values: Mapping[str, Any]) -> Any:
     except TypeError as exc:
         raise ConfigError("controller", dict(values), str(exc)) from None
 
+
+
+# --- the same laws over arrays: many episodes (and followers) in one numpy operation ----------------
+#
+# A batch of episodes played side by side (`batch`) runs these instead of one object per car. Each
+# performs, element by element, exactly the floating-point operations of its scalar counterpart above,
+# in the same order, so an episode played in a batch is bit for bit the episode played alone (a test
+# checks it). Every method takes and returns arrays of one shape (episodes, or episodes x cars).
+
+class ActuatorArray:
+    """`Actuator` over an array of cars; ``max_speed_mps`` broadcasts against the cars' shape."""
+
+    def __init__(self, vehicle: VehicleParams, step_s: float, shape: tuple[int, ...], max_speed_mps):
+        self.accel_max = vehicle.max_accel_mps2
+        self.decel_max = vehicle.max_decel_mps2
+        lag = vehicle.actuator_lag_s
+        self.alpha = 1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag)
+        self.step_s = step_s
+        self.max_speed_mps = np.broadcast_to(np.asarray(max_speed_mps, dtype=float), shape)
+        self.accel_mps2 = np.zeros(shape)
+
+    def apply(self, u: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+        target = np.where(u >= 0.0, u * self.accel_max, u * self.decel_max)
+        accel = self.accel_mps2 + (target - self.accel_mps2) * self.alpha
+        v = speed_mps + accel * self.step_s
+        clamped = np.minimum(np.maximum(v, 0.0), self.max_speed_mps)
+        hit = clamped != v
+        if hit.any():  # what the car actually did: no wind-up while clamped
+            accel = np.where(hit, (clamped - speed_mps) / self.step_s, accel)
+        self.accel_mps2 = accel
+        return clamped
+
+
+class CruiseArray:
+    """`CruiseControl` over an array of cars; only the cars in ``active`` use it (and change its state)."""
+
+    def __init__(self, params: SwitchingParams, target_speed_mps: float, step_s: float, shape: tuple[int, ...]):
+        self.kp, self.ki, self.kd = params.cruise_kp, params.cruise_ki, params.cruise_kd
+        self.clamp = params.cruise_integral_clamp
+        self.limit = params.cruise_output_limit_mps2
+        self.step_s = step_s
+        self.target_mps = target_speed_mps
+        self.integral = np.zeros(shape)
+        self.prev_error = np.zeros(shape)
+        self.engaged = np.zeros(shape, dtype=bool)  # False: prev_error is None (no derivative kick)
+
+    def disengage(self, where: np.ndarray) -> None:
+        self.engaged &= ~where
+
+    def reset(self, where: np.ndarray) -> None:
+        self.integral = np.where(where, 0.0, self.integral)
+        self.engaged &= ~where
+
+    def acceleration(self, speed_mps: np.ndarray, active: np.ndarray) -> np.ndarray:
+        e = self.target_mps - speed_mps
+        i = np.minimum(np.maximum(self.integral + e * self.step_s, -self.clamp), self.clamp)
+        d = np.where(self.engaged, (e - self.prev_error) / self.step_s, 0.0)
+        self.integral = np.where(active, i, self.integral)
+        self.prev_error = np.where(active, e, self.prev_error)
+        self.engaged |= active
+        a = self.kp * e + self.ki * i + self.kd * d
+        return np.minimum(np.maximum(a, -self.limit), self.limit)
+
+
+def acceleration_to_command_array(a_mps2: np.ndarray, vehicle: VehicleParams) -> np.ndarray:
+    """`acceleration_to_command` over an array."""
+    u = np.where(a_mps2 >= 0.0, a_mps2 / vehicle.max_accel_mps2, a_mps2 / vehicle.max_decel_mps2)
+    return np.minimum(np.maximum(u, -1.0), 1.0)
+
+
+class SwitchingArray:
+    """`SwitchingController` (or `TimeGapController`) over an array of followers that share its
+    parameters: built from one such controller, whose ``desired_gap_m`` takes arrays."""
+
+    def __init__(self, controller: SwitchingController, shape: tuple[int, ...], step_s: float):
+        self.desired_gap_m = controller.desired_gap_m
+        self.cruise = CruiseArray(controller.params, controller.target_speed_mps, step_s, shape)
+        self.mode = np.full(shape, MODE_CC)
+        self._mode_known = False
+        self._eps_x = controller._eps_x
+        self._cc_speed, self._acc_speed = controller._cc_speed, controller._acc_speed
+        self._acc_kp, self._acc_kv = controller._acc_kp, controller._acc_kv
+        self._accel_max, self._decel_max = controller._accel_max, controller._decel_max
+
+    def command(self, gap_m: np.ndarray, speed_mps: np.ndarray, lead_speed_mps: np.ndarray) -> np.ndarray:
+        desired = self.desired_gap_m(speed_mps)
+        cc = (gap_m >= desired + self._eps_x - GAP_TOLERANCE_M) | (speed_mps >= self._cc_speed)
+        acc = ~cc & (gap_m <= desired + GAP_TOLERANCE_M) & (speed_mps <= self._acc_speed)
+        held = self.mode if self._mode_known else MODE_CC  # inside the hysteresis band at start: cruise
+        mode = np.where(cc, MODE_CC, np.where(acc, MODE_ACC, held))
+        self.cruise.disengage((mode != self.mode) & (mode == MODE_ACC))
+        self.mode = mode
+        self._mode_known = True
+        cruising = mode == MODE_CC
+        a_cc = self.cruise.acceleration(speed_mps, cruising)
+        a = np.where(cruising, a_cc, self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps))
+        u = np.where(a >= 0.0, a / self._accel_max, a / self._decel_max)
+        return np.minimum(np.maximum(u, -1.0), 1.0)
+
+
+#: controller classes whose law also runs over arrays (exactly these classes: a subclass may change the law)
+ARRAY_KERNELS: dict[type, type] = {SwitchingController: SwitchingArray, TimeGapController: SwitchingArray}

@@ -112,16 +112,12 @@ class Platoon:
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
         vehicle, dt = config.vehicle, config.step_s
         self.followers = followers_of(config)
-        # The attacker is the same kind of car: it cruises with the followers' PID gains when they
-        # all run the paper's controller (or its time-gap variant), with the default gains otherwise.
-        uniform = isinstance(config.controller, ControllerConfig) and not config.controller.sumo_model
-        params = config.controller.build_params() if uniform else None
-        cruise_params = params if isinstance(params, SwitchingParams) else SwitchingParams()
-        self.attacker_cruise = CruiseControl(cruise_params, config.speed_mps, dt)
+        gains = cruise_params(config)  # the attacker is the same kind of car
+        self.attacker_cruise = CruiseControl(gains, config.speed_mps, dt)
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
         n = config.followers + 1
         #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
-        self._others = [(i, CruiseControl(cruise_params, config.speed_mps, dt) if self.maneuver.other_cruises else None,
+        self._others = [(i, CruiseControl(gains, config.speed_mps, dt) if self.maneuver.other_cruises else None,
                          Actuator(vehicle, dt, attacker_max_speed_mps)) for i, vid in enumerate(self.ids[n:], start=n)]
         #: the cars Python commands (the attacker, the Python-commanded followers, the other car): advance
         #: returns their speeds
@@ -177,77 +173,96 @@ class Platoon:
         """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands (and, for a
         lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
         gap of every pair of cars that followed each other."""
-        n_samples = times_s.size
-        ids = self.ids
-        accel = np.zeros_like(speeds)
-        accel[1:] = np.diff(speeds, axis=0) / self.config.step_s
-        cmds = np.empty((n_samples, len(ids)))
-        recorded = _hold_last(np.array(self.commands, dtype=float).reshape(-1, len(self.commanded)), n_samples)
-        cmds[:, list(self.commanded)] = recorded
-        vehicle = self.config.vehicle
-        for i, follower in enumerate(self.followers, start=1):
-            if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
-                ahead = np.append(accel[1:, i], accel[-1, i])
-                u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
-                cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
-        signals: dict[str, np.ndarray] = {}
-        for i, vid in enumerate(ids):
-            signals[f"pos_{vid}"] = positions[:, i]
-            signals[f"speed_{vid}"] = speeds[:, i]
-            signals[f"accel_{vid}"] = accel[:, i]
-            signals[f"cmd_{vid}"] = cmds[:, i]
-        if self.maneuver.lateral:
-            min_gaps = self._lane_gaps(signals, lateral_m)
-        else:
-            min_gaps = self._column_gaps(signals, positions)
-        if self._with_mode and self.modes:
-            modes = _hold_last(np.array(self.modes, dtype=float), n_samples)
-            with_mode = [i for i, f in enumerate(self.followers, start=1) if f.has_mode]
-            for column, i in enumerate(with_mode):
-                signals[f"mode_v{i}"] = modes[:, column]
-        return Trace(times_s=times_s, signals=signals, followers=self.config.followers), min_gaps
+        commands = np.array(self.commands, dtype=float).reshape(-1, len(self.commanded))
+        modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
+        return assemble_trace(self.config, self.followers, self.commanded, times_s, positions, speeds, commands, modes,
+                              self.pairs, lateral_m)
 
-    def _column_gaps(self, signals: dict, positions: np.ndarray) -> dict[str, float]:
-        """The paper's column v0, v1, .., vN: gap_I between vI and vI+1, vectorised (the same arithmetic as
-        the maneuver's pairs), and the named gaps every maneuver's trace has."""
-        n = positions.shape[1]
-        for i in range(n - 1):
-            signals[f"gap_{i}"] = positions[:, i] - self.length_m - positions[:, i + 1]
-        free = np.full(positions.shape[0], FREE_ROAD_GAP_M)
-        signals["gap_v0"] = free
-        for i in range(1, n):
-            signals[f"gap_v{i}"] = signals[f"gap_{i - 1}"]
-        signals["attacker_gap"] = signals["gap_0"]
-        signals["victim_gap"] = np.min([signals[f"gap_{i}"] for i in range(1, n - 1)], axis=0) if n > 2 else free
-        return {f"v{i}-v{i + 1}": float(signals[f"gap_{i}"].min()) for i in range(n - 1)}
 
-    def _lane_gaps(self, signals: dict, lateral_m: np.ndarray) -> dict[str, float]:
-        """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
-        pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions."""
-        ids, n_samples = self.ids, len(self.pairs)
-        gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
-        victim = np.full(n_samples, FREE_ROAD_GAP_M)
-        attacker = np.full(n_samples, FREE_ROAD_GAP_M)
-        min_gaps: dict[str, float] = {}
-        for k, pairs in enumerate(self.pairs):
-            for a, b, gap in pairs:
-                gaps[k, b] = min(gaps[k, b], gap)
-                if a == 0 or b == 0:
-                    attacker[k] = min(attacker[k], gap)
-                else:
-                    victim[k] = min(victim[k], gap)
-                name = f"{ids[a]}-{ids[b]}"
-                min_gaps[name] = min(min_gaps.get(name, gap), gap)
-        for i, vid in enumerate(ids):
-            signals[f"gap_{vid}"] = gaps[:, i]
-            signals[f"y_{vid}"] = lateral_m[:, i]
-        signals["victim_gap"] = victim
-        signals["attacker_gap"] = attacker
-        return min_gaps
+def cruise_params(config: EpisodeConfig) -> SwitchingParams:
+    """The gains the attacker (and a benign lead) cruise with: the followers' PID gains when they all
+    run the paper's controller (or its time-gap variant), the default gains otherwise."""
+    uniform = isinstance(config.controller, ControllerConfig) and not config.controller.sumo_model
+    params = config.controller.build_params() if uniform else None
+    return params if isinstance(params, SwitchingParams) else SwitchingParams()
 
-    @property
-    def length_m(self) -> float:
-        return self.config.vehicle.length_m
+
+def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int, ...], times_s: np.ndarray,
+                   positions: np.ndarray, speeds: np.ndarray, commands: np.ndarray, modes: np.ndarray | None,
+                   pairs: list[list[Pair]], lateral_m: np.ndarray | None) -> tuple[Trace, dict[str, float]]:
+    """The Trace of an episode from its sensed rows (samples x cars), the commands recorded per step
+    (steps x ``commanded`` cars) and the modes of the followers that have one (steps x those); for a
+    lane-changing maneuver also the pairs of each sample and each car's lateral position. With it the
+    minimum gap of every pair of cars that followed each other. One function for an episode played
+    alone or in a batch, so both give the same trace."""
+    n_samples = times_s.size
+    ids = config.vehicle_ids
+    accel = np.zeros_like(speeds)
+    accel[1:] = np.diff(speeds, axis=0) / config.step_s
+    cmds = np.empty((n_samples, len(ids)))
+    cmds[:, list(commanded)] = _hold_last(commands, n_samples)
+    vehicle = config.vehicle
+    for i, follower in enumerate(followers, start=1):
+        if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
+            ahead = np.append(accel[1:, i], accel[-1, i])
+            u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
+            cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
+    signals: dict[str, np.ndarray] = {}
+    for i, vid in enumerate(ids):
+        signals[f"pos_{vid}"] = positions[:, i]
+        signals[f"speed_{vid}"] = speeds[:, i]
+        signals[f"accel_{vid}"] = accel[:, i]
+        signals[f"cmd_{vid}"] = cmds[:, i]
+    if config.maneuver_class.lateral:
+        min_gaps = _lane_gaps(ids, signals, pairs, lateral_m)
+    else:
+        min_gaps = _column_gaps(config.vehicle.length_m, signals, positions)
+    if modes is not None and modes.size:
+        modes = _hold_last(modes, n_samples)
+        with_mode = [i for i, f in enumerate(followers, start=1) if f.has_mode]
+        for column, i in enumerate(with_mode):
+            signals[f"mode_v{i}"] = modes[:, column]
+    return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps
+
+
+def _column_gaps(length_m: float, signals: dict, positions: np.ndarray) -> dict[str, float]:
+    """The paper's column v0, v1, .., vN: gap_I between vI and vI+1, vectorised (the same arithmetic as
+    the maneuver's pairs), and the named gaps every maneuver's trace has."""
+    n = positions.shape[1]
+    for i in range(n - 1):
+        signals[f"gap_{i}"] = positions[:, i] - length_m - positions[:, i + 1]
+    free = np.full(positions.shape[0], FREE_ROAD_GAP_M)
+    signals["gap_v0"] = free
+    for i in range(1, n):
+        signals[f"gap_v{i}"] = signals[f"gap_{i - 1}"]
+    signals["attacker_gap"] = signals["gap_0"]
+    signals["victim_gap"] = np.min([signals[f"gap_{i}"] for i in range(1, n - 1)], axis=0) if n > 2 else free
+    return {f"v{i}-v{i + 1}": float(signals[f"gap_{i}"].min()) for i in range(n - 1)}
+
+
+def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lateral_m: np.ndarray) -> dict[str, float]:
+    """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
+    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions."""
+    n_samples = len(pairs)
+    gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
+    victim = np.full(n_samples, FREE_ROAD_GAP_M)
+    attacker = np.full(n_samples, FREE_ROAD_GAP_M)
+    min_gaps: dict[str, float] = {}
+    for k, sample in enumerate(pairs):
+        for a, b, gap in sample:
+            gaps[k, b] = min(gaps[k, b], gap)
+            if a == 0 or b == 0:
+                attacker[k] = min(attacker[k], gap)
+            else:
+                victim[k] = min(victim[k], gap)
+            name = f"{ids[a]}-{ids[b]}"
+            min_gaps[name] = min(min_gaps.get(name, gap), gap)
+    for i, vid in enumerate(ids):
+        signals[f"gap_{vid}"] = gaps[:, i]
+        signals[f"y_{vid}"] = lateral_m[:, i]
+    signals["victim_gap"] = victim
+    signals["attacker_gap"] = attacker
+    return min_gaps
 
 
 def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:

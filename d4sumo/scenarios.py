@@ -10,6 +10,7 @@ road without seeing the client's disk.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib.resources
 import json
@@ -40,6 +41,15 @@ class Road:
     speed_limit_mps: float  # the lowest limit along the chain
     lanes: int
     lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
+    copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
+
+    def route(self, copy: int = 0) -> tuple[str, ...]:
+        """The edges of one copy of the road."""
+        return self.route_edges if self.copies == 1 else tuple(f"{copy_prefix(copy)}{e}" for e in self.route_edges)
+
+
+def copy_prefix(copy: int) -> str:
+    return f"c{copy}_"
 
 
 def default_cache_dir() -> Path:
@@ -141,15 +151,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
     info_file = net_file.with_suffix(".json")
     info = _read_info(info_file) if net_file.is_file() else None
     if info is None:
-        try:
-            cache.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise SumoError(f"cannot create the network cache {cache} ({exc.strerror})") from None
-        with tempfile.TemporaryDirectory(dir=cache) as tmp:
-            nodes, edges = Path(tmp) / "road.nod.xml", Path(tmp) / "road.edg.xml"
-            nodes.write_bytes(source.nodes_xml)
-            edges.write_bytes(source.edges_xml)
-            _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
+        _build_net(source, net_file, netconvert)
         info = _describe(net_file)
         _write_atomic(info_file, json.dumps(info))
     return Road(
@@ -161,6 +163,76 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lanes=info["lanes"],
         lane_width_m=info["lane_width_m"],
     )
+
+
+def _build_net(source: NetworkSource, net_file: Path, netconvert: str | None = None) -> None:
+    try:
+        net_file.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SumoError(f"cannot create the network cache {net_file.parent} ({exc.strerror})") from None
+    with tempfile.TemporaryDirectory(dir=net_file.parent) as tmp:
+        nodes, edges = Path(tmp) / "road.nod.xml", Path(tmp) / "road.edg.xml"
+        nodes.write_bytes(source.nodes_xml)
+        edges.write_bytes(source.edges_xml)
+        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
+
+
+#: the largest batch of episodes one SUMO instance plays side by side
+MAX_COPIES = 64
+
+
+def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None) -> Road:
+    """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
+    named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
+    rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
+    with its y coordinates shifted, so a car drives exactly as on the road alone."""
+    if not 1 <= copies <= MAX_COPIES:
+        raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
+    source = name if isinstance(name, NetworkSource) else network_source(name, root)
+    road = build_road(source, cache_dir=cache_dir)
+    if copies == 1:
+        return road
+    copies = 1 << (copies - 1).bit_length()
+    nodes, edges = _side_by_side(source, copies)
+    copied = NetworkSource(f"{source.name}-x{copies}", nodes, edges)
+    net_file = road.net_file.parent / f"{copied.name}-{copied.digest}.net.xml"
+    if not net_file.is_file():
+        _build_net(copied, net_file)
+    return dataclasses.replace(road, net_file=net_file, copies=copies)
+
+
+def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes]:
+    """Node and edge XML of ``copies`` copies of a variant, each shifted in y past the one before."""
+    from xml.etree import ElementTree as ET
+
+    try:
+        nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
+    except ET.ParseError as exc:
+        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+    ys = [float(n.get("y", 0.0)) for n in nodes.iter("node")]
+    spacing = (max(ys) - min(ys) if ys else 0.0) + 100.0  # wider than any road of a few lanes
+
+    def shifted(shape: str, dy: float) -> str:
+        points = [p.split(",") for p in shape.split()]
+        return " ".join(",".join([p[0], repr(float(p[1]) + dy), *p[2:]]) for p in points)
+
+    out_nodes, out_edges = ET.Element(nodes.tag, nodes.attrib), ET.Element(edges.tag, edges.attrib)
+    for j in range(copies):
+        prefix, dy = copy_prefix(j), j * spacing
+        for node in nodes.iter("node"):
+            copy = ET.SubElement(out_nodes, "node", dict(node.attrib))
+            copy.set("id", prefix + node.get("id"))
+            copy.set("y", repr(float(node.get("y", 0.0)) + dy))
+            if node.get("shape"):
+                copy.set("shape", shifted(node.get("shape"), dy))
+        for edge in edges.iter("edge"):
+            copy = ET.SubElement(out_edges, "edge", dict(edge.attrib))
+            for key in ("id", "from", "to"):
+                copy.set(key, prefix + edge.get(key))
+            if edge.get("shape"):
+                copy.set("shape", shifted(edge.get("shape"), dy))
+            copy.extend(list(edge))
+    return ET.tostring(out_nodes), ET.tostring(out_edges)
 
 
 def _read_info(path: Path) -> dict | None:

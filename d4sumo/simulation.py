@@ -18,6 +18,7 @@ import re
 import subprocess
 import tempfile
 from pathlib import Path
+from typing import Callable, Sequence
 from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
@@ -25,8 +26,9 @@ import numpy as np
 from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
 from .maneuvers import CAR_WIDTH_M, AttackPlan, check_road_lanes, maneuver_of, occupied_lanes
-from .platoon import Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
-from .scenarios import Road, build_road, default_cache_dir, sumo_binary
+from .batch import PlatoonBatch, collided
+from .platoon import ControllerError, Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
+from .scenarios import MAX_COPIES, Road, batch_road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
 
 log = logging.getLogger(__name__)
@@ -177,11 +179,12 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     return cmd
 
 
-def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
-    """Insert every car of the maneuver, each in its lane, and hand Python the ones it commands."""
-    api.route.add(ROUTE_ID, list(road.route_edges))
-    api.vehicletype.copy("DEFAULT_VEHTYPE", VTYPE_ID)
+def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1) -> list[tuple[str, ...]]:
+    """Insert every car of the maneuver, each in its lane, and hand Python the ones it commands; with
+    ``episodes`` > 1, one platoon on each copy of the road (`scenarios.batch_road`). Returns each
+    platoon's SUMO vehicle ids, in the order of ``config.vehicle_ids`` (the same ids for one platoon)."""
     v = config.vehicle
+    api.vehicletype.copy("DEFAULT_VEHTYPE", VTYPE_ID)
     api.vehicletype.setLength(VTYPE_ID, v.length_m)
     api.vehicletype.setWidth(VTYPE_ID, CAR_WIDTH_M)
     api.vehicletype.setMinGap(VTYPE_ID, 0.0)
@@ -200,24 +203,32 @@ def load_platoon(api, config: EpisodeConfig, road: Road) -> None:
     n = config.followers + 1
     type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
     type_ids += [VTYPE_ID] * (len(config.vehicle_ids) - n)  # the benign lead or the obstacle
-    for car, type_id in zip(maneuver_of(config).cars(), type_ids):
-        api.vehicle.add(car.id, ROUTE_ID, typeID=type_id, depart="0", departLane=str(car.lane),
-                        departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
+    cars = maneuver_of(config).cars()
+    platoons = [config.vehicle_ids if episodes == 1 else tuple(f"{e}.{vid}" for vid in config.vehicle_ids)
+                for e in range(episodes)]
+    for e, ids in enumerate(platoons):
+        route = f"{ROUTE_ID}{e}" if episodes > 1 else ROUTE_ID
+        api.route.add(route, list(road.route(e)))
+        for vid, car, type_id in zip(ids, cars, type_ids):
+            api.vehicle.add(vid, route, typeID=type_id, depart="0", departLane=str(car.lane),
+                            departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
     api.simulationStep()  # inserts the cars: this state is t = 0
     present = set(api.vehicle.getIDList())
-    missing = [vid for vid in config.vehicle_ids if vid not in present]
+    missing = [vid for ids in platoons for vid in ids if vid not in present]
     if missing:
-        raise SumoError(f"SUMO did not insert {', '.join(missing)} on {road.name}")
-    for vid in config.vehicle_ids:
-        api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_OFF)
-    for vid in (config.vehicle_ids[0], *config.vehicle_ids[n:]):
-        api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
-    for vid, controller in zip(config.vehicle_ids[1:n], config.controllers):
-        if controller not in types:
+        raise SumoError(f"SUMO did not insert {', '.join(missing[:5])} on {road.name}")
+    for ids in platoons:
+        for vid in ids:
+            api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_OFF)
+        for vid in (ids[0], *ids[n:]):
             api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
-            continue
-        for key, value in types[controller][1].parameters().items():
-            api.vehicle.setParameter(vid, key, value)
+        for vid, controller in zip(ids[1:n], config.controllers):
+            if controller not in types:
+                api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
+                continue
+            for key, value in types[controller][1].parameters().items():
+                api.vehicle.setParameter(vid, key, value)
+    return platoons
 
 
 def simulate(
@@ -301,8 +312,9 @@ def _run(api, config: EpisodeConfig, platoon: Platoon, road: Road, lane_change_s
 class _Lateral:
     """The attacker's lane change, and where it is across the road at each step: the lanes it covers."""
 
-    def __init__(self, api, maneuver, road: Road):
+    def __init__(self, api, maneuver, road: Road, attacker: str = "v0"):
         self.api = api
+        self.attacker = attacker
         self.width = road.lane_width_m
         self.target = maneuver.target_lane()
         lanes = maneuver.start_lanes()
@@ -314,12 +326,124 @@ class _Lateral:
 
     def change_lane(self) -> None:
         # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds for the episode
-        self.api.vehicle.changeLane("v0", self.target, 1e6)
+        self.api.vehicle.changeLane(self.attacker, self.target, 1e6)
 
     def sense(self) -> list[tuple[int, ...]]:
-        y = (self.get_lane("v0") + 0.5) * self.width + self.get_lateral("v0")
+        y = (self.get_lane(self.attacker) + 0.5) * self.width + self.get_lateral(self.attacker)
         self.y.append(y)
         return [occupied_lanes(y, self.width), *self.fixed]
 
     def rows(self) -> np.ndarray:
         return np.column_stack([self.y, *(np.full(len(self.y), y) for y in self.fixed_y)])
+
+
+# --- a batch: many episodes side by side in one SUMO ---------------------------------------------
+
+def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: Road | None = None,
+                   on_episode: Callable[[int, "Episode | ControllerError"], None] | None = None) -> list["Episode | ControllerError"]:
+    """Play many episodes of one configuration side by side in one SUMO instance, each platoon on its
+    own copy of the road (`scenarios.batch_road`), commanded together (`batch.PlatoonBatch`).
+
+    Each result is bit for bit what `simulate` gives for the same plan alone: the episode, or the
+    ControllerError of a user's follower controller that failed in it. An episode that ends (its first
+    collision) leaves SUMO at once and costs nothing more; ``on_episode(i, result)`` hears of it then.
+    """
+    if not plans:
+        return []
+    if len(plans) > MAX_COPIES:
+        raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
+    if road is None or road.copies < len(plans):
+        road = batch_road(config.network, len(plans))
+    types_file = check_episode(config, road)
+    batch = PlatoonBatch(config, np.array([p.u for p in plans]), attacker_max_speed_mps=road.speed_limit_mps)
+    import libsumo as api
+
+    try:
+        api.start(sumo_command(config, road, types_file=types_file))
+    except Exception as exc:  # libsumo raises its own types
+        raise SumoError(f"SUMO did not start: {exc}") from None
+    try:
+        platoons = load_platoon(api, config, road, len(plans))
+        return _run_batch(api, config, batch, road, platoons, [p.lane_change_step for p in plans], on_episode)
+    except api.TraCIException as exc:
+        raise SumoError(f"SUMO failed during the episode: {exc}") from None
+    finally:
+        api.close()
+
+
+def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, platoons: list[tuple[str, ...]],
+               lane_change_steps: list[int | None], on_episode) -> list:
+    m, n, dt = batch.size, len(config.vehicle_ids), config.step_s
+    vehicle = api.vehicle
+    get_position, get_speed, set_speed = vehicle.getLanePosition, vehicle.getSpeed, vehicle.setSpeed
+    commanded = list(batch.commanded)
+    maneuver = batch.maneuver
+    laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
+    rows_x = np.empty((config.steps + 1, m, n))
+    rows_v = np.empty_like(rows_x)
+    active = np.ones(m, dtype=bool)
+    live = list(range(m))  # the episodes still in SUMO
+
+    def sense(k: int) -> None:
+        flat = [vid for e in live for vid in platoons[e]]
+        rows_x[k, live] = np.array([get_position(v) for v in flat]).reshape(len(live), n)
+        rows_v[k, live] = np.array([get_speed(v) for v in flat]).reshape(len(live), n)
+
+    def episode_pairs(k: int) -> list | None:
+        if laterals is None:
+            return None
+        pairs: list = [None] * m
+        for e in live:
+            pairs[e] = maneuver.pairs(rows_x[k, e].tolist(), laterals[e].sense())
+            recorded[e].append(pairs[e])
+        return pairs
+
+    recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
+    results: list = [None] * m
+
+    def end(e: int, steps: int, collisions: tuple) -> None:
+        active[e] = False
+        live.remove(e)
+        for vid in platoons[e]:
+            vehicle.remove(vid)
+        if e in batch.failed:
+            results[e] = batch.failed[e]
+        else:
+            lateral_m = laterals[e].rows() if laterals else None
+            results[e] = batch.episode(e, steps, rows_x[:steps + 1, e], rows_v[:steps + 1, e], collisions,
+                                       recorded[e] if laterals else None, lateral_m)
+        if on_episode:
+            on_episode(e, results[e])
+
+    sense(0)
+    pairs = episode_pairs(0)
+    lead, gap = batch.leaders(rows_x[0], pairs)
+    changes: dict[int, list[int]] = {}
+    for e, step in enumerate(lane_change_steps):
+        if step is not None:
+            changes.setdefault(step, []).append(e)
+    for k in range(config.steps):
+        for e in changes.get(k, ()):
+            if active[e]:
+                laterals[e].change_lane()
+        speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
+        for e in list(live):
+            if e in batch.failed:  # a user's controller failed: the episode ends with its error
+                end(e, k, ())
+                continue
+            for vid, v in zip((platoons[e][i] for i in commanded), speeds[e].tolist()):
+                set_speed(vid, v)
+        if not live:
+            break
+        api.simulationStep()
+        sense(k + 1)
+        pairs = episode_pairs(k + 1)
+        lead, gap = batch.leaders(rows_x[k + 1], pairs)
+        for e in np.flatnonzero(collided(gap) & active).tolist():
+            x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
+            end(e, k + 1, collisions_at((k + 1) * dt, pairs[e] if pairs else maneuver.pairs(x), x, v, config.vehicle_ids))
+        if not live:
+            break
+    for e in list(live):
+        end(e, config.steps, ())
+    return results

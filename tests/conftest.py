@@ -18,6 +18,26 @@ def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
     return make_attack("knots").signal(values, np.arange(config.steps) * config.step_s)
 
 
+def random_plans(config: EpisodeConfig, count: int, seed: int = 0, family: str = "knots"):
+    """Attack plans drawn uniformly from the campaign's box (a lane change time too, for a lateral maneuver)."""
+    from d4sumo.maneuvers import attack_plan, maneuver_of
+
+    box = maneuver_of(config).family(make_attack(family))
+    rng = np.random.default_rng(seed)
+    return [attack_plan(box, box.lower + rng.random(box.lower.size) * (box.upper - box.lower), config) for _ in range(count)]
+
+
+def assert_same_episode(batched, alone) -> None:
+    """Bit for bit: every signal, the collision record, the minimum gaps, the outcome."""
+    assert batched.outcome == alone.outcome
+    assert batched.collisions == alone.collisions
+    assert batched.min_gaps_m() == alone.min_gaps_m()
+    assert batched.trace.names == alone.trace.names
+    assert np.array_equal(batched.trace.times_s, alone.trace.times_s)
+    for name in alone.trace.names:
+        assert np.array_equal(batched.trace[name], alone.trace[name]), name
+
+
 @pytest.fixture(scope="session")
 def road():
     from d4sumo.scenarios import build_road

@@ -327,3 +327,44 @@ def test_a_one_lane_road_has_no_room_for_a_lane_change():
     with pytest.raises(ConfigError, match="at least 2 lanes .highway_1lane has 1") as e:
         check_episode(EpisodeConfig(maneuver="cutin", network="highway_1lane"), build_road("highway_1lane"))
     assert e.value.field == "scenario.maneuver"
+
+
+class FlakyController(SwitchingController):
+    """A user's controller (no array form) that returns NaN once its gap opens past 16 m."""
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        u = super().command(gap_m, speed_mps, lead_speed_mps)
+        return float("nan") if gap_m > 16.0 else u
+
+
+@pytest.mark.parametrize("config", [
+    EpisodeConfig(),
+    EpisodeConfig(start="steady", setpoint_m=12.0, speed_mps=20.0),
+    EpisodeConfig(start="warmup", setpoint_m=3.0, warmup_s=5.0),
+    EpisodeConfig(controller=ControllerConfig("sumo:ACC", params=(("tau", 0.5),)), start="steady"),
+    EpisodeConfig(controller=ControllerConfig("sumo:IDM"), setpoint_m=4.0),
+    EpisodeConfig(controller=(ControllerConfig("sumo:ACC"), ControllerConfig("switching", where="controller.v2"),
+                              ControllerConfig("timegap", where="controller.v3")), setpoint_m=5.0),
+    EpisodeConfig(maneuver="cutin", cutin_follower=2, cutin_offset_m=3.0, lane_change_s=1.0),
+    EpisodeConfig(maneuver="cutin", lane_change_s=0.0, controller=ControllerConfig("sumo:Krauss")),
+    EpisodeConfig(maneuver="cutout", obstacle_distance_m=60.0, obstacle_speed_mps=5.0),
+    EpisodeConfig(controller=ControllerConfig("test_simulation:FlakyController")),
+], ids=["rest", "steady", "warmup", "sumo-acc", "sumo-idm", "mixed", "cutin", "cutin-krauss", "cutout", "user"])
+def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, config):
+    """Issue 13: many platoons in one SUMO, each on its own copy of the road, never meet."""
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.platoon import ControllerError
+    from d4sumo.simulation import simulate_batch
+
+    register_controller("test_simulation:FlakyController", FlakyController)
+    plans = random_plans(config, 10, seed=4)
+    heard = {}
+    batched = simulate_batch(config, plans, road=None, on_episode=lambda i, r: heard.setdefault(i, r))
+    assert heard.keys() == set(range(len(plans))) and all(heard[i] is batched[i] for i in heard)
+    for plan, result in zip(plans, batched):
+        try:
+            alone = simulate(config, plan, road=road if config.maneuver == "inlane" else None)
+        except ControllerError as exc:
+            assert isinstance(result, ControllerError) and str(result) == str(exc)
+            continue
+        assert_same_episode(result, alone)

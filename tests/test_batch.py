@@ -1,0 +1,79 @@
+"""Episodes advanced together over arrays against the same episodes played alone: no SUMO."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_same_episode, random_plans
+
+from d4sumo.batch import integrate_batch
+from d4sumo.config import ControllerConfig, EpisodeConfig
+from d4sumo.platoon import ControllerError, integrate
+
+
+def attacks(config: EpisodeConfig, count: int, seed: int = 0, family: str = "knots") -> np.ndarray:
+    return np.array([p.u for p in random_plans(config, count, seed, family)])
+
+
+class Flaky:
+    """A user's controller that returns NaN once its gap opens past 16 m."""
+
+    from d4sumo.control import SwitchingParams as Params
+
+    def __init__(self, params, **kwargs):
+        from d4sumo.control import SwitchingController
+
+        self.inner = SwitchingController(params, **kwargs)
+        self.mode = 0.0
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        u = self.inner.command(gap_m, speed_mps, lead_speed_mps)
+        self.mode = self.inner.mode
+        return float("nan") if gap_m > 16.0 else u
+
+
+@pytest.mark.parametrize("config", [
+    EpisodeConfig(),
+    EpisodeConfig(start="steady", setpoint_m=12.0, speed_mps=20.0),
+    EpisodeConfig(start="warmup", setpoint_m=3.0, followers=5),
+    EpisodeConfig(controller=ControllerConfig("timegap", params=(("time_gap_s", 0.6),)), setpoint_m=4.0),
+    EpisodeConfig(controller=(ControllerConfig("switching"), ControllerConfig("timegap", where="controller.v2"),
+                              ControllerConfig("switching", params=(("acc_kp", 0.5),), where="controller.v3")), setpoint_m=5.0),
+], ids=["rest", "steady", "warmup-5", "timegap", "mixed"])
+@pytest.mark.parametrize("family", ["knots", "persistent"])
+def test_an_episode_in_a_batch_is_the_episode_played_alone(config, family):
+    signals = attacks(config, 12, family=family)
+    batched = integrate_batch(config, signals, 40.0)
+    outcomes = set()
+    for u, episode in zip(signals, batched):
+        assert_same_episode(episode, integrate(config, u, 40.0))
+        outcomes.add(episode.outcome)
+    assert len(batched) == len(signals)
+
+
+def test_the_batch_ends_episodes_apart_and_covers_every_outcome():
+    config = EpisodeConfig(setpoint_m=4.0)
+    signals = attacks(config, 40, seed=3)
+    batched = integrate_batch(config, signals, 40.0)
+    assert {e.outcome for e in batched} == {"success", "attacker_crash", "no_crash"}
+    assert len({len(e.trace) for e in batched}) > 5  # they ended at different steps
+
+
+def test_a_user_controller_without_an_array_form_runs_per_episode_and_fails_alone():
+    import sys
+
+    sys.modules[__name__].Flaky = Flaky
+    config = EpisodeConfig(setpoint_m=7.0, controller=ControllerConfig(f"{__name__}:Flaky"))
+    signals = attacks(config, 8, seed=1)
+    batched = integrate_batch(config, signals, 40.0)
+    kinds = set()
+    for u, result in zip(signals, batched):
+        try:
+            alone = integrate(config, u, 40.0)
+        except ControllerError as exc:
+            assert isinstance(result, ControllerError) and str(result) == str(exc)
+            kinds.add("error")
+            continue
+        assert_same_episode(result, alone)
+        kinds.add("episode")
+    assert kinds == {"error", "episode"}
