@@ -16,10 +16,14 @@ from __future__ import annotations
 import numpy as np
 
 from .config import EpisodeConfig
-from .control import (ARRAY_KERNELS, ActuatorArray, CruiseArray, MODE_CC, acceleration_to_command_array)
+from .control import ARRAY_KERNELS, ActuatorArray, CruiseArray, acceleration_to_command_array
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
 from .platoon import ControllerError, PythonFollower, assemble_trace, collisions_at, cruise_params, followers_of
-from .trace import Collision, Episode, Trace
+from .trace import Collision, Episode
+
+
+#: episodes of a campaign played side by side at most, by default (the results never depend on it, only the speed)
+DEFAULT_BATCH = 32
 
 
 class PlatoonBatch:
@@ -40,45 +44,49 @@ class PlatoonBatch:
         self.attacker_cruise = CruiseArray(gains, config.speed_mps, dt, (m,))
         self._attacking = np.zeros(m, dtype=bool)
         others = list(range(n, len(self.ids)))
+        self._others = np.array(others, dtype=int)
         self._lead = CruiseArray(gains, config.speed_mps, dt, (m, len(others))) if self.maneuver.other_cruises else None
         python = [i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         self.commanded = (0, *python, *others)
-        self._python_columns = np.array(python, dtype=int)
+        self._commanded = _index(list(self.commanded))
+        self._with_mode = [i for i, f in enumerate(self.followers, start=1) if f.has_mode]
         # Followers with one controller table share an array kernel over (episodes x those followers).
-        self._kernels: list[tuple[np.ndarray, np.ndarray, object]] = []  # (car indices, their columns in commanded, kernel)
+        self._kernels: list[tuple] = []  # (its cars, the cars before them, their columns in `commanded` and in the modes, the kernel)
         self._scalar: list[tuple[int, int, list[PythonFollower]]] = []  # (car, column, one follower per episode)
         groups: dict = {}
         for column, i in enumerate(python, start=1):
             groups.setdefault(self.followers[i - 1].config, []).append((i, column))
         for controller, members in groups.items():
             cars = np.array([i for i, _ in members])
-            columns = np.array([c for _, c in members])
-            kernel = ARRAY_KERNELS.get(type(self.followers[cars[0] - 1].controller))
-            if kernel is not None:
-                self._kernels.append((cars, columns, kernel(self.followers[cars[0] - 1].controller, (m, len(cars)), dt)))
-            else:
+            prototype = self.followers[cars[0] - 1].controller
+            kernel = ARRAY_KERNELS.get(type(prototype))
+            if kernel is None:
                 for i, column in members:
                     self._scalar.append((i, column, [PythonFollower(controller, config) for _ in range(m)]))
-        self._with_mode = [i for i, f in enumerate(self.followers, start=1) if f.has_mode]
+                continue
+            columns = [c for _, c in members]
+            modes = [self._with_mode.index(i) for i, _ in members]
+            self._kernels.append((_index(cars.tolist()), _index([i - 1 for i in cars.tolist()]), _index(columns),
+                                  _index(modes), kernel(prototype, (m, len(cars)), dt)))
         max_speeds = [attacker_max_speed_mps] + [np.inf] * len(python) + [attacker_max_speed_mps] * len(others)
         self.actuator = ActuatorArray(vehicle, dt, (m, len(self.commanded)), np.array(max_speeds))
-        self._others = np.array(others, dtype=int)
-        self._commanded = np.array(self.commanded, dtype=int)
-        self.commands = np.empty((config.steps, m, len(self.commanded)))
-        self.modes = np.empty((config.steps, m, len(self._with_mode))) if self._with_mode else None
+        self.commands = np.zeros((config.steps, m, len(self.commanded)))  # each step's commands, as played
+        self.modes = np.zeros((config.steps, m, len(self._with_mode))) if self._with_mode else None
         self.failed: dict[int, ControllerError] = {}  # episode -> the error of a user's controller
+        self._rows = np.arange(m)[:, None]
+        #: the paper's column: each car's leader is the car before it (the attacker leads itself)
+        self._column = np.broadcast_to(np.maximum(np.arange(len(self.ids)) - 1, 0), (m, len(self.ids)))
 
     def leaders(self, positions: np.ndarray, pairs: list[list[Pair]] | None) -> tuple[np.ndarray, np.ndarray]:
         """Each car's leader and bumper gap to it (M x n); a car with nobody ahead in its lane leads
         itself at the free road's gap. ``pairs``: each episode's pairs, for a lane-changing maneuver
         (None: the paper's column, vectorised with the arithmetic of `Maneuver.pairs`)."""
         m, n = positions.shape
-        lead = np.broadcast_to(np.arange(n), (m, n)).copy()
         gap = np.full((m, n), FREE_ROAD_GAP_M)
         if pairs is None:
-            lead[:, 1:] -= 1
             gap[:, 1:] = positions[:, :-1] - self.config.vehicle.length_m - positions[:, 1:]
-            return lead, gap
+            return self._column, gap
+        lead = np.broadcast_to(np.arange(n), (m, n)).copy()
         for e, episode_pairs in enumerate(pairs):
             if episode_pairs is None:
                 continue
@@ -92,18 +100,21 @@ class PlatoonBatch:
         """Commands for step k of every episode from the sensed state (M x n) and each car's leader and
         gap; returns the speed at the step's end of each commanded car (M x C). Episodes not
         ``active`` (ended) are computed along and ignored; a user's controller runs only for active ones."""
-        m = self.size
-        u = np.zeros((m, len(self.commanded)))
+        u = self.commands[k]
         attack = self.attacks_u[:, k]
         cruising = attack != attack  # NaN: no attack here, the attacker cruises like everyone else
-        self.attacker_cruise.reset(cruising & self._attacking)  # a new cruise window: the PID starts afresh
+        if np.count_nonzero(cruising):
+            self.attacker_cruise.reset(cruising & self._attacking)  # a new cruise window: the PID starts afresh
+            a = self.attacker_cruise.acceleration(speeds[:, 0], cruising)
+            u[:, 0] = np.where(cruising, acceleration_to_command_array(a, self.config.vehicle), attack)
+        else:
+            u[:, 0] = attack
         self._attacking = ~cruising
-        a = self.attacker_cruise.acceleration(speeds[:, 0], cruising)
-        u[:, 0] = np.where(cruising, acceleration_to_command_array(a, self.config.vehicle), attack)
-        rows = np.arange(m)[:, None]
-        for cars, columns, kernel in self._kernels:
-            u[:, columns] = kernel.command(gap[:, cars], speeds[:, cars], speeds[rows, lead[:, cars]])
-        for i, column, followers in self._scalar:
+        column = lead is self._column
+        for cars, before, columns, _, kernel in self._kernels:
+            ahead = speeds[:, before] if column else speeds[self._rows, lead[:, cars]]
+            u[:, columns] = kernel.command(gap[:, cars], speeds[:, cars], ahead)
+        for i, column_index, followers in self._scalar:
             for e in np.flatnonzero(active).tolist():
                 if e in self.failed:
                     continue
@@ -112,31 +123,22 @@ class PlatoonBatch:
                     self.failed[e] = ControllerError(
                         f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
                     c = 0.0
-                u[e, column] = c
+                u[e, column_index] = c
         others = self._others
-        if others.size:
-            if self._lead is not None:
-                a = self._lead.acceleration(speeds[:, others], np.ones((m, others.size), dtype=bool))
-                u[:, -others.size:] = acceleration_to_command_array(a, self.config.vehicle)
-            else:  # the obstacle holds its speed
-                u[:, -others.size:] = 0.0
+        if others.size and self._lead is not None:
+            u[:, -others.size:] = acceleration_to_command_array(self._lead.acceleration(speeds[:, others]),
+                                                                self.config.vehicle)
         new_speeds = self.actuator.apply(u, speeds[:, self._commanded])
-        if others.size and self._lead is None:
+        if others.size and self._lead is None:  # the obstacle holds its speed (command 0)
             new_speeds[:, -others.size:] = self.config.obstacle_speed_mps
-        self.commands[k] = u
         if self.modes is not None:
-            self.modes[k] = self._modes()
+            modes = self.modes[k]
+            for _, _, _, mode_columns, kernel in self._kernels:
+                modes[:, mode_columns] = kernel.mode
+            for i, _, followers in self._scalar:
+                if followers[0].has_mode:
+                    modes[:, self._with_mode.index(i)] = [f.controller.mode for f in followers]
         return new_speeds
-
-    def _modes(self) -> np.ndarray:
-        by_car: dict[int, np.ndarray] = {}
-        for cars, _, kernel in self._kernels:
-            for column, i in enumerate(cars.tolist()):
-                by_car[i] = kernel.mode[:, column]
-        for i, _, followers in self._scalar:
-            if followers[0].has_mode:
-                by_car[i] = np.array([f.controller.mode for f in followers])
-        return np.column_stack([by_car.get(i, np.full(self.size, MODE_CC)) for i in self._with_mode])
 
     def episode(self, e: int, steps: int, positions: np.ndarray, speeds: np.ndarray, collisions: tuple[Collision, ...],
                 pairs: list[list[Pair]] | None = None, lateral_m: np.ndarray | None = None) -> Episode:
@@ -146,6 +148,13 @@ class PlatoonBatch:
         trace, min_gaps = assemble_trace(self.config, self.followers, self.commanded, times, positions, speeds,
                                          self.commands[:steps, e], modes, pairs or [], lateral_m)
         return Episode(trace, collisions, min_gaps)
+
+
+def _index(positions: list[int]) -> slice | np.ndarray:
+    """Columns to index with: a slice where they are contiguous (a view, and cheaper), else an array."""
+    if positions == list(range(positions[0], positions[0] + len(positions))):
+        return slice(positions[0], positions[0] + len(positions))
+    return np.array(positions, dtype=int)
 
 
 def collided(gap: np.ndarray) -> np.ndarray:
@@ -190,4 +199,3 @@ def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_s
     return [ended[e] for e in range(m)]
 
 
-__all__ = ["PlatoonBatch", "collided", "integrate_batch", "Trace"]

@@ -20,12 +20,13 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .attacks import AttackFamily, make_attack
+from .batch import DEFAULT_BATCH
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError, check_int, check_number
 from .maneuvers import AttackPlan, attack_plan, maneuver_of
 from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
-from .scenarios import Road, build_road
-from .simulation import check_episode, simulate
+from .scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
+from .simulation import check_episode, simulate, simulate_batch
 from .spec import Specification
 from .store import DefinitionError, Store, StoreError
 
@@ -156,14 +157,17 @@ class CampaignSummary:
 
 
 class Evaluator:
-    """Simulates and scores parameter vectors of one campaign (road built and formula parsed once)."""
+    """Simulates and scores parameter vectors of one campaign (road built and formula parsed once):
+    one at a time, or a batch side by side in one SUMO (`simulation.simulate_batch`)."""
 
-    def __init__(self, campaign: Campaign, road: Road | None = None):
+    def __init__(self, campaign: Campaign, road: Road | None = None, *, network: NetworkSource | None = None):
         self.campaign = campaign
         self.family = campaign.family()
         self.spec = campaign.specification()
-        self.road = road or build_road(campaign.config.network)
+        self.network = network or campaign.config.network  # what batches' roads are built from
+        self.road = road or build_road(self.network)
         check_episode(campaign.config, self.road)
+        self._batch_road: Road | None = None
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
@@ -174,15 +178,84 @@ class Evaluator:
         x = tuple(float(v) for v in params)
         try:
             episode = simulate(self.campaign.config, self.plan(x), road=self.road, fcd_path=fcd_path)
+        except Exception as exc:  # SUMO or a user's controller: store the sample as errored, go on
+            return self._failed(index, x, exc, time.perf_counter() - t0)
+        return self._scored(index, x, episode, t0)
+
+    def batch(self, first: int, params: Sequence[np.ndarray],
+              on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
+        """Samples ``first``, ``first`` + 1, .. played side by side in one SUMO: each result is the one
+        `__call__` gives alone. ``on_result`` hears of each as its episode ends (in any order). A
+        sample's wall time is its share of the batch's simulation plus its own scoring."""
+        if len(params) > 1:
+            return self._batch(first, params, on_result)
+        result = self(first, params[0])  # alone: the single-episode engine
+        if on_result:
+            on_result(result)
+        return [result]
+
+    def _batch(self, first: int, params: Sequence[np.ndarray], on_result) -> list[SampleResult]:
+        t0 = time.perf_counter()
+        xs = [tuple(float(v) for v in p) for p in params]
+        results: list[SampleResult | None] = [None] * len(xs)
+
+        def finish(i: int, r: SampleResult) -> None:
+            results[i] = r
+            if on_result:
+                try:
+                    on_result(r)
+                except BaseException as exc:  # the caller's own failure (storing, say): not the episode's
+                    raise _CallerError(exc) from exc
+
+        def done(j: int, episode) -> None:
+            i = playing[j]
+            t = time.perf_counter()
+            if isinstance(episode, Exception):  # a user's controller failed in it
+                r = self._failed(first + i, xs[i], episode, 0.0)
+            else:
+                r = self._scored(first + i, xs[i], episode, t)
+            finish(i, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(xs)))  # plus its share so far
+
+        plans, playing = [], []
+        for i, x in enumerate(xs):
+            try:
+                plans.append(self.plan(x))
+                playing.append(i)
+            except Exception as exc:
+                finish(i, self._failed(first + i, x, exc, 0.0))
+        if not plans:
+            return results  # type: ignore[return-value]
+        try:
+            if self._batch_road is None or self._batch_road.copies < len(plans):
+                self._batch_road = batch_road(self.network, len(plans))
+            simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
+        except _CallerError as exc:
+            raise exc.__cause__ from None
+        except Exception as exc:  # SUMO failed: every sample not yet finished is errored
+            for i in playing:
+                if results[i] is None:
+                    finish(i, self._failed(first + i, xs[i], exc, (time.perf_counter() - t0) / len(xs)))
+        return results  # type: ignore[return-value]
+
+    def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:
+        try:
             rho = self.spec.robustness(episode.trace)
             if not math.isfinite(rho):
                 raise ValueError(f"robustness is {rho}")
-        except Exception as exc:  # SUMO, a user's controller or formula: store the sample as errored, go on
-            message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
-            log.warning("sample %d failed: %s", index, message)
-            return SampleResult(index, x, None, "error", None, None, time.perf_counter() - t0, message)
+        except Exception as exc:  # a user's formula
+            return self._failed(index, x, exc, time.perf_counter() - t0)
         collision = episode.first_collision.to_dict() if episode.first_collision else None
         return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
+
+    @staticmethod
+    def _failed(index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
+        message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
+        log.warning("sample %d failed: %s", index, message)
+        return SampleResult(index, x, None, "error", None, None, wall_s, message)
+
+
+class _CallerError(Exception):
+    """Carries an exception raised by the caller's ``on_result`` out of a batch, untouched."""
 
 
 def _score(result: SampleResult, history: list[float]) -> float:
@@ -195,34 +268,39 @@ def _score(result: SampleResult, history: list[float]) -> float:
 class CampaignRunner:
     """The ask-simulate-score-tell loop of one campaign, without storage.
 
-    Built from the samples stored so far (re-told to the optimiser, whose asks must match them
-    exactly) or from the ``state`` a previous runner of the same campaign handed over; ``state`` is
-    plain picklable data (the optimiser and the scores told), so a campaign can move between
-    processes or machines between steps and still end as if it had run in one piece.
+    The optimiser is asked for as many points as it can propose before its next score
+    (`Optimizer.ready`); they are played in batches of at most ``batch`` episodes side by side and
+    told in order. Built from the samples stored so far (re-told to the optimiser, whose asks must
+    match them exactly; a sample missing in between, interrupted in its batch, is played again) or
+    from the ``state`` a previous runner of the same campaign handed over; ``state`` is plain
+    picklable data (the optimiser, the scores told, the points asked and not yet played), so a
+    campaign can move between processes or machines between steps and still end as if it had run
+    in one piece, whatever the batch size.
     """
 
     def __init__(self, campaign: Campaign, evaluator: Evaluator, *, stored: Sequence[SampleResult] = (),
-                 state: tuple | None = None, where: str = "the database"):
+                 state: tuple | None = None, where: str = "the database", batch: int = DEFAULT_BATCH):
         if evaluator.campaign.definition() != campaign.definition():
             raise ValueError("the evaluator was built for another campaign")
         self.campaign = campaign
         self.evaluate = evaluator
+        self.batch = max(1, min(int(batch), MAX_COPIES))
+        self.where = where
+        self.stored: dict[int, SampleResult] = {}
+        for r in stored:
+            if r.index in self.stored or not 0 <= r.index < campaign.samples:
+                raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} twice or out of range)")
+            self.stored[r.index] = r
         if state is not None:
-            self.optimizer, self.scores = state
+            self.optimizer, self.scores, self.queue = state
             return
         rng = np.random.default_rng(campaign.seed)
         family = evaluator.family
         self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
                                         options=dict(campaign.optimizer_options))
         self.scores: list[float] = []
-        for i, r in enumerate(stored):
-            if r.index != i:
-                raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} at position {i})")
-            x = self.optimizer.ask()
-            if not np.allclose(x, r.params, rtol=0, atol=1e-12):
-                raise StoreError(f"{where}: stored sample {r.index} is not what this seed asks for; "
-                                 "it was written by another d4sumo version or changed: use a new database")
-            self._tell(x, r)
+        self.queue: list[np.ndarray] = []  # asked for, not played yet: samples done, done + 1, ..
+        self._replay()
 
     @property
     def done(self) -> int:
@@ -230,26 +308,72 @@ class CampaignRunner:
 
     @property
     def state(self) -> tuple:
-        return self.optimizer, self.scores
+        return self.optimizer, self.scores, self.queue
+
+    def _fill(self) -> None:
+        if not self.queue:
+            count = min(self.optimizer.ready(), self.campaign.samples - self.optimizer.asked)
+            self.queue = [self.optimizer.ask() for _ in range(max(count, 1))]
+
+    def _replay(self) -> None:
+        """Tell the optimiser the stored samples, in order, as far as they go without a gap."""
+        while self.done < self.campaign.samples and self.done in self.stored:
+            self._fill()
+            x = self.queue.pop(0)
+            r = self.stored.pop(self.done)
+            self._check(x, r)
+            self._tell(x, r)
+
+    def _check(self, x: np.ndarray, r: SampleResult) -> None:
+        if not np.allclose(x, r.params, rtol=0, atol=1e-12):
+            raise StoreError(f"{self.where}: stored sample {r.index} is not what this seed asks for; "
+                             "it was written by another d4sumo version or changed: use a new database")
 
     def _tell(self, x: np.ndarray, r: SampleResult) -> None:
         score = _score(r, self.scores)
         self.optimizer.tell(x, score)
         self.scores.append(score)
 
-    def step(self) -> SampleResult:
-        """Ask for the next attack, play and score it, tell the optimiser; the sample's result."""
+    def step(self, on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
+        """Play the next batch of asked points (samples stored already are not played again), tell the
+        optimiser; the new samples' results in order. ``on_result`` hears of each as it finishes."""
         if self.done >= self.campaign.samples:
             raise ValueError(f"the campaign's budget of {self.campaign.samples} samples is spent")
-        x = self.optimizer.ask()
-        r = self.evaluate(self.done, x)
-        self._tell(x, r)
-        return r
+        self._fill()
+        first, xs = self.done, self.queue[:self.batch]
+        for i, x in enumerate(xs):  # a batch interrupted before: only its missing samples play
+            if first + i in self.stored:
+                self._check(x, self.stored[first + i])
+        missing = [i for i in range(len(xs)) if first + i not in self.stored]
+        played: dict[int, SampleResult] = {}
+        for run in _runs(missing):  # consecutive missing samples play as one batch
+            for r in self.evaluate.batch(first + run[0], [xs[i] for i in run], on_result):
+                played[r.index] = r
+        results = []
+        for i, x in enumerate(xs):
+            r = self.stored.pop(first + i, None) or played[first + i]
+            self._tell(x, r)
+            if first + i in played:
+                results.append(r)
+        del self.queue[:len(xs)]
+        self._replay()
+        return results
+
+
+def _runs(indices: list[int]) -> list[list[int]]:
+    """Consecutive runs of sorted indices: [0, 1, 3] -> [[0, 1], [3]]."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and runs[-1][-1] == i - 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
 
 
 def stored_results(store: Store, campaign_id: int, limit: int) -> list[SampleResult]:
     return [SampleResult(row.index, row.params, row.robustness, row.outcome, row.collision, row.min_gaps, row.wall_s,
-                         row.error, row.id) for row in store.samples(campaign_id)[:limit]]
+                         row.error, row.id) for row in store.samples(campaign_id) if row.index < limit]
 
 
 def run_campaign(
@@ -259,15 +383,18 @@ def run_campaign(
     sweep: str | None = None,
     evaluator: Evaluator | None = None,
     on_sample: Callable[[SampleResult], None] | None = None,
+    batch: int = DEFAULT_BATCH,
 ) -> CampaignSummary:
-    """Run (or resume) a campaign; every sample is in ``store`` as soon as it finishes.
+    """Run (or resume) a campaign; every sample is in ``store`` as soon as it finishes. ``batch``: at
+    most this many episodes side by side in one SUMO (1: one at a time); the results are the same.
 
     Pass an ``evaluator`` built beforehand to have every input checked before anything is written."""
     evaluate = evaluator or Evaluator(campaign)
     # read and check what is stored (and that the evaluator is this campaign's) before writing anything
     campaign_id = store.find_campaign(campaign.definition()) if store else None
     results = stored_results(store, campaign_id, campaign.samples) if campaign_id is not None else []
-    runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}")
+    runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}",
+                            batch=batch)
     if store is not None:
         campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep)
     if results:
@@ -275,12 +402,15 @@ def run_campaign(
     if on_sample:
         for r in results:
             on_sample(r)
-    while runner.done < campaign.samples:
-        r = runner.step()
+    def finished(r: SampleResult) -> None:  # stored as soon as its episode ends
         if store is not None:
             r = dataclasses.replace(r, id=store.add_sample(campaign_id, r.index, r.params, r.robustness, r.outcome,
                                                            r.collision, r.min_gaps, r.wall_s, r.error))
         results.append(r)
         if on_sample:
             on_sample(r)
+
+    while runner.done < campaign.samples:
+        runner.step(finished)
+    results.sort(key=lambda r: r.index)
     return CampaignSummary(campaign_id, results)

@@ -23,7 +23,9 @@ from . import __version__
 from .attacks import FAMILIES
 from .config import MANEUVERS, START_MODES, EpisodeConfig
 from .errors import ConfigError, D4sumoError, check_number
+from .batch import DEFAULT_BATCH
 from .optimizers import OPTIMIZERS
+from .scenarios import MAX_COPIES
 
 EXIT_USAGE = 2
 
@@ -292,6 +294,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     doc, _ = document(args)
     campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    check_batch(args.batch)
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
     with Store(args.db) as store, tqdm(total=campaign.samples, desc=f"{campaign.attack}/{campaign.optimizer}", unit="sample",
@@ -304,7 +307,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             bar.update(1)
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
-        summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress)
+        summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
     top = summary.best
     result = {
         "db": str(args.db),
@@ -423,6 +426,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.dask is not None:
         check_dask_address(args.dask)
     check_number("--dask-timeout", args.dask_timeout, 0.0, 3600.0, "seconds", low_open=True)
+    check_batch(args.batch)
     sweep = Sweep.load(args.sweep)
     bar = None  # made at the first progress report: an error before it stays one line
 
@@ -436,7 +440,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     try:
         result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
-                           progress=progress)
+                           progress=progress, batch=args.batch)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
@@ -504,6 +508,18 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"d4sumo: error: {message} (see `{self.prog} --help`)\n")
 
 
+def _add_batch_option(p) -> None:
+    p.add_argument("--batch", type=int, default=DEFAULT_BATCH, metavar="N",
+                   help=f"play up to N episodes an optimiser proposes together side by side in one SUMO (1: one at a "
+                        f"time; the results are the same, bit for bit) [{DEFAULT_BATCH}]")
+
+
+def check_batch(value: int) -> int:
+    if not 1 <= value <= MAX_COPIES:
+        raise ConfigError("--batch", value, f"a whole number of episodes in [1, {MAX_COPIES}]")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="d4sumo", description="Adversarial driving maneuvers against ACC platoons, on SUMO.")
     parser.add_argument("--version", action="version", version=f"d4sumo {__version__}")
@@ -538,6 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--samples", type=int, help="budget: episodes to simulate [100]")
     g.add_argument("--seed", type=int, help="seed: the same seed repeats the campaign exactly [0]")
     _add_spec_options(g)
+    _add_batch_option(g)
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database (created if new) [results.sqlite]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
@@ -550,6 +567,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on a Dask scheduler (e.g. tcp://10.0.0.5:8786), or 'local' for a local Dask cluster of --workers")
     p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")
+    _add_batch_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 

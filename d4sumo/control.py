@@ -321,12 +321,12 @@ class ActuatorArray:
         self.accel_mps2 = np.zeros(shape)
 
     def apply(self, u: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
-        target = np.where(u >= 0.0, u * self.accel_max, u * self.decel_max)
+        target = u * np.where(u >= 0.0, self.accel_max, self.decel_max)
         accel = self.accel_mps2 + (target - self.accel_mps2) * self.alpha
         v = speed_mps + accel * self.step_s
         clamped = np.minimum(np.maximum(v, 0.0), self.max_speed_mps)
         hit = clamped != v
-        if hit.any():  # what the car actually did: no wind-up while clamped
+        if np.count_nonzero(hit):  # what the car actually did: no wind-up while clamped
             accel = np.where(hit, (clamped - speed_mps) / self.step_s, accel)
         self.accel_mps2 = accel
         return clamped
@@ -352,20 +352,25 @@ class CruiseArray:
         self.integral = np.where(where, 0.0, self.integral)
         self.engaged &= ~where
 
-    def acceleration(self, speed_mps: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def acceleration(self, speed_mps: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """The PID's output for every car; the state moves on for the ``active`` ones (None: all)."""
         e = self.target_mps - speed_mps
         i = np.minimum(np.maximum(self.integral + e * self.step_s, -self.clamp), self.clamp)
         d = np.where(self.engaged, (e - self.prev_error) / self.step_s, 0.0)
-        self.integral = np.where(active, i, self.integral)
-        self.prev_error = np.where(active, e, self.prev_error)
-        self.engaged |= active
+        if active is None:
+            self.integral, self.prev_error = i, e
+            self.engaged[...] = True
+        else:
+            self.integral = np.where(active, i, self.integral)
+            self.prev_error = np.where(active, e, self.prev_error)
+            self.engaged |= active
         a = self.kp * e + self.ki * i + self.kd * d
         return np.minimum(np.maximum(a, -self.limit), self.limit)
 
 
 def acceleration_to_command_array(a_mps2: np.ndarray, vehicle: VehicleParams) -> np.ndarray:
     """`acceleration_to_command` over an array."""
-    u = np.where(a_mps2 >= 0.0, a_mps2 / vehicle.max_accel_mps2, a_mps2 / vehicle.max_decel_mps2)
+    u = a_mps2 / np.where(a_mps2 >= 0.0, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
     return np.minimum(np.maximum(u, -1.0), 1.0)
 
 
@@ -381,22 +386,24 @@ class SwitchingArray:
         self._eps_x = controller._eps_x
         self._cc_speed, self._acc_speed = controller._cc_speed, controller._acc_speed
         self._acc_kp, self._acc_kv = controller._acc_kp, controller._acc_kv
-        self._accel_max, self._decel_max = controller._accel_max, controller._decel_max
+        self._vehicle = controller.vehicle
 
     def command(self, gap_m: np.ndarray, speed_mps: np.ndarray, lead_speed_mps: np.ndarray) -> np.ndarray:
         desired = self.desired_gap_m(speed_mps)
         cc = (gap_m >= desired + self._eps_x - GAP_TOLERANCE_M) | (speed_mps >= self._cc_speed)
-        acc = ~cc & (gap_m <= desired + GAP_TOLERANCE_M) & (speed_mps <= self._acc_speed)
+        acc = (gap_m <= desired + GAP_TOLERANCE_M) & (speed_mps <= self._acc_speed)
         held = self.mode if self._mode_known else MODE_CC  # inside the hysteresis band at start: cruise
         mode = np.where(cc, MODE_CC, np.where(acc, MODE_ACC, held))
-        self.cruise.disengage((mode != self.mode) & (mode == MODE_ACC))
+        changed = mode != self.mode
+        if np.count_nonzero(changed):
+            self.cruise.disengage(changed & (mode == MODE_ACC))
         self.mode = mode
         self._mode_known = True
+        a = self._acc_kp * (gap_m - desired) + self._acc_kv * (lead_speed_mps - speed_mps)
         cruising = mode == MODE_CC
-        a_cc = self.cruise.acceleration(speed_mps, cruising)
-        a = np.where(cruising, a_cc, self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps))
-        u = np.where(a >= 0.0, a / self._accel_max, a / self._decel_max)
-        return np.minimum(np.maximum(u, -1.0), 1.0)
+        if np.count_nonzero(cruising):
+            a = np.where(cruising, self.cruise.acceleration(speed_mps, cruising), a)
+        return acceleration_to_command_array(a, self._vehicle)
 
 
 #: controller classes whose law also runs over arrays (exactly these classes: a subclass may change the law)

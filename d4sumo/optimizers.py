@@ -14,7 +14,13 @@
   per dimension, learned noise) and expected improvement, maximised over random candidates and
   perturbations of the incumbent. Kernel hyperparameters are re-learned every ``refit_every`` samples
   and kept in between (the GP is still conditioned on every sample): this keeps BO's own time per
-  sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell.
+  sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell. With
+  ``batch_size`` q > 1 it proposes q points at once (the constant liar: each point proposed but not yet
+  scored counts as the worst score seen), so their episodes can be played side by side.
+
+``ready()`` says how many points an optimiser can propose before it is told a score, with exactly the
+points it would propose one at a time: a cross-entropy generation, a CMA-ES population, any number of
+random or Halton points, BO's initial design. The campaign plays them as one batch (`batch`).
 
 Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly. Options
 (``OPTIONS`` of each class) come from a config's ``[search.<optimizer>]`` table, validated by
@@ -53,6 +59,18 @@ class Optimizer:
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
 
+    @property
+    def outstanding(self) -> int:
+        """Points asked for whose scores have not been told yet."""
+        return self.asked - len(self.y)
+
+    def ready(self) -> int:
+        """How many points may be asked for now, before any outstanding score is told, such that every
+        one of them is what the optimiser would ask with all earlier scores told: a batch whose episodes
+        can be played side by side without changing the campaign. At least 1 when nothing is
+        outstanding; by default the optimiser is sequential."""
+        return 0 if self.outstanding else 1
+
     def ask(self) -> np.ndarray:
         if self.asked >= self.budget:
             raise ValueError(f"{self.name}: the budget of {self.budget} samples is spent")
@@ -81,12 +99,18 @@ class Optimizer:
 class RandomSearch(Optimizer):
     name = "random"
 
+    def ready(self) -> int:  # no point depends on a score
+        return self.budget - self.asked
+
     def _ask(self) -> np.ndarray:
         return self._unit_to_box(self.rng.random(self.dimension))
 
 
 class Halton(Optimizer):
     name = "halton"
+
+    def ready(self) -> int:  # no point depends on a score
+        return self.budget - self.asked
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -120,6 +144,9 @@ class CrossEntropy(Optimizer):
         self.min_std = o["min_std_fraction"] * span
         self._pending: list[np.ndarray] = []
         self._batch: list[tuple[np.ndarray, float]] = []
+
+    def ready(self) -> int:  # the rest of the current generation
+        return self.batch_size - len(self._batch) - self.outstanding
 
     def _ask(self) -> np.ndarray:
         if not self._pending:
@@ -215,6 +242,10 @@ class CMAES(Optimizer):
             warnings.simplefilter("ignore")
             return cma.CMAEvolutionStrategy(list(x0), self.options["sigma0"], options)
 
+    def ready(self) -> int:  # the rest of the current population
+        population = len(self._population) if self._population else self._popsize
+        return population - len(self._scores) - self.outstanding
+
     def _ask(self) -> np.ndarray:
         if not self._pending:
             with warnings.catch_warnings():
@@ -242,7 +273,8 @@ class CMAES(Optimizer):
 class BayesianOptimization(Optimizer):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
-               "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0)}
+               "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
+               "batch_size": (1, 1, 64)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -253,16 +285,33 @@ class BayesianOptimization(Optimizer):
         self.local_fraction = o["local_fraction"]
         self.local_scale = o["local_scale"]
         self.xi = o["xi"]
+        self.batch_size = o["batch_size"]
         self._initial = qmc.Halton(d=self.dimension, scramble=True, seed=self.rng)
         self._kernel = None  # the learned covariance (amplitude x Matern), without the noise term
         self._noise = 1.0  # the learned noise variance, in units of the normalised scores
         self._gp = None
+        self._pending: list[np.ndarray] = []  # asked, not told yet (unit box)
+
+    def ready(self) -> int:
+        if self.asked < self.initial_points:  # the initial design does not depend on scores
+            return self.initial_points - self.asked
+        return self.batch_size if not self.outstanding else 0
 
     def _ask(self) -> np.ndarray:
         if len(self.y) < self.initial_points or self._gp is None:
-            return self._unit_to_box(self._initial.random(1)[0])
+            z = self._initial.random(1)[0]
+        else:
+            z = self._propose()
+        self._pending.append(z)
+        return self._unit_to_box(z)
+
+    def _propose(self) -> np.ndarray:
         from skopt.acquisition import gaussian_ei
 
+        gp, scores = self._gp, np.asarray(self.y)
+        if self._pending:  # a batch (constant liar): each point asked but not told scores the worst seen
+            lies = np.full(len(self._pending), scores.min())
+            gp = self._fit(np.vstack([self.X_unit, self._pending]), np.concatenate([scores, lies]), relearn=False)
         Z = np.asarray(self.X_unit)
         best = Z[int(np.argmax(self.y))]
         n_local = int(self.candidates * self.local_fraction)
@@ -270,8 +319,8 @@ class BayesianOptimization(Optimizer):
         glob = self.rng.random((self.candidates - n_local, self.dimension))
         cand = np.vstack([local, glob])
         # skopt minimises: the GP models -score
-        ei = gaussian_ei(cand, self._gp, y_opt=float(np.min(-np.asarray(self.y))), xi=self.xi)
-        return self._unit_to_box(cand[int(np.argmax(ei))])
+        ei = gaussian_ei(cand, gp, y_opt=float(np.min(-scores)), xi=self.xi)
+        return cand[int(np.argmax(ei))]
 
     @property
     def X_unit(self) -> list[np.ndarray]:
@@ -279,13 +328,22 @@ class BayesianOptimization(Optimizer):
 
     def tell(self, x: np.ndarray, score: float) -> None:
         super().tell(x, score)
+        if self._pending:
+            self._pending.pop(0)  # told in the order asked
         n = len(self.y)
         if n < self.initial_points:
             return
+        relearn = self._kernel is None or (n - self.initial_points) % self.refit_every == 0
+        gp = self._fit(np.asarray(self.X_unit), np.asarray(self.y), relearn)
+        self._kernel = gp.kernel_.k1
+        self._noise = float(gp.noise_) if gp.noise_ is not None else self._noise
+        self._gp = gp
+
+    def _fit(self, Z: np.ndarray, scores: np.ndarray, relearn: bool):
+        """A GP of -score over the unit box; its hyperparameters re-learned, or the learned ones kept."""
         from skopt.learning import GaussianProcessRegressor
         from skopt.learning.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
-        relearn = self._kernel is None or (n - self.initial_points) % self.refit_every == 0
         kernel = self._kernel
         if kernel is None:
             kernel = ConstantKernel(1.0, (0.01, 1000.0)) * Matern(
@@ -304,10 +362,8 @@ class BayesianOptimization(Optimizer):
         )
         with warnings.catch_warnings():  # hyperparameters at their bounds are expected early on
             warnings.simplefilter("ignore")
-            gp.fit(np.asarray(self.X_unit), -np.asarray(self.y))
-        self._kernel = gp.kernel_.k1
-        self._noise = float(gp.noise_) if gp.noise_ is not None else self._noise
-        self._gp = gp
+            gp.fit(Z, -scores)
+        return gp
 
 
 _FACTORIES: dict[str, Callable[..., Optimizer]] = {

@@ -266,12 +266,16 @@ def simulate(
         api.close()
 
 
+def vehicle_call(api, name: str):
+    """``api.vehicle.<name>``; for libsumo its C function itself, without the one-line Python wrapper
+    around it (a third of the cost of a call, and these run for every car at every step)."""
+    return getattr(getattr(api, "_libsumo", None), f"vehicle_{name}", None) or getattr(api.vehicle, name)
+
+
 def _run(api, config: EpisodeConfig, platoon: Platoon, road: Road, lane_change_step: int | None) -> Episode:
     ids = config.vehicle_ids
     commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
-    get_position = api.vehicle.getLanePosition
-    get_speed = api.vehicle.getSpeed
-    set_speed = api.vehicle.setSpeed
+    get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
     step = api.simulationStep
     advance = platoon.advance
     maneuver = platoon.maneuver
@@ -375,19 +379,25 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
                lane_change_steps: list[int | None], on_episode) -> list:
     m, n, dt = batch.size, len(config.vehicle_ids), config.step_s
     vehicle = api.vehicle
-    get_position, get_speed, set_speed = vehicle.getLanePosition, vehicle.getSpeed, vehicle.setSpeed
-    commanded = list(batch.commanded)
+    get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
+    commanded_ids = [[ids[i] for i in batch.commanded] for ids in platoons]
     maneuver = batch.maneuver
     laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
-    rows_x = np.empty((config.steps + 1, m, n))
-    rows_v = np.empty_like(rows_x)
+    recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
+    rows_x = np.zeros((config.steps + 1, m, n))  # an ended episode's rows stay 0: computed along, never used
+    rows_v = np.zeros_like(rows_x)
     active = np.ones(m, dtype=bool)
-    live = list(range(m))  # the episodes still in SUMO
+    live = list(range(m))  # the episodes still in SUMO, and their cars
+    sensed = [vid for ids in platoons for vid in ids]
+    results: list = [None] * m
 
     def sense(k: int) -> None:
-        flat = [vid for e in live for vid in platoons[e]]
-        rows_x[k, live] = np.array([get_position(v) for v in flat]).reshape(len(live), n)
-        rows_v[k, live] = np.array([get_speed(v) for v in flat]).reshape(len(live), n)
+        if len(live) == m:
+            rows_x[k] = np.array([get_position(v) for v in sensed]).reshape(m, n)
+            rows_v[k] = np.array([get_speed(v) for v in sensed]).reshape(m, n)
+        else:
+            rows_x[k, live] = np.array([get_position(v) for v in sensed]).reshape(len(live), n)
+            rows_v[k, live] = np.array([get_speed(v) for v in sensed]).reshape(len(live), n)
 
     def episode_pairs(k: int) -> list | None:
         if laterals is None:
@@ -398,52 +408,51 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
             recorded[e].append(pairs[e])
         return pairs
 
-    recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
-    results: list = [None] * m
-
     def end(e: int, steps: int, collisions: tuple) -> None:
+        nonlocal sensed
         active[e] = False
         live.remove(e)
-        for vid in platoons[e]:
+        sensed = [vid for i in live for vid in platoons[i]]
+        for vid in platoons[e]:  # it costs SUMO nothing more
             vehicle.remove(vid)
         if e in batch.failed:
             results[e] = batch.failed[e]
         else:
-            lateral_m = laterals[e].rows() if laterals else None
             results[e] = batch.episode(e, steps, rows_x[:steps + 1, e], rows_v[:steps + 1, e], collisions,
-                                       recorded[e] if laterals else None, lateral_m)
+                                       recorded[e] if laterals else None, laterals[e].rows() if laterals else None)
         if on_episode:
             on_episode(e, results[e])
 
-    sense(0)
-    pairs = episode_pairs(0)
-    lead, gap = batch.leaders(rows_x[0], pairs)
     changes: dict[int, list[int]] = {}
     for e, step in enumerate(lane_change_steps):
         if step is not None:
             changes.setdefault(step, []).append(e)
+    sense(0)
+    pairs = episode_pairs(0)
+    lead, gap = batch.leaders(rows_x[0], pairs)
     for k in range(config.steps):
         for e in changes.get(k, ()):
             if active[e]:
                 laterals[e].change_lane()
         speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
-        for e in list(live):
-            if e in batch.failed:  # a user's controller failed: the episode ends with its error
-                end(e, k, ())
-                continue
-            for vid, v in zip((platoons[e][i] for i in commanded), speeds[e].tolist()):
-                set_speed(vid, v)
+        for e in batch.failed.keys() & live:  # a user's controller failed: the episode ends with its error
+            end(e, k, ())
         if not live:
             break
+        for e, row in zip(live, speeds[live].tolist()):
+            for vid, v in zip(commanded_ids[e], row):
+                set_speed(vid, v)
         api.simulationStep()
         sense(k + 1)
         pairs = episode_pairs(k + 1)
         lead, gap = batch.leaders(rows_x[k + 1], pairs)
-        for e in np.flatnonzero(collided(gap) & active).tolist():
-            x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
-            end(e, k + 1, collisions_at((k + 1) * dt, pairs[e] if pairs else maneuver.pairs(x), x, v, config.vehicle_ids))
-        if not live:
-            break
+        hit = collided(gap)
+        if np.count_nonzero(hit):
+            for e in np.flatnonzero(hit & active).tolist():
+                x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
+                end(e, k + 1, collisions_at((k + 1) * dt, pairs[e] if pairs else maneuver.pairs(x), x, v, config.vehicle_ids))
+            if not live:
+                break
     for e in list(live):
         end(e, config.steps, ())
     return results

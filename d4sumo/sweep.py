@@ -40,7 +40,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
 
-from .campaign import Campaign, CampaignRunner, Evaluator, SampleResult, stored_results
+from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, stored_results
 from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
@@ -167,7 +167,7 @@ def stored_counts(store: Store, sweep_name: str) -> tuple[int, int]:
     return int(row[0]), int(row[1])
 
 
-CHUNK_SAMPLES = 10  # at most this many samples per task ...
+CHUNK_SAMPLES = 10  # a task returns once it has this many samples (a batch is played whole) ...
 CHUNK_WALL_S = 2.0  # ... and a task returns after this long, so results reach the client often
 MAX_TASK_FAILURES = 3  # a chunk that fails this often (a bug, not a lost worker) stops the sweep
 
@@ -180,6 +180,7 @@ class Chunk:
     network: NetworkSource
     stored: tuple[SampleResult, ...]
     state: tuple | None
+    batch: int = DEFAULT_BATCH  # episodes side by side in one SUMO, at most
 
 
 _EVALUATORS: dict[str, Evaluator] = {}  # per worker process: roads built and formulas parsed once
@@ -194,16 +195,16 @@ def run_chunk(chunk: Chunk) -> tuple[list[SampleResult], tuple]:
     if evaluator is None:
         if len(_EVALUATORS) >= 16:
             _EVALUATORS.clear()
-        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network))
+        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network), network=chunk.network)
     # One BLAS thread per task: the GP's matrices are small, and a BLAS pool per worker process
     # oversubscribes the cores (two workers on two cores ran no faster than one).
     with threadpool_limits(limits=1):
         runner = CampaignRunner(chunk.campaign, evaluator, stored=chunk.stored, state=chunk.state,
-                                where=f"campaign {key}")
+                                where=f"campaign {key}", batch=chunk.batch)
         results: list[SampleResult] = []
         t0 = time.monotonic()
         while runner.done < chunk.campaign.samples and len(results) < CHUNK_SAMPLES:
-            results.append(runner.step())
+            results.extend(runner.step())
             if time.monotonic() - t0 > CHUNK_WALL_S:
                 break
     return results, runner.state
@@ -228,10 +229,11 @@ class _Active:
     state: tuple | None = None
     done: int = 0
     failures: int = 0
+    batch: int = DEFAULT_BATCH
 
     def chunk(self) -> Chunk:
         # the stored samples travel only until a state exists
-        return Chunk(self.campaign, self.network, self.stored if self.state is None else (), self.state)
+        return Chunk(self.campaign, self.network, self.stored if self.state is None else (), self.state, self.batch)
 
 
 def run_sweep(
@@ -242,10 +244,12 @@ def run_sweep(
     dask_address: str | None = None,
     dask_timeout_s: float = 30.0,
     progress: Callable[[int, int, int], None] | None = None,
+    batch: int = DEFAULT_BATCH,
 ) -> SweepResult:
     """Run every campaign of the sweep not yet complete in ``db_path``. ``progress(done, total, successes)``
     is called as samples are stored. ``dask_address``: a scheduler's address, or "local" for a local
-    Dask cluster of ``workers`` processes."""
+    Dask cluster of ``workers`` processes. ``batch``: at most this many episodes of a campaign side by
+    side in one SUMO (1: one at a time); the results do not depend on it."""
     sweep.check()
     if dask_address is not None:
         dask_address = check_dask_address(dask_address)
@@ -264,7 +268,7 @@ def run_sweep(
             if len(stored) < c.samples:
                 if c.config.network not in sources:
                     sources[c.config.network] = network_source(c.config.network)
-                todo.append(_Active(c, cid, sources[c.config.network], tuple(stored), done=len(stored)))
+                todo.append(_Active(c, cid, sources[c.config.network], tuple(stored), done=len(stored), batch=batch))
         total = sweep.samples
         counts = list(stored_counts(store, sweep.name))
 

@@ -80,11 +80,37 @@ def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goe
 
     monkeypatch.setattr(campaign_module, "simulate", flaky)
     with Store(tmp_path / "r.sqlite") as store:
-        summary = run_campaign(SMALL.replace(optimizer="random", samples=4), store)
+        summary = run_campaign(SMALL.replace(optimizer="random", samples=4), store, batch=1)
         rows = store.samples()
     assert [r.outcome == "error" for r in rows] == [False, True, False, False]
     assert rows[1].robustness is None and "test" in rows[1].error
     assert summary.count("error") == 1
+
+
+def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_are_errored(tmp_path, monkeypatch):
+    real = campaign_module.simulate_batch
+    batches = []
+
+    def failing_after_two(config, plans, *, road=None, on_episode=None):
+        heard = []
+
+        def hear(i, episode):
+            on_episode(i, episode)
+            heard.append(i)
+            if len(heard) == 2 and len(batches) == 1:
+                raise SumoError("SUMO failed during the episode: test")
+
+        batches.append(len(plans))
+        return real(config, plans, road=road, on_episode=hear)
+
+    monkeypatch.setattr(campaign_module, "simulate_batch", failing_after_two)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=4)
+        rows = store.samples()
+    assert batches == [4, 2]
+    assert sorted(r.index for r in rows) == list(range(6))
+    assert [r.outcome == "error" for r in sorted(rows, key=lambda r: r.index)[:4]].count(True) == 2
+    assert summary.count("error") == 2 and all("test" in r.error for r in rows if r.outcome == "error")
 
 
 def test_robustness_positive_exactly_for_successes_with_the_papers_psi():
@@ -179,3 +205,59 @@ def test_after_a_warm_up_the_specification_is_scored_from_the_attacks_start():
     assert {r.robustness for r in run_campaign(before).samples} == {-3.0}
     # without a warm-up nothing changes, not even the stored definition
     assert "from_attack_start" not in Campaign().definition()["spec"]
+
+
+def full_signature(summary):
+    return [(s.index, s.params, s.robustness, s.outcome, s.collision, s.min_gaps) for s in summary.samples]
+
+
+@pytest.mark.parametrize("optimizer, options", [
+    ("random", {}), ("halton", {}), ("ce", {"batch_size": 6}), ("cmaes", {}), ("ce-bucket", {}),
+    ("bo", {"initial_points": 6}), ("bo", {"initial_points": 4, "batch_size": 3}),
+])
+def test_a_campaign_played_in_batches_is_the_campaign_played_one_episode_at_a_time(optimizer, options):
+    """Issue 13: batches change the speed, never a sample."""
+    campaign = Campaign(optimizer=optimizer, optimizer_options=options, samples=14, seed=2, config=SMALL.config.__class__(setpoint_m=5.0))
+    alone = run_campaign(campaign, batch=1)
+    for batch in (4, 32):
+        assert full_signature(run_campaign(campaign, batch=batch)) == full_signature(alone), batch
+    assert {s.outcome for s in alone.samples} - {"error"}
+
+
+def test_a_campaign_interrupted_inside_a_batch_resumes_with_nothing_lost_or_counted_twice(tmp_path):
+    """Samples of a batch are stored as their episodes end, out of order: a kill leaves holes, and
+    the resumed campaign plays only the missing samples, then ends as if never interrupted."""
+    campaign = Campaign(optimizer="ce", optimizer_options={"batch_size": 8}, samples=16, seed=1)
+    uninterrupted = run_campaign(campaign)
+    path = tmp_path / "r.sqlite"
+
+    class Interrupt(Exception):
+        pass
+
+    heard = []
+
+    def stop_in_second_batch(sample):
+        heard.append(sample.index)
+        if len(heard) == 11:
+            raise Interrupt
+
+    with pytest.raises(Interrupt), Store(path) as store:
+        run_campaign(campaign, store, on_sample=stop_in_second_batch)
+    assert heard[:8] != sorted(heard[:8]) or heard[8:] != sorted(heard[8:])  # stored as they ended
+    with Store(path) as store:
+        kept = sorted(s.index for s in store.samples())
+        assert len(kept) == 11 and kept != list(range(11))  # holes inside the second batch
+        played = []
+        resumed = run_campaign(campaign, store, on_sample=lambda s: played.append(s.index))
+        assert full_signature(resumed) == full_signature(uninterrupted)
+        assert sorted(s.index for s in store.samples()) == list(range(16))
+    assert sorted(set(played) - set(kept)) == sorted(set(range(16)) - set(kept))
+
+
+def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats_exactly():
+    campaign = Campaign(optimizer="bo", optimizer_options={"initial_points": 5, "batch_size": 4}, samples=13, seed=0)
+    a, b = run_campaign(campaign), run_campaign(campaign)
+    assert full_signature(a) == full_signature(b)
+    proposed = [s.params for s in a.samples[5:9]]
+    assert len(set(proposed)) == 4
+    assert "batch_size" in campaign.definition()["optimizer_options"]

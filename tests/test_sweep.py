@@ -341,7 +341,7 @@ def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_pat
 @pytest.mark.sumo
 def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp_path):
     """Regression: two runs of one sweep on one database both crashed part-way ("already has sample 0")."""
-    path = write(tmp_path, TINY.replace("samples = 6", "samples = 30"))
+    path = write(tmp_path, TINY.replace("samples = 6", "samples = 200"))  # long enough to be running still
     db = tmp_path / "r.sqlite"
     cmd, first = start_sweep(path, db)
     wait_for_samples(db, 5)
@@ -350,7 +350,7 @@ def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp
     assert "another d4sumo command is writing to it" in second.stderr
     assert first.wait(timeout=300) == 0
     rows = outcomes(db)
-    assert len(rows) == 120 and len({(r[0], r[1]) for r in rows}) == 120
+    assert len(rows) == 800 and len({(r[0], r[1]) for r in rows}) == 800
 
 
 @pytest.mark.sumo
@@ -381,3 +381,15 @@ def test_grid_points_that_are_one_campaign_are_refused_before_anything_runs(tmp_
     # a fixed [controller] beside a controller axis would be dropped: refused
     with pytest.raises(ConfigError, match="no \\[controller\\] beside grid.controller"):
         Sweep.load(write(tmp_path, TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC"]\n') + "[controller]\ntau = 0.5\n"))
+
+
+@pytest.mark.sumo
+def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or_alone(tmp_path):
+    """Issue 13: batches, and the chunks a worker returns between them, change the speed only."""
+    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["random", "ce", "cmaes"]')
+                 .replace("samples = 6", "samples = 23"))
+    sweep = Sweep.load(path)
+    run_sweep(sweep, tmp_path / "alone.sqlite", workers=1, batch=1)
+    run_sweep(sweep, tmp_path / "batched.sqlite", workers=2, batch=7)
+    assert outcomes(tmp_path / "alone.sqlite") == outcomes(tmp_path / "batched.sqlite")
+    assert len(outcomes(tmp_path / "alone.sqlite")) == 12 * 23
