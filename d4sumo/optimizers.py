@@ -237,7 +237,7 @@ class CMAES(Optimizer):
         import cma
 
         options = {"bounds": [0.0, 1.0], "popsize": self._popsize, "seed": np.nan, "verbose": -9,
-                   "randn": lambda lam, n: self.rng.standard_normal((lam, n))}
+                   "randn": _Normals(self.rng)}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return cma.CMAEvolutionStrategy(list(x0), self.options["sigma0"], options)
@@ -268,6 +268,17 @@ class CMAES(Optimizer):
             self._popsize = int(round(self._popsize * self.options["restart_factor"]))
             self._es = self._start(self.rng.random(self.dimension))
         self._pending, self._population, self._scores = [], [], []
+
+
+class _Normals:
+    """pycma's source of normal draws: the campaign's Generator (a class, not a lambda, so that the
+    optimiser's state pickles: a sweep sends it between processes)."""
+
+    def __init__(self, rng: np.random.Generator):
+        self.rng = rng
+
+    def __call__(self, lam: int, n: int) -> np.ndarray:
+        return self.rng.standard_normal((lam, n))
 
 
 class BayesianOptimization(Optimizer):

@@ -173,3 +173,22 @@ def test_cmaes_restarts_with_a_larger_population_and_never_touches_numpys_global
     assert opt.restarts >= 1 and opt._popsize == first * 2 ** opt.restarts
     after = np.random.get_state()
     assert state[0] == after[0] and np.array_equal(state[1], after[1]) and state[2:] == after[2:]
+
+
+@pytest.mark.parametrize("name", OPTIMIZERS)
+def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
+    """Regression: CMA-ES held a lambda, so a sweep on two worker processes could not send its state."""
+    import pickle
+
+    def run(split: bool) -> list:
+        opt = make_optimizer(name, np.zeros(4), np.ones(4), budget=30, rng=np.random.default_rng(5))
+        asked = []
+        for i in range(30):
+            if split and i == 13:
+                opt = pickle.loads(pickle.dumps(opt))
+            x = opt.ask()
+            asked.append(tuple(x))
+            opt.tell(x, -float(np.sum((x - 0.3) ** 2)))
+        return asked
+
+    assert run(split=True) == run(split=False)
