@@ -16,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 
 from .config import EpisodeConfig
-from .control import ARRAY_KERNELS, ActuatorArray, CruiseArray, acceleration_to_command_array
+from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import ControllerError, PythonFollower, assemble_trace, collisions_at, cruise_params, followers_of
+from .platoon import (ControllerError, Platoon, PythonFollower, assemble_trace, collisions_at, cruise_params,
+                      followers_of)
 from .trace import Collision, Episode
 
 
@@ -42,6 +43,7 @@ class PlatoonBatch:
         self.followers = followers_of(config)  # the kinds, for the trace: the same in every episode
         gains = cruise_params(config)
         self.attacker_cruise = CruiseArray(gains, config.speed_mps, dt, (m,))
+        self._command = CommandArray(vehicle)
         self._attacking = np.zeros(m, dtype=bool)
         others = list(range(n, len(self.ids)))
         self._others = np.array(others, dtype=int)
@@ -106,7 +108,7 @@ class PlatoonBatch:
         if np.count_nonzero(cruising):
             self.attacker_cruise.reset(cruising & self._attacking)  # a new cruise window: the PID starts afresh
             a = self.attacker_cruise.acceleration(speeds[:, 0], cruising)
-            u[:, 0] = np.where(cruising, acceleration_to_command_array(a, self.config.vehicle), attack)
+            u[:, 0] = np.where(cruising, self._command(a), attack)
         else:
             u[:, 0] = attack
         self._attacking = ~cruising
@@ -126,8 +128,7 @@ class PlatoonBatch:
                 u[e, column_index] = c
         others = self._others
         if others.size and self._lead is not None:
-            u[:, -others.size:] = acceleration_to_command_array(self._lead.acceleration(speeds[:, others]),
-                                                                self.config.vehicle)
+            u[:, -others.size:] = self._command(self._lead.acceleration(speeds[:, others]))
         new_speeds = self.actuator.apply(u, speeds[:, self._commanded])
         if others.size and self._lead is None:  # the obstacle holds its speed (command 0)
             new_speeds[:, -others.size:] = self.config.obstacle_speed_mps
@@ -140,6 +141,40 @@ class PlatoonBatch:
                     modes[:, self._with_mode.index(i)] = [f.controller.mode for f in followers]
         return new_speeds
 
+    def detach(self, e: int, k: int, pairs: list[list[Pair]] | None = None) -> Platoon:
+        """Episode ``e`` before its step ``k`` as a `Platoon` of its own, in exactly the state it has here
+        (controllers, actuators, what it recorded), to go on one car at a time: a batch whose few
+        episodes left cost less that way than the arrays' fixed cost per step. ``pairs``: the episode's
+        pairs of samples 0 .. k, for a lane-changing maneuver."""
+        followers = [f if f.sumo_driven else PythonFollower(f.config, self.config) for f in self.followers]
+        for i, _, scalar in self._scalar:  # a user's controller: its own object goes on
+            followers[i - 1] = scalar[e]
+        platoon = Platoon(self.config, self.attacks_u[e], float(self.actuator.max_speed_mps[e, 0]), followers)
+        _carry(self.attacker_cruise, e, platoon.attacker_cruise)
+        platoon._attacking = bool(self._attacking[e])
+        accel = self.actuator.accel_mps2[e].tolist()
+        column = dict(zip(self.commanded, range(len(self.commanded))))
+        platoon.attacker_actuator.accel_mps2 = accel[0]
+        for cars, _, _, _, kernel in self._kernels:
+            for j, i in enumerate(_positions(cars)):
+                controller = followers[i - 1].controller
+                controller.mode = float(kernel.mode[e, j])
+                controller._mode_known = kernel._mode_known
+                _carry(kernel.cruise, (e, j), controller.cruise)
+        for i, f in enumerate(followers, start=1):
+            if not f.sumo_driven:
+                f.actuator.accel_mps2 = accel[column[i]]
+        for j, (i, cruise, actuator) in enumerate(platoon._others):
+            actuator.accel_mps2 = accel[column[i]]
+            if cruise is not None:
+                _carry(self._lead, (e, j), cruise)
+        platoon.commands = self.commands[:k, e].tolist()
+        if self.modes is not None:
+            platoon.modes = self.modes[:k, e].tolist()
+        if pairs is not None:
+            platoon.pairs = list(pairs[:k])
+        return platoon
+
     def episode(self, e: int, steps: int, positions: np.ndarray, speeds: np.ndarray, collisions: tuple[Collision, ...],
                 pairs: list[list[Pair]] | None = None, lateral_m: np.ndarray | None = None) -> Episode:
         """Episode ``e`` after ``steps`` steps, from its sensed rows (steps + 1 samples x n)."""
@@ -148,6 +183,16 @@ class PlatoonBatch:
         trace, min_gaps = assemble_trace(self.config, self.followers, self.commanded, times, positions, speeds,
                                          self.commands[:steps, e], modes, pairs or [], lateral_m)
         return Episode(trace, collisions, min_gaps)
+
+
+def _carry(cruise: CruiseArray, at, to: CruiseControl) -> None:
+    """One car's PID state, from the arrays to its own controller."""
+    to.integral = float(cruise.integral[at])
+    to.prev_error = float(cruise.prev_error[at]) if cruise.engaged[at] else None
+
+
+def _positions(index: slice | np.ndarray) -> list[int]:
+    return list(range(index.start, index.stop)) if isinstance(index, slice) else index.tolist()
 
 
 def _index(positions: list[int]) -> slice | np.ndarray:
@@ -162,40 +207,59 @@ def collided(gap: np.ndarray) -> np.ndarray:
     return (gap < 0.0).any(axis=1)
 
 
-def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_speed_mps: float = float("inf")) -> list[Episode | ControllerError]:
-    """`platoon.integrate` for many attacks at once: ballistic positions, no SUMO, the paper's maneuver.
-    For physics tests of the array laws against the scalar ones."""
+def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_speed_mps: float = float("inf"), *,
+                    detach_at_step: int | None = None) -> list[Episode | ControllerError]:
+    """`platoon.integrate` for many attacks at once: ballistic positions, no SUMO, the paper's maneuver;
+    from step ``detach_at_step`` on, each episode left goes on alone (`PlatoonBatch.detach`). For
+    physics tests of the array laws against the scalar ones."""
     from .maneuvers import initial_state
 
     batch = PlatoonBatch(config, attacks_u, attacker_max_speed_mps)
     m, dt, ids = batch.size, config.step_s, config.vehicle_ids
     x0, v0 = initial_state(config)
-    rows_x = np.empty((config.steps + 1, m, len(ids)))
-    rows_v = np.empty_like(rows_x)
+    rows_x = np.zeros((config.steps + 1, m, len(ids)))
+    rows_v = np.zeros_like(rows_x)
     rows_x[0], rows_v[0] = x0, v0
-    positions, speeds = rows_x[0].copy(), rows_v[0].copy()
     active = np.ones(m, dtype=bool)
+    alone: dict[int, Platoon] = {}
     ended: dict[int, Episode | ControllerError] = {}
-    lead, gap = batch.leaders(positions, None)
+    lead, gap = batch.leaders(rows_x[0], None)
     for k in range(config.steps):
-        new_speeds = batch.advance(k, positions, speeds, lead, gap, active)
-        positions = positions + 0.5 * (speeds + new_speeds) * dt
-        speeds = new_speeds
-        rows_x[k + 1], rows_v[k + 1] = positions, speeds
-        lead, gap = batch.leaders(positions, None)
-        hit = collided(gap) | np.isin(np.arange(m), list(batch.failed))
-        for e in np.flatnonzero(hit & active).tolist():
-            active[e] = False
+        if k == detach_at_step:
+            for e in np.flatnonzero(active).tolist():
+                alone[e] = batch.detach(e, k)
+                active[e] = False
+        new_speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
+        for e, platoon in list(alone.items()):
+            try:
+                new_speeds[e] = platoon.advance(k, rows_x[k, e].tolist(), rows_v[k, e].tolist(), batch.maneuver.pairs(rows_x[k, e].tolist()))
+            except ControllerError as exc:
+                ended[e] = exc
+                del alone[e]
+        rows_x[k + 1] = rows_x[k] + 0.5 * (rows_v[k] + new_speeds) * dt
+        rows_v[k + 1] = new_speeds
+        lead, gap = batch.leaders(rows_x[k + 1], None)
+        for e in np.flatnonzero(active).tolist():
             if e in batch.failed:
                 ended[e] = batch.failed[e]
+                active[e] = False
+        for e in np.flatnonzero(collided(gap)).tolist():
+            if e in ended:
                 continue
             x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
-            record = collisions_at((k + 1) * dt, batch.maneuver.pairs(x), x, v, ids)
-            ended[e] = batch.episode(e, k + 1, rows_x[:k + 2, e], rows_v[:k + 2, e], record)
-        if not active.any():
+            ended[e] = _ended(batch, alone, e, k + 1, rows_x, rows_v, collisions_at((k + 1) * dt, batch.maneuver.pairs(x), x, v, ids))
+            active[e] = False
+        if len(ended) == m:
             break
-    for e in np.flatnonzero(active).tolist():
-        ended[e] = batch.episode(e, config.steps, rows_x[:, e], rows_v[:, e], ())
+    for e in range(m):
+        if e not in ended:
+            ended[e] = _ended(batch, alone, e, config.steps, rows_x, rows_v, ())
     return [ended[e] for e in range(m)]
 
 
+def _ended(batch: PlatoonBatch, alone: dict, e: int, steps: int, rows_x, rows_v, collisions) -> Episode:
+    x, v = rows_x[:steps + 1, e], rows_v[:steps + 1, e]
+    if e in alone:
+        trace, min_gaps = alone.pop(e).trace(np.arange(steps + 1) * batch.config.step_s, x, v)
+        return Episode(trace, collisions, min_gaps)
+    return batch.episode(e, steps, x, v, collisions)

@@ -102,7 +102,8 @@ class Platoon:
     """Every car Python knows of: the attacker, the followers and the maneuver's other car (a benign
     lead that cruises at the target speed, or an obstacle at its constant speed)."""
 
-    def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float):
+    def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float,
+                 followers: list[PythonFollower | SumoFollower] | None = None):
         attack_u = np.asarray(attack_u, dtype=float)
         if attack_u.shape != (config.steps,):
             raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
@@ -111,7 +112,7 @@ class Platoon:
         self.ids = config.vehicle_ids
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
         vehicle, dt = config.vehicle, config.step_s
-        self.followers = followers_of(config)
+        self.followers = followers or followers_of(config)  # given: an episode carried on from a batch
         gains = cruise_params(config)  # the attacker is the same kind of car
         self.attacker_cruise = CruiseControl(gains, config.speed_mps, dt)
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)

@@ -375,6 +375,11 @@ def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: 
         api.close()
 
 
+#: a batch carries on one episode at a time once this few are left: the arrays' fixed cost per step
+#: then exceeds what they save (measured with tools/bench_batch.py)
+DETACH_AT = 4
+
+
 def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, platoons: list[tuple[str, ...]],
                lane_change_steps: list[int | None], on_episode) -> list:
     m, n, dt = batch.size, len(config.vehicle_ids), config.step_s
@@ -386,8 +391,9 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
     recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
     rows_x = np.zeros((config.steps + 1, m, n))  # an ended episode's rows stay 0: computed along, never used
     rows_v = np.zeros_like(rows_x)
-    active = np.ones(m, dtype=bool)
-    live = list(range(m))  # the episodes still in SUMO, and their cars
+    active = np.ones(m, dtype=bool)  # still commanded by the batch's arrays
+    live = list(range(m))  # still in SUMO
+    detached: dict[int, Platoon] = {}  # carried on one at a time
     sensed = [vid for ids in platoons for vid in ids]
     results: list = [None] * m
 
@@ -408,18 +414,25 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
             recorded[e].append(pairs[e])
         return pairs
 
-    def end(e: int, steps: int, collisions: tuple) -> None:
+    def end(e: int, steps: int, collisions: tuple, error: Exception | None = None) -> None:
         nonlocal sensed
         active[e] = False
         live.remove(e)
         sensed = [vid for i in live for vid in platoons[i]]
         for vid in platoons[e]:  # it costs SUMO nothing more
             vehicle.remove(vid)
-        if e in batch.failed:
-            results[e] = batch.failed[e]
+        error = error or batch.failed.get(e)
+        lateral_m = laterals[e].rows() if laterals else None
+        if error is not None:
+            results[e] = error
+        elif e in detached:
+            platoon = detached.pop(e)
+            platoon.pairs = recorded[e]
+            trace, min_gaps = platoon.trace(np.arange(steps + 1) * dt, rows_x[:steps + 1, e], rows_v[:steps + 1, e], lateral_m)
+            results[e] = Episode(trace, collisions, min_gaps)
         else:
             results[e] = batch.episode(e, steps, rows_x[:steps + 1, e], rows_v[:steps + 1, e], collisions,
-                                       recorded[e] if laterals else None, laterals[e].rows() if laterals else None)
+                                       recorded[e] if laterals else None, lateral_m)
         if on_episode:
             on_episode(e, results[e])
 
@@ -431,24 +444,48 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
     pairs = episode_pairs(0)
     lead, gap = batch.leaders(rows_x[0], pairs)
     for k in range(config.steps):
+        arrayed = len(live) - len(detached)  # episodes the arrays command
+        if 0 < arrayed <= DETACH_AT:  # few left: each goes on alone
+            for e in live:
+                if e not in detached:
+                    detached[e] = batch.detach(e, k, recorded[e] if laterals else None)
+                    active[e] = False
+            arrayed = 0
         for e in changes.get(k, ()):
-            if active[e]:
+            if e in live:
                 laterals[e].change_lane()
-        speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
-        for e in batch.failed.keys() & live:  # a user's controller failed: the episode ends with its error
-            end(e, k, ())
+        if arrayed:
+            speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
+            for e in batch.failed.keys() & live:  # a user's controller failed: the episode ends with its error
+                end(e, k, ())
+            if len(live) == m:
+                for ids, row in zip(commanded_ids, speeds.tolist()):
+                    for vid, v in zip(ids, row):
+                        set_speed(vid, v)
+            else:
+                for e in live:
+                    if e not in detached:
+                        for vid, v in zip(commanded_ids[e], speeds[e].tolist()):
+                            set_speed(vid, v)
+        for e, platoon in list(detached.items()):
+            x = rows_x[k, e].tolist()
+            try:
+                out = platoon.advance(k, x, rows_v[k, e].tolist(), pairs[e] if pairs else maneuver.pairs(x))
+            except ControllerError as exc:
+                detached.pop(e)
+                end(e, k, (), exc)
+                continue
+            for vid, v in zip(commanded_ids[e], out):
+                set_speed(vid, v)
         if not live:
             break
-        for e, row in zip(live, speeds[live].tolist()):
-            for vid, v in zip(commanded_ids[e], row):
-                set_speed(vid, v)
         api.simulationStep()
         sense(k + 1)
         pairs = episode_pairs(k + 1)
         lead, gap = batch.leaders(rows_x[k + 1], pairs)
         hit = collided(gap)
         if np.count_nonzero(hit):
-            for e in np.flatnonzero(hit & active).tolist():
+            for e in [e for e in live if hit[e]]:
                 x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
                 end(e, k + 1, collisions_at((k + 1) * dt, pairs[e] if pairs else maneuver.pairs(x), x, v, config.vehicle_ids))
             if not live:

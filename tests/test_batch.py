@@ -41,9 +41,11 @@ class Flaky:
                               ControllerConfig("switching", params=(("acc_kp", 0.5),), where="controller.v3")), setpoint_m=5.0),
 ], ids=["rest", "steady", "warmup-5", "timegap", "mixed"])
 @pytest.mark.parametrize("family", ["knots", "persistent"])
-def test_an_episode_in_a_batch_is_the_episode_played_alone(config, family):
+@pytest.mark.parametrize("detach_at_step", [None, 0, 250])
+def test_an_episode_in_a_batch_is_the_episode_played_alone(config, family, detach_at_step):
+    """Also when the batch hands its episodes over to go on one at a time, midway."""
     signals = attacks(config, 12, family=family)
-    batched = integrate_batch(config, signals, 40.0)
+    batched = integrate_batch(config, signals, 40.0, detach_at_step=detach_at_step)
     outcomes = set()
     for u, episode in zip(signals, batched):
         assert_same_episode(episode, integrate(config, u, 40.0))
@@ -65,7 +67,7 @@ def test_a_user_controller_without_an_array_form_runs_per_episode_and_fails_alon
     sys.modules[__name__].Flaky = Flaky
     config = EpisodeConfig(setpoint_m=7.0, controller=ControllerConfig(f"{__name__}:Flaky"))
     signals = attacks(config, 8, seed=1)
-    batched = integrate_batch(config, signals, 40.0)
+    batched = integrate_batch(config, signals, 40.0, detach_at_step=200)
     kinds = set()
     for u, result in zip(signals, batched):
         try:
