@@ -24,7 +24,7 @@ from .batch import DEFAULT_BATCH
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError, check_int, check_number
 from .maneuvers import AttackPlan, attack_plan, maneuver_of
-from .optimizers import OPTIMIZERS, make_optimizer, resolve_options
+from .optimizers import OPTIMIZERS, OPTIONS_SINCE, make_optimizer, resolve_options, stored_options
 from .scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
 from .simulation import check_episode, simulate, simulate_batch
 from .spec import Specification
@@ -93,7 +93,7 @@ class Campaign:
             "config": self.config.to_dict(),
             "attack": attack,
             "optimizer": self.optimizer,
-            "optimizer_options": dict(self.optimizer_options),
+            "optimizer_options": stored_options(self.optimizer, dict(self.optimizer_options)),
             "seed": self.seed,
             "spec": {"formula": self.formula, "d_safe_m": self.d_safe_m,
                      # only where it matters, so that campaigns stored before it keep their identity
@@ -115,7 +115,8 @@ class Campaign:
                 formula=definition["spec"]["formula"],
                 delta_s=attack.get("delta_s", 6.0),
                 horizon_s=attack.get("horizon_s", 48.0),
-                optimizer_options=tuple(definition.get("optimizer_options", {}).items()),
+                optimizer_options=tuple({**OPTIONS_SINCE.get(definition["optimizer"], {}),
+                                         **definition.get("optimizer_options", {})}.items()),
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),
             )
         except ConfigError as exc:

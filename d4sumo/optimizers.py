@@ -14,9 +14,10 @@
   per dimension, learned noise) and expected improvement, maximised over random candidates and
   perturbations of the incumbent. Kernel hyperparameters are re-learned every ``refit_every`` samples
   and kept in between (the GP is still conditioned on every sample): this keeps BO's own time per
-  sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell. With
-  ``batch_size`` q > 1 it proposes q points at once (the constant liar: each point proposed but not yet
-  scored counts as the worst score seen), so their episodes can be played side by side.
+  sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell. It proposes
+  ``batch_size`` points at once (5; 1 is the paper's one point per score): the constant liar, each
+  point proposed but not yet scored counts as the worst score seen, so their episodes can be played
+  side by side (and the batch spreads out: it found more distinct attacks than one at a time).
 
 ``ready()`` says how many points an optimiser can propose before it is told a score, with exactly the
 points it would propose one at a time: a cross-entropy generation, a CMA-ES population, any number of
@@ -285,7 +286,7 @@ class BayesianOptimization(Optimizer):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (1, 1, 64)}
+               "batch_size": (5, 1, 64)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -385,6 +386,18 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
     "random": RandomSearch,
     "halton": Halton,
 }
+
+
+#: options added after campaigns were stored, each with the value those campaigns ran with: a campaign's
+#: definition leaves such an option out at that value, and a stored definition without it gets it back,
+#: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score)
+OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1}}
+
+
+def stored_options(name: str, options: dict) -> dict:
+    """The options as a campaign's definition holds them (see OPTIONS_SINCE)."""
+    since = OPTIONS_SINCE.get(name, {})
+    return {k: v for k, v in options.items() if not (k in since and since[k] == v)}
 
 
 def resolve_options(name: str, options: dict | None) -> dict:

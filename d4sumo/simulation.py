@@ -272,11 +272,17 @@ def vehicle_call(api, name: str):
     return getattr(getattr(api, "_libsumo", None), f"vehicle_{name}", None) or getattr(api.vehicle, name)
 
 
+def simulation_step(api):
+    """``api.simulationStep``; for libsumo its C function (d4sumo registers no step listeners)."""
+    raw = getattr(getattr(api, "_libsumo", None), "simulation_step", None)
+    return (lambda: raw(0.0)) if raw else api.simulationStep
+
+
 def _run(api, config: EpisodeConfig, platoon: Platoon, road: Road, lane_change_step: int | None) -> Episode:
     ids = config.vehicle_ids
     commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
     get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
-    step = api.simulationStep
+    step = simulation_step(api)
     advance = platoon.advance
     maneuver = platoon.maneuver
     pairs_at = maneuver.pairs
@@ -385,6 +391,7 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
     m, n, dt = batch.size, len(config.vehicle_ids), config.step_s
     vehicle = api.vehicle
     get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
+    sumo_step = simulation_step(api)
     commanded_ids = [[ids[i] for i in batch.commanded] for ids in platoons]
     maneuver = batch.maneuver
     laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
@@ -479,7 +486,7 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
                 set_speed(vid, v)
         if not live:
             break
-        api.simulationStep()
+        sumo_step()
         sense(k + 1)
         pairs = episode_pairs(k + 1)
         lead, gap = batch.leaders(rows_x[k + 1], pairs)

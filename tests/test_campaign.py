@@ -213,7 +213,7 @@ def full_signature(summary):
 
 @pytest.mark.parametrize("optimizer, options", [
     ("random", {}), ("halton", {}), ("ce", {"batch_size": 6}), ("cmaes", {}), ("ce-bucket", {}),
-    ("bo", {"initial_points": 6}), ("bo", {"initial_points": 4, "batch_size": 3}),
+    ("bo", {"initial_points": 6, "batch_size": 1}), ("bo", {"initial_points": 4, "batch_size": 3}),
 ])
 def test_a_campaign_played_in_batches_is_the_campaign_played_one_episode_at_a_time(optimizer, options):
     """Issue 13: batches change the speed, never a sample."""
@@ -261,3 +261,19 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
     proposed = [s.params for s in a.samples[5:9]]
     assert len(set(proposed)) == 4
     assert "batch_size" in campaign.definition()["optimizer_options"]
+
+
+def test_bo_proposes_five_at_a_time_and_a_campaign_stored_before_that_keeps_its_identity_and_its_samples():
+    """Stored bo campaigns proposed one point per score and have no batch_size: they must resume and
+    replay as they ran, under the same key."""
+    from d4sumo.store import campaign_key
+
+    new = Campaign(optimizer="bo")
+    assert new.definition()["optimizer_options"]["batch_size"] == 5
+    old = copy.deepcopy(new.definition())
+    del old["optimizer_options"]["batch_size"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert dict(stored.optimizer_options)["batch_size"] == 1
+    assert campaign_key(stored.definition()) == campaign_key(old)
+    sequential = Campaign(optimizer="bo", optimizer_options={"batch_size": 1}, samples=12)
+    assert sequential.definition() == stored.definition()

@@ -1,8 +1,10 @@
-"""Sweep throughput against worker count, measured in one run: the same sweep into fresh databases.
+"""Sweep throughput against worker count and batch size, measured in one run: the same sweeps into
+fresh databases.
 
-Usage: python tools/bench_sweep.py [SWEEP.toml] [--workers 1 2]
-Prints the wall time per worker count, samples per second, and the speed-up over one worker; checks
-that every run stored the same samples (the result does not depend on the worker count).
+Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
+       python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 32
+Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
+checks that every run stored the same samples (the result depends on neither).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from d4sumo.batch import DEFAULT_BATCH
 from d4sumo.store import Store
 from d4sumo.sweep import Sweep, run_sweep
 
@@ -26,25 +29,33 @@ def signature(db: Path) -> list:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("sweep", nargs="?", default=str(HERE / "examples" / "sweeps" / "small.toml"))
+    parser.add_argument("sweeps", nargs="*", default=[str(HERE / "examples" / "sweeps" / "small.toml")])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--batch", type=int, nargs="+", default=[DEFAULT_BATCH])
     args = parser.parse_args()
-    sweep = Sweep.load(args.sweep)
-    print(f"sweep {sweep.name}: {len(sweep.campaigns)} campaigns, {sweep.samples} samples")
+    sweeps = [Sweep.load(path) for path in args.sweeps]
+    print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))
     times, results = {}, {}
+    runs = [(n, b) for n in args.workers for b in args.batch]
     with tempfile.TemporaryDirectory() as tmp:
-        for n in args.workers:
-            db = Path(tmp) / f"w{n}.sqlite"
+        for n, b in runs:
             t0 = time.perf_counter()
-            result = run_sweep(sweep, db, workers=n)
-            times[n] = time.perf_counter() - t0
-            results[n] = signature(db)
-            print(f"  {n} worker(s): {times[n]:6.1f} s  ({result.samples / times[n]:.0f} samples/s, {result.successes} successes)")
-    base = args.workers[0]
-    for n in args.workers[1:]:
-        print(f"  speed-up {n} vs {base} worker(s): {times[base] / times[n]:.2f}x")
-    same = all(results[n] == results[base] for n in args.workers)
-    print(f"  identical samples for every worker count: {same}")
+            samples = successes = 0
+            signatures = []
+            for i, sweep in enumerate(sweeps):
+                db = Path(tmp) / f"w{n}-b{b}-{i}.sqlite"
+                result = run_sweep(sweep, db, workers=n, batch=b)
+                samples += result.samples
+                successes += result.successes
+                signatures.append(signature(db))
+            times[n, b] = time.perf_counter() - t0
+            results[n, b] = signatures
+            print(f"  {n} worker(s), batch {b:>2}: {times[n, b]:6.1f} s  ({samples / times[n, b]:.0f} samples/s, {successes} successes)")
+    base = runs[0]
+    for run in runs[1:]:
+        print(f"  speed-up of {run[0]} worker(s), batch {run[1]} over {base[0]} worker(s), batch {base[1]}: {times[base] / times[run]:.2f}x")
+    same = all(results[run] == results[base] for run in runs)
+    print(f"  identical samples for every run: {same}")
 
 
 if __name__ == "__main__":
