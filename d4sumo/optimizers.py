@@ -302,6 +302,7 @@ class BayesianOptimization(Optimizer):
         self._kernel = None  # the learned covariance (amplitude x Matern), without the noise term
         self._noise = 1.0  # the learned noise variance, in units of the normalised scores
         self._gp = None
+        self._fitted = 0  # the scores the GP was fitted to
         self._pending: list[np.ndarray] = []  # asked, not told yet (unit box)
 
     def ready(self) -> int:
@@ -310,17 +311,30 @@ class BayesianOptimization(Optimizer):
         return self.batch_size if not self.outstanding else 0
 
     def _ask(self) -> np.ndarray:
-        if len(self.y) < self.initial_points or self._gp is None:
+        if len(self.y) < self.initial_points:
             z = self._initial.random(1)[0]
         else:
             z = self._propose()
         self._pending.append(z)
         return self._unit_to_box(z)
 
+    def _model(self):
+        """The GP of every score told, fitted when first needed after new scores (once per batch)."""
+        n = len(self.y)
+        if self._gp is None or self._fitted != n:
+            # re-learn the hyperparameters at the first fit and each time refit_every more were told
+            relearn = self._kernel is None or ((n - self.initial_points) // self.refit_every
+                                               > (self._fitted - self.initial_points) // self.refit_every)
+            gp = self._fit(np.asarray(self.X_unit), np.asarray(self.y), relearn)
+            self._kernel = gp.kernel_.k1
+            self._noise = float(gp.noise_) if gp.noise_ is not None else self._noise
+            self._gp, self._fitted = gp, n
+        return self._gp
+
     def _propose(self) -> np.ndarray:
         from skopt.acquisition import gaussian_ei
 
-        gp, scores = self._gp, np.asarray(self.y)
+        gp, scores = self._model(), np.asarray(self.y)
         if self._pending:  # a batch (constant liar): each point asked but not told scores the worst seen
             lies = np.full(len(self._pending), scores.min())
             gp = self._fit(np.vstack([self.X_unit, self._pending]), np.concatenate([scores, lies]), relearn=False)
@@ -342,14 +356,6 @@ class BayesianOptimization(Optimizer):
         super().tell(x, score)
         if self._pending:
             self._pending.pop(0)  # told in the order asked
-        n = len(self.y)
-        if n < self.initial_points:
-            return
-        relearn = self._kernel is None or (n - self.initial_points) % self.refit_every == 0
-        gp = self._fit(np.asarray(self.X_unit), np.asarray(self.y), relearn)
-        self._kernel = gp.kernel_.k1
-        self._noise = float(gp.noise_) if gp.noise_ is not None else self._noise
-        self._gp = gp
 
     def _fit(self, Z: np.ndarray, scores: np.ndarray, relearn: bool):
         """A GP of -score over the unit box; its hyperparameters re-learned, or the learned ones kept."""

@@ -109,7 +109,8 @@ def test_bo_keeps_the_learned_noise_between_relearnings():
     for i in range(25):
         x = opt.ask()
         opt.tell(x, rng.normal(0, 1.0))  # pure noise: the GP must learn a noise level
-        if i == 19:  # re-learned at 20 samples
+        if i == 19:  # re-learned at 20 samples, when next needed
+            opt._model()
             learned = opt._noise
     assert learned > 1e-4
     assert opt._noise == learned and opt._gp.noise_ == pytest.approx(learned)

@@ -3,6 +3,7 @@ fresh databases.
 
 Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 32
+       python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
 Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither).
 """
@@ -11,10 +12,13 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import tomllib
 import time
 from pathlib import Path
 
 from d4sumo.batch import DEFAULT_BATCH
+from d4sumo.config import read_toml
+from d4sumo.inputs import with_overrides
 from d4sumo.store import Store
 from d4sumo.sweep import Sweep, run_sweep
 
@@ -27,13 +31,22 @@ def signature(db: Path) -> list:
         return sorted((keys[s.campaign_id], s.index, s.params, s.robustness) for s in store.samples())
 
 
+def load(path: str, overrides: dict) -> Sweep:
+    doc = read_toml(path, "SWEEP")
+    head = {k: doc.pop(k) for k in ("name", "grid") if k in doc}
+    return Sweep.from_dict({**head, **with_overrides(doc, overrides)}, default_name=Path(path).stem)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("sweeps", nargs="*", default=[str(HERE / "examples" / "sweeps" / "small.toml")])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--batch", type=int, nargs="+", default=[DEFAULT_BATCH])
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="change a fixed value of every sweep (TOML value), e.g. search.bo.batch_size=5")
     args = parser.parse_args()
-    sweeps = [Sweep.load(path) for path in args.sweeps]
+    overrides = {k: tomllib.loads(f"v = {v}")["v"] for k, v in (item.split("=", 1) for item in args.set)}
+    sweeps = [load(path, overrides) for path in args.sweeps]
     print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))
     times, results = {}, {}
     runs = [(n, b) for n in args.workers for b in args.batch]
