@@ -386,8 +386,9 @@ def run_campaign(
     on_sample: Callable[[SampleResult], None] | None = None,
     batch: int = DEFAULT_BATCH,
 ) -> CampaignSummary:
-    """Run (or resume) a campaign; every sample is in ``store`` as soon as it finishes. ``batch``: at
-    most this many episodes side by side in one SUMO (1: one at a time); the results are the same.
+    """Run (or resume) a campaign; every sample is in ``store`` as soon as it and those before it have
+    finished. ``batch``: at most this many episodes side by side in one SUMO (1: one at a time); the
+    results are the same.
 
     Pass an ``evaluator`` built beforehand to have every input checked before anything is written."""
     evaluate = evaluator or Evaluator(campaign)
@@ -403,13 +404,26 @@ def run_campaign(
     if on_sample:
         for r in results:
             on_sample(r)
-    def finished(r: SampleResult) -> None:  # stored as soon as its episode ends
-        if store is not None:
-            r = dataclasses.replace(r, id=store.add_sample(campaign_id, r.index, r.params, r.robustness, r.outcome,
-                                                           r.collision, r.min_gaps, r.wall_s, r.error))
-        results.append(r)
-        if on_sample:
-            on_sample(r)
+
+    # A sample is stored as soon as its episode and those before it have ended: row ids then follow the
+    # samples' order whatever the batch size, and a kill loses only episodes still waiting in a batch.
+    done = {r.index for r in results}
+    waiting: dict[int, SampleResult] = {}
+    following = [0]  # the next index to store
+
+    def finished(r: SampleResult) -> None:
+        waiting[r.index] = r
+        while following[0] in waiting or following[0] in done:
+            r = waiting.pop(following[0], None)
+            following[0] += 1
+            if r is None:
+                continue
+            if store is not None:
+                r = dataclasses.replace(r, id=store.add_sample(campaign_id, r.index, r.params, r.robustness, r.outcome,
+                                                               r.collision, r.min_gaps, r.wall_s, r.error))
+            results.append(r)
+            if on_sample:
+                on_sample(r)
 
     while runner.done < campaign.samples:
         runner.step(finished)
