@@ -24,7 +24,7 @@ from .trace import Collision, Episode
 
 
 #: episodes of a campaign played side by side at most, by default (the results never depend on it, only the speed)
-DEFAULT_BATCH = 32
+DEFAULT_BATCH = 64
 
 
 class PlatoonBatch:

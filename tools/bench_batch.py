@@ -6,7 +6,7 @@ is scored as usual (simulation, specification, optimiser: a whole sample). A bat
 optimiser proposes together: a cross-entropy generation (`ce`, 10 by default), a CMA-ES population,
 or up to --batch random points. The results are checked to be identical both ways.
 
-Usage: python tools/bench_batch.py [--samples 200] [--repeats 3] [--batch 32] [--optimizers random ce cmaes]
+Usage: python tools/bench_batch.py [--samples 200] [--repeats 3] [--batch 64] [--optimizers random ce cmaes]
 The last line is the ratio of the first optimiser's campaigns on the paper's default scenario
 (7 m, 25 m/s, from rest, knots).
 """
@@ -18,6 +18,7 @@ import os
 import statistics
 import time
 
+from d4sumo.batch import DEFAULT_BATCH
 from d4sumo.campaign import Campaign, Evaluator, run_campaign
 from d4sumo.config import EpisodeConfig
 
@@ -32,7 +33,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--batch", type=int, default=DEFAULT_BATCH)
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
     args = parser.parse_args()

@@ -2,7 +2,7 @@
 fresh databases.
 
 Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
-       python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 32
+       python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 64
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
 Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither).
