@@ -56,8 +56,12 @@ class Record:
 
     @property
     def lane_change_at_s(self) -> float | None:
-        """When the attacker began its lane change, in simulation time (None: the paper's maneuver)."""
-        return None if self.maneuver == "inlane" else self.attack_start_s + self.params[-1]
+        """When the attacker began its lane change, in simulation time (None: the paper's maneuver, or an
+        episode that ended before the change began)."""
+        if self.maneuver == "inlane":
+            return None
+        at = self.attack_start_s + self.params[-1]
+        return None if self.time_s is not None and self.time_s <= at else at
 
     @property
     def configuration(self) -> tuple:

@@ -234,9 +234,18 @@ def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") ->
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
     if not isinstance(family, LaneChangeAttack):
         return AttackPlan(u)
-    t_lc = float(family.check(params)[-1])
-    step = config.attack_start_step + int(math.floor(t_lc / config.step_s + 0.5))
+    step = config.attack_start_step + lane_change_steps(float(family.check(params)[-1]), config.step_s)
     return AttackPlan(u, step if step < config.steps else None)
+
+
+#: a lane change time within this many steps of a half step counts as the half step (which rounds up)
+HALF_STEP_TOLERANCE = 1e-9
+
+
+def lane_change_steps(t_lc_s: float, step_s: float) -> int:
+    """The whole steps nearest to t_lc_s, a half step rounding up whatever the rounding of t_lc_s / step_s
+    (1.075 s / 0.05 s is 21.499999999999996 in floating point: it rounds to 22, as 1.025 s to 21)."""
+    return int(math.floor(t_lc_s / step_s + 0.5 + HALF_STEP_TOLERANCE))
 
 
 def check_road_lanes(config: "EpisodeConfig", road_name: str, lanes: int) -> None:

@@ -9,6 +9,7 @@ A sweep file is TOML:
     speed_mps = [20, 25, 30]
     start = ["rest", "steady"]
     maneuver = ["inlane", "cutin"]      # optional, and its settings: cutin_follower, cutin_offset_m, lane_change_s, ...
+                                        # (a setting another maneuver does not read gives it one campaign)
     controller = ["switching", "timegap", "sumo:ACC", {class = "sumo:IDM", tau = 1.5}]   # optional
     attack = ["knots"]
     optimizer = ["bo", "ce"]
@@ -60,6 +61,15 @@ GRID_TO_KEY = {**{k: f"scenario.{k}" for k in SCENARIO_GRID_KEYS}, "controller":
                "optimizer": "search.optimizer", "seed": "search.seed"}
 
 
+def _unused_settings_only(a: dict, b: dict, campaign: Campaign) -> bool:
+    """Whether two grid points differ only in maneuver settings the campaign's maneuver does not read
+    (a cut-in's offset for the in-lane attack): the same campaign, counted once."""
+    used = set(campaign.config.maneuver_class.settings)
+    settings = {f"scenario.{k}" for m in MANEUVERS.values() for k in m.settings}
+    differ = {k for k in a if a[k] != b[k]}
+    return bool(differ) and all(k in settings and k.removeprefix("scenario.") not in used for k in differ)
+
+
 @dataclass(frozen=True)
 class Sweep:
     name: str
@@ -100,15 +110,23 @@ class Sweep:
         if "controller" in grid and "controller" in base:
             raise ConfigError(f"{source}: [controller]", base["controller"],
                               "no [controller] beside grid.controller: give each controller's values in the grid")
-        campaigns, points = [], {}
+        campaigns, points, merged = [], {}, []
         for values in itertools.product(*grid.values()):
             point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
             campaign = campaign_of(with_overrides(base, point))
             key = campaign_key(campaign.definition())
-            if key in points:  # e.g. a controller's defaults written out, or one table per follower alike
+            if key in points:
+                if _unused_settings_only(points[key], point, campaign):  # inlane x cutin_offset_m: one inlane campaign
+                    merged.append((points[key], point))
+                    continue
+                # e.g. a controller's defaults written out, or one table per follower alike
                 raise ConfigError(f"{source}: [grid]", f"{points[key]} and {point}", "grid points that are different campaigns")
             points[key] = point
             campaigns.append(campaign)
+        read = {f"scenario.{k}" for c in campaigns for k in c.config.maneuver_class.settings}
+        for a, b in merged:  # an axis no maneuver of the grid reads changes nothing at all: a mistake
+            if any(a[k] != b[k] and k not in read for k in a):
+                raise ConfigError(f"{source}: [grid]", f"{a} and {b}", "grid points that are different campaigns")
         return cls(name=name.strip(), campaigns=tuple(campaigns))
 
     def check(self) -> None:

@@ -75,6 +75,15 @@ def test_attack_start_comes_from_the_stored_scenario():
     assert attack_start_s({"start": "warmup"}) == 15.0  # the default warm-up when the key is absent
 
 
+def test_the_lane_change_is_marked_only_when_it_began_before_the_episode_ended():
+    """Regression: figures marked the lane change at t_lc_s even when the crash had ended the episode first."""
+    changed = _record([0] * 9 + [4.0], time_s=30.0, start="warmup", attack_start_s=15.0, maneuver="cutout")
+    ended_first = _record([0] * 9 + [20.0], time_s=30.0, start="warmup", attack_start_s=15.0, maneuver="cutout")
+    no_crash = _record([0] * 9 + [20.0], time_s=None, maneuver="cutout")
+    assert changed.lane_change_at_s == 19.0 and ended_first.lane_change_at_s is None and no_crash.lane_change_at_s == 20.0
+    assert _record([0] * 9, time_s=30.0).lane_change_at_s is None  # the paper's maneuver changes no lane
+
+
 def test_table_1_counts_collision_time_from_the_attack_start():
     records = [_record([0] * 9, time_s=25.0, start="warmup", attack_start_s=15.0),
                _record([0] * 9, time_s=35.0, start="warmup", attack_start_s=15.0)]

@@ -150,3 +150,12 @@ def test_the_default_specification_of_a_lane_change_is_the_papers_over_whoever_f
 def test_every_maneuver_has_its_class():
     for name, cls in (("inlane", Maneuver), ("cutin", CutIn), ("cutout", CutOut)):
         assert type(maneuver_of(EpisodeConfig(maneuver=name))) is cls
+
+
+def test_a_lane_change_time_on_a_half_step_always_rounds_up():
+    """Regression: floor(t / dt + 0.5) sent 1.075 s to step 21 (1.075 / 0.05 is 21.499999999999996) and
+    1.025 s to step 21 too: which way a half step fell hinged on float rounding."""
+    from d4sumo.maneuvers import lane_change_steps
+
+    assert [lane_change_steps((k + 0.5) * 0.05, 0.05) for k in range(1200)] == list(range(1, 1201))
+    assert lane_change_steps(1.074, 0.05) == 21 and lane_change_steps(1.076, 0.05) == 22

@@ -393,3 +393,13 @@ def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or
     run_sweep(sweep, tmp_path / "batched.sqlite", workers=2, batch=7)
     assert outcomes(tmp_path / "alone.sqlite") == outcomes(tmp_path / "batched.sqlite")
     assert len(outcomes(tmp_path / "alone.sqlite")) == 12 * 23
+
+
+def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):
+    """Regression: maneuver = [inlane, cutin] with a cut-in offset axis was refused, the in-lane campaigns
+    (which read no offset) being the same campaign twice; now they are one campaign."""
+    grid = '[grid]\nmaneuver = ["inlane", "cutin"]\ncutin_offset_m = [-2.0, 0.0, 5.0]\n'
+    sweep = Sweep.load(write(tmp_path, TINY.replace("[grid]\n", grid, 1)))
+    by_maneuver = {m: [c for c in sweep.campaigns if c.config.maneuver == m] for m in ("inlane", "cutin")}
+    assert len(by_maneuver["inlane"]) == 4 and len(by_maneuver["cutin"]) == 12
+    assert {c.config.cutin_offset_m for c in by_maneuver["cutin"]} == {-2.0, 0.0, 5.0}
