@@ -14,7 +14,7 @@ import numpy as np
 
 from .config import EpisodeConfig
 from .errors import ConfigError
-from .maneuvers import MANEUVERS
+from .maneuvers import MANEUVERS, lane_change_steps
 from .store import Store
 
 #: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart
@@ -48,6 +48,8 @@ class Record:
     system: str = "switching"  # the system under test: its controller(s), see EpisodeConfig.system_label
     maneuver: str = "inlane"  # the attacker's maneuver: inlane (the paper's), cutin or cutout
     maneuver_settings: str = ""  # its settings ("cutin_follower=2, cutin_offset_m=0.0, lane_change_s=2.0")
+    step_s: float = 0.05
+    end_s: float = 60.0  # when the episode ends without a collision (warm-up included)
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -60,8 +62,8 @@ class Record:
         episode that ended before the change began)."""
         if self.maneuver == "inlane":
             return None
-        at = self.attack_start_s + self.params[-1]
-        return None if self.time_s is not None and self.time_s <= at else at
+        at = self.attack_start_s + lane_change_steps(self.params[-1], self.step_s) * self.step_s  # as played
+        return None if at >= (self.end_s if self.time_s is None else self.time_s) else at
 
     @property
     def configuration(self) -> tuple:
@@ -100,6 +102,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
                     s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id], sc.get("maneuver", "inlane"),
                     ", ".join(f"{k}={v}" for k, v in sc.items() if k in MANEUVER_SETTINGS),
+                    float(sc.get("step_s", 0.05)), attack_start_s(sc) + float(sc.get("duration_s", 60.0)),
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")

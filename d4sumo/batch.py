@@ -18,8 +18,8 @@ import numpy as np
 from .config import EpisodeConfig
 from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import (ControllerError, Platoon, PythonFollower, assemble_trace, collisions_at, cruise_params,
-                      followers_of)
+from .platoon import (ControllerError, Platoon, PythonFollower, assemble_trace, checked_command, collisions_at,
+                      cruise_params, followers_of)
 from .trace import Collision, Episode
 
 
@@ -74,7 +74,8 @@ class PlatoonBatch:
         self.actuator = ActuatorArray(vehicle, dt, (m, len(self.commanded)), np.array(max_speeds))
         self.commands = np.zeros((config.steps, m, len(self.commanded)))  # each step's commands, as played
         self.modes = np.zeros((config.steps, m, len(self._with_mode))) if self._with_mode else None
-        self.failed: dict[int, ControllerError] = {}  # episode -> the error of a user's controller
+        self._scalar.sort(key=lambda entry: entry[0])  # car order: the first follower to fail is the one named alone
+        self.failed: dict[int, Exception] = {}  # episode -> the error of a user's controller
         self._rows = np.arange(m)[:, None]
         #: the paper's column: each car's leader is the car before it (the attacker leads itself)
         self._column = np.broadcast_to(np.maximum(np.arange(len(self.ids)) - 1, 0), (m, len(self.ids)))
@@ -116,16 +117,15 @@ class PlatoonBatch:
         for cars, before, columns, _, kernel in self._kernels:
             ahead = speeds[:, before] if column else speeds[self._rows, lead[:, cars]]
             u[:, columns] = kernel.command(gap[:, cars], speeds[:, cars], ahead)
-        for i, column_index, followers in self._scalar:
+        for i, column_index, followers in self._scalar:  # a user's controllers, v1 first as alone
             for e in np.flatnonzero(active).tolist():
                 if e in self.failed:
                     continue
-                c = followers[e].command(float(gap[e, i]), float(speeds[e, i]), float(speeds[e, lead[e, i]]))
-                if not -1.0 <= c <= 1.0:  # NaN fails too
-                    self.failed[e] = ControllerError(
-                        f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
-                    c = 0.0
-                u[e, column_index] = c
+                try:
+                    u[e, column_index] = checked_command(
+                        followers[e].command(float(gap[e, i]), float(speeds[e, i]), float(speeds[e, lead[e, i]])), i, k)
+                except Exception as exc:  # as alone: this episode ends with the error, the others go on
+                    self.failed[e] = exc
         others = self._others
         if others.size and self._lead is not None:
             u[:, -others.size:] = self._command(self._lead.acceleration(speeds[:, others]))
@@ -138,7 +138,11 @@ class PlatoonBatch:
                 modes[:, mode_columns] = kernel.mode
             for i, _, followers in self._scalar:
                 if followers[0].has_mode:
-                    modes[:, self._with_mode.index(i)] = [f.controller.mode for f in followers]
+                    for e, f in enumerate(followers):
+                        try:
+                            modes[e, self._with_mode.index(i)] = f.controller.mode
+                        except Exception as exc:  # not a number: the episode ends with the error
+                            self.failed.setdefault(e, exc)
         return new_speeds
 
     def detach(self, e: int, k: int, pairs: list[list[Pair]] | None = None) -> Platoon:
@@ -208,7 +212,7 @@ def collided(gap: np.ndarray) -> np.ndarray:
 
 
 def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_speed_mps: float = float("inf"), *,
-                    detach_at_step: int | None = None) -> list[Episode | ControllerError]:
+                    detach_at_step: int | None = None) -> list[Episode | Exception]:
     """`platoon.integrate` for many attacks at once: ballistic positions, no SUMO, the paper's maneuver;
     from step ``detach_at_step`` on, each episode left goes on alone (`PlatoonBatch.detach`). For
     physics tests of the array laws against the scalar ones."""
@@ -222,7 +226,7 @@ def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_s
     rows_x[0], rows_v[0] = x0, v0
     active = np.ones(m, dtype=bool)
     alone: dict[int, Platoon] = {}
-    ended: dict[int, Episode | ControllerError] = {}
+    ended: dict[int, Episode | Exception] = {}
     lead, gap = batch.leaders(rows_x[0], None)
     for k in range(config.steps):
         if k == detach_at_step:
@@ -233,7 +237,7 @@ def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_s
         for e, platoon in list(alone.items()):
             try:
                 new_speeds[e] = platoon.advance(k, rows_x[k, e].tolist(), rows_v[k, e].tolist(), batch.maneuver.pairs(rows_x[k, e].tolist()))
-            except ControllerError as exc:
+            except Exception as exc:  # a user's controller: as alone, the episode ends with it
                 ended[e] = exc
                 del alone[e]
         rows_x[k + 1] = rows_x[k] + 0.5 * (rows_v[k] + new_speeds) * dt

@@ -1,10 +1,11 @@
 """A campaign: one configuration, one attack family, one optimiser, a budget and a seed.
 
-The runner owns the loop: the optimiser asks for a parameter vector, the attack family turns it into
-the attacker's signal, SUMO plays the episode, the specification scores it, the sample is stored at
-once, and the robustness goes back to the optimiser. Samples already in the database are told to the
-optimiser again first (its asks must match them exactly), so an interrupted campaign resumes where it
-stopped and ends as if it had never been interrupted.
+The runner owns the loop: the optimiser proposes parameter vectors (as many as it can before its next
+score: a batch), the attack family turns each into the attacker's signal, SUMO plays the episodes
+(side by side when there are several), the specification scores them, each sample is stored as soon
+as it and those before it have finished, and the robustness goes back to the optimiser. Samples
+already in the database are told to the optimiser again first (its asks must match them exactly), so
+an interrupted campaign resumes where it stopped and ends as if it had never been interrupted.
 """
 
 from __future__ import annotations
@@ -218,24 +219,27 @@ class Evaluator:
             finish(i, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(xs)))  # plus its share so far
 
         plans, playing = [], []
-        for i, x in enumerate(xs):
-            try:
-                plans.append(self.plan(x))
-                playing.append(i)
-            except Exception as exc:
-                finish(i, self._failed(first + i, x, exc, 0.0))
-        if not plans:
-            return results  # type: ignore[return-value]
         try:
-            if self._batch_road is None or self._batch_road.copies < len(plans):
-                self._batch_road = batch_road(self.network, len(plans))
-            simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
-        except _CallerError as exc:
+            for i, x in enumerate(xs):
+                try:
+                    plans.append(self.plan(x))
+                    playing.append(i)
+                except Exception as exc:
+                    finish(i, self._failed(first + i, x, exc, 0.0))
+            if not plans:
+                return results  # type: ignore[return-value]
+            try:
+                if self._batch_road is None or self._batch_road.copies < len(plans):
+                    self._batch_road = batch_road(self.network, len(plans))
+                simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
+            except _CallerError:
+                raise
+            except Exception as exc:  # SUMO failed: every sample not yet finished is errored
+                for i in playing:
+                    if results[i] is None:
+                        finish(i, self._failed(first + i, xs[i], exc, (time.perf_counter() - t0) / len(xs)))
+        except _CallerError as exc:  # the caller's own exception, as it raised it
             raise exc.__cause__ from None
-        except Exception as exc:  # SUMO failed: every sample not yet finished is errored
-            for i in playing:
-                if results[i] is None:
-                    finish(i, self._failed(first + i, xs[i], exc, (time.perf_counter() - t0) / len(xs)))
         return results  # type: ignore[return-value]
 
     def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:
@@ -272,7 +276,7 @@ class CampaignRunner:
     The optimiser is asked for as many points as it can propose before its next score
     (`Optimizer.ready`); they are played in batches of at most ``batch`` episodes side by side and
     told in order. Built from the samples stored so far (re-told to the optimiser, whose asks must
-    match them exactly; a sample missing in between, interrupted in its batch, is played again) or
+    match them exactly; a sample missing in between, if a database lacks one, is played again) or
     from the ``state`` a previous runner of the same campaign handed over; ``state`` is plain
     picklable data (the optimiser, the scores told, the points asked and not yet played), so a
     campaign can move between processes or machines between steps and still end as if it had run

@@ -46,6 +46,18 @@ SET_BY_D4SUMO = {
 #: d4sumo's defaults where SUMO's would make the followers random: a driver's dawdling (Krauss-type
 #: models draw it from SUMO's own random stream, which the campaign's seed does not reach).
 DEFAULTS = {"sigma": 0.0}
+#: Models whose motion (with ``sigma`` 0 where they have it) depends on nothing but the cars around:
+#: their platoons may share one SUMO (a batch). The others draw from SUMO's random streams, which SUMO
+#: deals out by the order in which cars enter the simulation, so beside other platoons they would drive
+#: differently (EIDM, W99, Wiedemann, BKerner, PWagner2009 did in tests/test_simulation.py).
+SHARE_SUMO = frozenset({"ACC", "CACC", "CC", "Daniel1", "IDM", "IDMM", "Krauss", "KraussOrig1", "KraussPS", "SmartSK"})
+
+
+def shares_sumo(model: str, params: Mapping[str, Any]) -> bool:
+    """Whether a follower driven by ``model`` with ``params`` drives alike whatever else SUMO simulates."""
+    return model in SHARE_SUMO and float(params.get("sigma", DEFAULTS["sigma"])) == 0.0
+
+
 #: Plexe's CC model runs one of its controllers; the others need data fed in by the application.
 CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1}
 

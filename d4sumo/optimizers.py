@@ -97,11 +97,16 @@ class Optimizer:
         return (np.asarray(x) - self.lower) / span
 
 
+#: points a sampler whose points depend on no score proposes at a time (a batch's worth: proposing the
+#: whole budget at once would only carry it around)
+INDEPENDENT_BATCH = 64
+
+
 class RandomSearch(Optimizer):
     name = "random"
 
     def ready(self) -> int:  # no point depends on a score
-        return self.budget - self.asked
+        return min(self.budget - self.asked, INDEPENDENT_BATCH)
 
     def _ask(self) -> np.ndarray:
         return self._unit_to_box(self.rng.random(self.dimension))
@@ -111,7 +116,7 @@ class Halton(Optimizer):
     name = "halton"
 
     def ready(self) -> int:  # no point depends on a score
-        return self.budget - self.asked
+        return min(self.budget - self.asked, INDEPENDENT_BATCH)
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

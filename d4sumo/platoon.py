@@ -11,6 +11,8 @@ SUMO's ballistic position update for SUMO-free physics tests (Python followers o
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import carfollowing
@@ -23,6 +25,18 @@ from .trace import Collision, Episode, Trace
 
 class ControllerError(D4sumoError, ValueError):
     """A follower controller returned something that is not a command."""
+
+
+def checked_command(c, car: int, k: int) -> float:
+    """A follower controller's command as a float in [-1, 1] (a float32 or a numpy scalar becomes the
+    float it stands for), or a ControllerError: a user's controller must not corrupt the trace."""
+    try:
+        u = float(c)
+    except (TypeError, ValueError):
+        u = math.nan
+    if not -1.0 <= u <= 1.0:  # NaN fails too
+        raise ControllerError(f"the controller of v{car} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
+    return u
 
 
 def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
@@ -47,6 +61,7 @@ class PythonFollower:
     """A follower commanded each step by a Python controller, through its actuator."""
 
     sumo_driven = False
+    shares_sumo = True  # its platoon may share one SUMO with others (a batch)
 
     def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
         self.config = config
@@ -74,6 +89,8 @@ class SumoFollower:
         self.model = config.sumo_model
         self.params = dict(config.params)
         self.episode = episode
+        #: whether its platoon may share one SUMO with others: not when its model draws random numbers
+        self.shares_sumo = carfollowing.shares_sumo(self.model, self.params)
 
     def vtype(self, lanes: int) -> dict[str, str]:
         """Its <vType> attributes."""
@@ -151,9 +168,7 @@ class Platoon:
                 ahead[b] = (a, gap)
         for i, follower in self._python:
             leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
-            c = follower.command(gap, speeds[i], speeds[leader])
-            if not -1.0 <= c <= 1.0:  # NaN fails too: a user's controller must not corrupt the trace
-                raise ControllerError(f"the controller of v{i} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
+            c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
             commands.append(c)
             new_speeds.append(follower.actuator.apply(c, speeds[i]))
         for i, cruise, actuator in self._others:

@@ -27,7 +27,7 @@ from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
 from .maneuvers import CAR_WIDTH_M, AttackPlan, check_road_lanes, maneuver_of, occupied_lanes
 from .batch import PlatoonBatch, collided
-from .platoon import ControllerError, Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
+from .platoon import Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
 from .scenarios import MAX_COPIES, Road, batch_road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
 
@@ -349,19 +349,38 @@ class _Lateral:
 
 # --- a batch: many episodes side by side in one SUMO ---------------------------------------------
 
+def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
+    """`simulate_batch`'s results, each episode played alone."""
+    road = road or build_road(config.network)
+    results: list = []
+    for i, plan in enumerate(plans):
+        try:
+            result = simulate(config, plan, road=road)
+        except Exception as exc:  # as alone: this episode's error (SUMO's, or a user's controller's)
+            result = exc
+        results.append(result)
+        if on_episode:
+            on_episode(i, result)
+    return results
+
+
 def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: Road | None = None,
-                   on_episode: Callable[[int, "Episode | ControllerError"], None] | None = None) -> list["Episode | ControllerError"]:
+                   on_episode: Callable[[int, "Episode | Exception"], None] | None = None) -> list["Episode | Exception"]:
     """Play many episodes of one configuration side by side in one SUMO instance, each platoon on its
     own copy of the road (`scenarios.batch_road`), commanded together (`batch.PlatoonBatch`).
 
     Each result is bit for bit what `simulate` gives for the same plan alone: the episode, or the
-    ControllerError of a user's follower controller that failed in it. An episode that ends (its first
-    collision) leaves SUMO at once and costs nothing more; ``on_episode(i, result)`` hears of it then.
+    exception a user's follower controller raised in it (alone it would end that episode). An episode
+    that ends (its first collision) leaves SUMO at once and costs nothing more; ``on_episode(i, result)``
+    hears of it then. Followers whose SUMO model draws from SUMO's random streams (`carfollowing.shares_sumo`)
+    would draw differently beside other platoons: their episodes play one at a time, in turn.
     """
     if not plans:
         return []
     if len(plans) > MAX_COPIES:
         raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
+    if not all(f.shares_sumo for f in followers_of(config)):
+        return _one_at_a_time(config, plans, road if road is not None and road.copies == 1 else None, on_episode)
     if road is None or road.copies < len(plans):
         road = batch_road(config.network, len(plans))
     types_file = check_episode(config, road)
@@ -478,7 +497,7 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
             x = rows_x[k, e].tolist()
             try:
                 out = platoon.advance(k, x, rows_v[k, e].tolist(), pairs[e] if pairs else maneuver.pairs(x))
-            except ControllerError as exc:
+            except Exception as exc:  # a user's controller: as alone, the episode ends with its error
                 detached.pop(e)
                 end(e, k, (), exc)
                 continue

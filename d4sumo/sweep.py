@@ -25,6 +25,7 @@ it again skips complete campaigns and resumes the others.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -36,7 +37,7 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
@@ -83,6 +84,12 @@ class Sweep:
         """Identifies the grid (not the budget): the same sweep may be resumed or extended."""
         keys = sorted(campaign_key(c.definition()) for c in self.campaigns)
         return hashlib.sha256(json.dumps(keys).encode()).hexdigest()[:20]
+
+    def one_bo_point_per_score(self) -> "Sweep":
+        """The sweep as d4sumo ran it before bo proposed 5 points at a time (its batch_size then 1)."""
+        return dataclasses.replace(self, campaigns=tuple(
+            c.replace(optimizer_options=tuple({**dict(c.optimizer_options), "batch_size": 1}.items()))
+            if c.optimizer == "bo" else c for c in self.campaigns))
 
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":
@@ -164,9 +171,13 @@ def claim(store: Store, sweep: Sweep) -> None:
         except (ValueError, TypeError, KeyError):
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
+            hint = "Use another --db, or the sweep file that wrote it"
+            if theirs["fingerprint"] == sweep.one_bo_point_per_score().fingerprint():
+                hint = ("It was run when bo proposed one point per score: add `[search.bo] batch_size = 1` to the sweep "
+                        "file to go on with it, or use another --db")
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
-                f"(grid {mine['fingerprint']}); nothing was changed. Use another --db, or the sweep file that wrote it"
+                f"(grid {mine['fingerprint']}); nothing was changed. {hint}"
             )
     else:
         others = store.campaigns()
@@ -248,6 +259,7 @@ class _Active:
     done: int = 0
     failures: int = 0
     batch: int = DEFAULT_BATCH
+    added: set = field(default_factory=set)  # indices stored by this sweep run (a stored campaign may have gaps)
 
     def chunk(self) -> Chunk:
         # the stored samples travel only until a state exists
@@ -315,9 +327,13 @@ def run_sweep(
 def _accept(active: _Active, chunk_result: tuple[list[SampleResult], tuple], store_results) -> bool:
     """Store a finished chunk; True when its campaign is complete."""
     results, state = chunk_result
-    if [r.index for r in results] != list(range(active.done, active.done + len(results))):
-        raise D4sumoError(f"campaign {active.campaign_id}: a worker returned samples out of order; nothing of them was stored")
+    indices = [r.index for r in results]
+    stored = {r.index for r in active.stored} | active.added
+    if (indices != sorted(set(indices)) or any(i in stored or not 0 <= i < active.campaign.samples for i in indices)):
+        raise D4sumoError(f"campaign {active.campaign_id}: a worker returned samples out of order or stored already; "
+                          "nothing of them was stored")
     store_results(active, results)
+    active.added.update(indices)
     active.state = state
     active.failures = 0
     return active.done >= active.campaign.samples

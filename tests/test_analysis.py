@@ -81,6 +81,10 @@ def test_the_lane_change_is_marked_only_when_it_began_before_the_episode_ended()
     ended_first = _record([0] * 9 + [20.0], time_s=30.0, start="warmup", attack_start_s=15.0, maneuver="cutout")
     no_crash = _record([0] * 9 + [20.0], time_s=None, maneuver="cutout")
     assert changed.lane_change_at_s == 19.0 and ended_first.lane_change_at_s is None and no_crash.lane_change_at_s == 20.0
+    # as played: 15.03 s after a 15 s warm-up is step 601 (30.05 s), after a collision at the end of step 600
+    rounded = _record([0] * 9 + [15.03], time_s=30.05, start="warmup", attack_start_s=15.0, maneuver="cutout", end_s=75.0)
+    assert rounded.lane_change_at_s is None
+    assert _record([0] * 9 + [60.0], time_s=None, maneuver="cutout").lane_change_at_s is None  # past the episode
     assert _record([0] * 9, time_s=30.0).lane_change_at_s is None  # the paper's maneuver changes no lane
 
 

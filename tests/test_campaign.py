@@ -296,3 +296,28 @@ def test_bo_proposes_five_at_a_time_and_a_campaign_stored_before_that_keeps_its_
     assert campaign_key(stored.definition()) == campaign_key(old)
     sequential = Campaign(optimizer="bo", optimizer_options={"batch_size": 1}, samples=12)
     assert sequential.definition() == stored.definition()
+
+
+@pytest.mark.parametrize("where", ["a plan that fails", "SUMO failing"])
+def test_the_callers_own_exception_comes_out_of_a_batch_as_it_was_raised(monkeypatch, where):
+    """Regression: on these two paths an exception of the caller's on_result (Ctrl-C, a store error)
+    came out wrapped in a private class, so Ctrl-C ended in a traceback instead of exit 130."""
+    from d4sumo.campaign import Evaluator
+
+    evaluator = Evaluator(Campaign(optimizer="random", samples=4))
+    params = [np.zeros(9), np.zeros(9)]
+    if where == "a plan that fails":
+        params[0] = np.full(9, 7.0)  # outside the knots' box
+        with pytest.raises(ValueError):
+            evaluator.plan(params[0])
+    else:
+        def failing(*args, **kwargs):
+            raise SumoError("SUMO failed during the episode: test")
+
+        monkeypatch.setattr(campaign_module, "simulate_batch", failing)
+
+    def interrupted(result):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        evaluator.batch(0, params, interrupted)

@@ -225,3 +225,15 @@ def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",
                   "--json", "--gui", "--workers", "--dask", "--out", "--sample"}
     assert main_flags - in_readme == set()
+
+
+@pytest.mark.sumo
+def test_falsify_says_how_to_go_on_with_a_bo_campaign_run_when_bo_proposed_one_point_per_score(tmp_path, capsys):
+    db = str(tmp_path / "r.sqlite")
+    assert main(["falsify", "--samples", "2", "--set", "search.bo.batch_size=1", "--db", db, "--quiet", "--json"]) == 0
+    capsys.readouterr()
+    assert main(["falsify", "--samples", "3", "--db", db, "--quiet", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert "--set search.bo.batch_size=1" in err and err.count("\n") == 1
+    assert main(["falsify", "--samples", "3", "--set", "search.bo.batch_size=1", "--db", db, "--quiet", "--json"]) == 0
+    assert capsys.readouterr().err == ""  # it went on with it

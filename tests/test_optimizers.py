@@ -193,3 +193,18 @@ def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
         return asked
 
     assert run(split=True) == run(split=False)
+
+
+def test_bo_one_point_per_score_proposes_what_the_version_before_batches_proposed():
+    """Campaigns stored before BO proposed in batches replay with batch_size 1 only if its proposals are
+    unchanged: these are the proposals of d4sumo before it (the same seed, objective and tells)."""
+    opt = make_optimizer("bo", -np.ones(9), np.ones(9), budget=25, rng=np.random.default_rng(3), options={"batch_size": 1})
+    asks = []
+    for _ in range(25):
+        x = opt.ask()
+        asks.append(x)
+        opt.tell(x, -float(np.sum((x - 0.2) ** 2)) + 0.3 * float(np.sin(5 * x[0])))
+    before = {10: [0.665376968, -0.25666376, 1.0], 14: [0.352501799, -0.270091818, 0.646594826],
+              19: [0.609403667, -0.279143507, 0.66399196], 24: [-0.025321608, 0.160072477, 0.429469124]}
+    for i, first in before.items():
+        assert np.allclose(asks[i][:3], first, rtol=0, atol=2e-9), i

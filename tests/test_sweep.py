@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sqlite3
@@ -14,7 +15,7 @@ import pytest
 from d4sumo.cli import main
 from d4sumo.errors import ConfigError
 from d4sumo.store import Store, StoreError
-from d4sumo.sweep import Sweep, run_sweep
+from d4sumo.sweep import Sweep, claim, run_sweep
 
 TINY = """
 name = "tiny"
@@ -386,13 +387,13 @@ def test_grid_points_that_are_one_campaign_are_refused_before_anything_runs(tmp_
 @pytest.mark.sumo
 def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or_alone(tmp_path):
     """Issue 13: batches, and the chunks a worker returns between them, change the speed only."""
-    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["random", "ce", "cmaes"]')
+    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["random", "ce", "cmaes", "bo"]')
                  .replace("samples = 6", "samples = 23"))
     sweep = Sweep.load(path)
     run_sweep(sweep, tmp_path / "alone.sqlite", workers=1, batch=1)
     run_sweep(sweep, tmp_path / "batched.sqlite", workers=2, batch=7)
     assert outcomes(tmp_path / "alone.sqlite") == outcomes(tmp_path / "batched.sqlite")
-    assert len(outcomes(tmp_path / "alone.sqlite")) == 12 * 23
+    assert len(outcomes(tmp_path / "alone.sqlite")) == 16 * 23
 
 
 def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):
@@ -403,3 +404,33 @@ def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(
     by_maneuver = {m: [c for c in sweep.campaigns if c.config.maneuver == m] for m in ("inlane", "cutin")}
     assert len(by_maneuver["inlane"]) == 4 and len(by_maneuver["cutin"]) == 12
     assert {c.config.cutin_offset_m for c in by_maneuver["cutin"]} == {-2.0, 0.0, 5.0}
+
+
+@pytest.mark.sumo
+def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
+    """Regression: a stored campaign with a gap (sample 3 gone) made the resumed sweep stop with 'a
+    worker returned samples out of order'; the campaign runner plays just the missing samples."""
+    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["ce"]').replace("samples = 6", "samples = 12"))
+    sweep = Sweep.load(path)
+    run_sweep(sweep, tmp_path / "whole.sqlite", workers=1)
+    db = tmp_path / "r.sqlite"
+    run_sweep(sweep, db, workers=1)
+    with Store(db) as store:
+        store.db.execute("DELETE FROM sample WHERE idx = 3")
+        store.db.commit()
+    run_sweep(sweep, db, workers=2)
+    assert outcomes(db) == outcomes(tmp_path / "whole.sqlite")
+
+
+def test_a_database_of_a_sweep_run_when_bo_proposed_one_point_per_score_says_how_to_go_on_with_it(tmp_path):
+    """bo proposes 5 points at a time since d4sumo 0.3; a sweep database written before has the grid of
+    batch_size 1, and the refusal says so."""
+    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["bo", "ce"]')
+    before = Sweep.load(write(tmp_path, text + "\n[search.bo]\nbatch_size = 1\n", "before.toml"))
+    now = Sweep.load(write(tmp_path, text, "now.toml"))
+    assert before.fingerprint() != now.fingerprint() == now.fingerprint()
+    with Store(tmp_path / "r.sqlite") as store:
+        store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
+        with pytest.raises(StoreError, match=r"add `\[search.bo\] batch_size = 1`"):
+            claim(store, now)
+        claim(store, before)  # the sweep file with it goes on
