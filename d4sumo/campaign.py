@@ -188,7 +188,7 @@ class Evaluator:
               on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
         """Samples ``first``, ``first`` + 1, .. played side by side in one SUMO: each result is the one
         `__call__` gives alone. ``on_result`` hears of each as its episode ends (in any order). A
-        sample's wall time is its share of the batch's simulation plus its own scoring."""
+        sample's wall time is its share of the batch's time until its episode ended, plus its scoring."""
         if len(params) > 1:
             return self._batch(first, params, on_result)
         result = self(first, params[0])  # alone: the single-episode engine
