@@ -307,10 +307,17 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             bar.update(1)
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
-        if campaign.optimizer == "bo" and store.find_campaign(campaign.definition()) is None:
+        known = store.find_campaign(campaign.definition())
+        if known is not None and not args.quiet:
+            stored = min(store.count_samples(known), campaign.samples)
+            bar.write(f"d4sumo: campaign {known} in {args.db}: " + (
+                f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
+                if stored >= campaign.samples else f"resuming after {stored} of {campaign.samples} samples stored"),
+                file=sys.stderr)
+        if campaign.optimizer == "bo" and known is None:
             before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), "batch_size": 1}.items()))
             if before != campaign and store.find_campaign(before.definition()) is not None:
-                print(f"d4sumo: note: {args.db} holds this campaign as run when bo proposed one point per score; this "
+                bar.write(f"d4sumo: note: {args.db} holds this campaign as run when bo proposed one point per score; this "
                       "starts a new one. To go on with that one: --set search.bo.batch_size=1", file=sys.stderr)
         summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
     top = summary.best

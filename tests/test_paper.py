@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 from d4sumo.analysis import Record
-from d4sumo.paper import TABLE_1, comparisons, table_1, table_2, to_markdown
+from d4sumo.paper import PART, TABLE_1, comparisons, table_1, table_2, table_3, to_markdown
 
 
 def record(**changes) -> Record:
@@ -24,7 +24,7 @@ def test_the_paper_tables_come_only_for_the_grids_the_records_cover():
 
 
 def test_our_rows_sit_under_the_papers_and_far_cells_are_flagged():
-    records = [record(sample_id=i) for i in range(600)]  # 600 successes against the paper's 246: far
+    records = [record(sample_id=i, setpoint_m=float(2 + i % 8)) for i in range(600)]  # 600 successes against 246: far
     records += [record(sample_id=1000 + i, setpoint_m=2.0, outcome="attacker_crash", pair="v0-v1") for i in range(100)]
     t1 = table_1(records)
     (label, who, cells, far), (_, ours, our_cells, our_far) = t1.rows
@@ -35,3 +35,14 @@ def test_our_rows_sit_under_the_papers_and_far_cells_are_flagged():
     t2 = table_2(records)
     assert t2.rows[1][2][0] == "100 / 0" and t2.rows[1][3][0] is False  # 100 attacker crashes at 2 m, as the paper
     assert "**600**" in "\n".join(to_markdown(t1))
+
+
+def test_a_grid_that_covers_part_of_the_papers_flags_nothing_and_shows_what_did_not_run():
+    """Regression: a report of a sweep at 25 m/s only showed 0 successes at 20 and 30 m/s in bold, as if
+    we had contradicted the paper there, and compared its totals with the paper's whole grid."""
+    knots = [record(sample_id=i, attack="knots", start="rest", speed_mps=25.0, setpoint_m=float(5 + 2 * (i % 2)))
+             for i in range(300)]
+    (_, _, _, _), (_, who, cells, far) = table_3(knots).rows
+    assert who == PART and cells == ("300", "-", "300 (100.0%)", "-") and far == (False,) * 4
+    (_, _, _, _), (_, who, _, far) = table_1([record(sample_id=i) for i in range(600)]).rows  # at 5 m only
+    assert who == PART and far == (False,) * 5
