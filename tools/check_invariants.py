@@ -15,9 +15,12 @@ campaign stores a sample, and counts the samples where any of these disagree:
 - the FCD file SUMO wrote: every car's position at every step agrees with the trace to the FCD's
   precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
   coordinate) is negative (beyond that precision) before the stored collision time, nor is the
-  collision pair's FCD gap positive at it.
+  collision pair's FCD gap positive at it;
+- the episode played in a batch (beside --batch - 1 other random attacks of its configuration, in one
+  SUMO) is bit for bit the episode played alone: every signal, the collision record, the minimum gaps.
 
-Usage: python tools/check_invariants.py [N] [--seed S]. Prints the counts; exits 1 if any is non-zero.
+Usage: python tools/check_invariants.py [N] [--seed S] [--batch K]. Prints the counts; exits 1 if any is
+non-zero.
 """
 
 from __future__ import annotations
@@ -35,9 +38,10 @@ from sumolib.xml import parse_fast_nested
 from d4sumo.attacks import FAMILIES
 from d4sumo.campaign import Campaign, Evaluator
 from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
+from d4sumo.errors import ConfigError
 from d4sumo.maneuvers import maneuver_of, occupied_lanes
 from d4sumo.scenarios import build_road
-from d4sumo.simulation import simulate
+from d4sumo.simulation import simulate, simulate_batch
 from d4sumo.spec import psi_robustness
 from d4sumo.store import Store
 
@@ -49,6 +53,14 @@ SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), Controlle
 
 
 def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
+    while True:  # a draw the config refuses (an obstacle the warm-up would reach) is drawn again
+        try:
+            return _random_episode(rng)
+        except ConfigError:
+            continue
+
+
+def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     setpoint = float(rng.choice([rng.integers(2, 16), round(rng.uniform(2, 15), 1), rng.uniform(2, 15)]))
     followers = int(rng.integers(1, 11))
     systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
@@ -147,10 +159,32 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     return broken
 
 
+def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, partners: int,
+                  rng: np.random.Generator, road) -> str | None:
+    """Play the episode beside ``partners`` random others in one SUMO; what differs from it alone, if anything."""
+    f = evaluator.family
+    plans = [evaluator.plan(x) for x in [params, *(f.lower + rng.random(f.dimension) * (f.upper - f.lower)
+                                                   for _ in range(partners))]]
+    batched = simulate_batch(campaign.config, plans)[0]
+    try:
+        alone = simulate(campaign.config, plans[0], road=road)
+    except Exception as exc:
+        return None if type(batched) is type(exc) and str(batched) == str(exc) else "batch: the error differs from alone"
+    if isinstance(batched, Exception):
+        return "batch: an error where alone there was none"
+    if (batched.outcome, batched.collisions, batched.min_gaps_m()) != (alone.outcome, alone.collisions, alone.min_gaps_m()):
+        return "batch: the verdict differs from alone"
+    if batched.trace.names != alone.trace.names or not all(
+            np.array_equal(batched.trace[n], alone.trace[n]) for n in alone.trace.names):
+        return "batch: a signal differs from alone"
+    return None
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("n", type=int, nargs="?", default=2000, help="episodes [2000]")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--batch", type=int, default=4, help="play each episode also in a batch of K [4]; 0: not")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     road = build_road("highway_4lane")
@@ -167,6 +201,10 @@ def main(argv=None) -> int:
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
             outcomes[store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"] += 1
+            if args.batch > 1:  # its partners drawn apart, so that the episodes are those of a run without
+                differs = batch_differs(campaign, evaluator, params, args.batch - 1,
+                                        np.random.default_rng([args.seed, index]), road)
+                problems = [*problems, differs] if differs else problems
             for p in problems:
                 broken[p] += 1
                 examples.setdefault(p, f"{campaign.definition()} params {list(params)}")
