@@ -27,7 +27,7 @@ from .errors import ConfigError, SumoError, check_int, check_number
 from .maneuvers import AttackPlan, attack_plan, maneuver_of
 from .optimizers import OPTIMIZERS, OPTIONS_SINCE, make_optimizer, resolve_options, stored_options
 from .scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
-from .simulation import check_episode, simulate, simulate_batch
+from .simulation import check_episode, shares_sumo, simulate, simulate_batch
 from .spec import Specification
 from .store import DefinitionError, Store, StoreError
 
@@ -170,6 +170,7 @@ class Evaluator:
         self.road = road or build_road(self.network)
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None
+        self._shares_sumo = shares_sumo(campaign.config)
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
@@ -229,9 +230,13 @@ class Evaluator:
             if not plans:
                 return results  # type: ignore[return-value]
             try:
-                if self._batch_road is None or self._batch_road.copies < len(plans):
-                    self._batch_road = batch_road(self.network, len(plans))
-                simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
+                if not self._shares_sumo:  # played one at a time, on the road built for one
+                    road = self.road
+                elif self._batch_road is None or self._batch_road.copies < len(plans):
+                    road = self._batch_road = batch_road(self.network, len(plans))
+                else:
+                    road = self._batch_road
+                simulate_batch(self.campaign.config, plans, road=road, on_episode=done)
             except _CallerError:
                 raise
             except Exception as exc:  # SUMO failed: every sample not yet finished is errored

@@ -349,6 +349,11 @@ class _Lateral:
 
 # --- a batch: many episodes side by side in one SUMO ---------------------------------------------
 
+def shares_sumo(config: EpisodeConfig) -> bool:
+    """Whether the configuration's platoons may share one SUMO (see `simulate_batch`)."""
+    return all(f.shares_sumo for f in followers_of(config))
+
+
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
     road = road or build_road(config.network)
@@ -379,7 +384,7 @@ def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: 
         return []
     if len(plans) > MAX_COPIES:
         raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
-    if not all(f.shares_sumo for f in followers_of(config)):
+    if not shares_sumo(config):
         return _one_at_a_time(config, plans, road if road is not None and road.copies == 1 else None, on_episode)
     if road is None or road.copies < len(plans):
         road = batch_road(config.network, len(plans))

@@ -321,3 +321,13 @@ def test_the_callers_own_exception_comes_out_of_a_batch_as_it_was_raised(monkeyp
 
     with pytest.raises(KeyboardInterrupt):
         evaluator.batch(0, params, interrupted)
+
+
+def test_a_campaign_whose_sumo_model_draws_random_numbers_is_the_same_batched_or_not():
+    """EIDM draws from SUMO's random streams (dealt out by car): its episodes play one at a time, on the
+    campaign's own road, whatever --batch says."""
+    from d4sumo.config import ControllerConfig, EpisodeConfig
+
+    campaign = Campaign(config=EpisodeConfig(controller=ControllerConfig("sumo:EIDM"), setpoint_m=4.0), optimizer="random",
+                        samples=6, seed=1)
+    assert full_signature(run_campaign(campaign, batch=6)) == full_signature(run_campaign(campaign, batch=1))
