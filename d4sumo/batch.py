@@ -18,8 +18,8 @@ import numpy as np
 from .config import EpisodeConfig
 from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import (ControllerError, Platoon, PythonFollower, assemble_trace, checked_command, collisions_at,
-                      cruise_params, followers_of)
+from .platoon import (Platoon, PythonFollower, assemble_trace, checked_command, collisions_at, cruise_params,
+                      followers_of)
 from .trace import Collision, Episode
 
 
