@@ -75,7 +75,10 @@ class PlatoonBatch:
         self.commands = np.zeros((config.steps, m, len(self.commanded)))  # each step's commands, as played
         self.modes = np.zeros((config.steps, m, len(self._with_mode))) if self._with_mode else None
         self._scalar.sort(key=lambda entry: entry[0])  # car order: the first follower to fail is the one named alone
-        self.failed: dict[int, Exception] = {}  # episode -> the error of a user's controller
+        self.failed: dict[int, Exception] = {}  # episode -> the error of a user's controller, which ended it
+        #: episode -> a user's controller's mode that is not a number: alone, its trace cannot be made, so
+        #: the episode ends with this error unless the controller fails first
+        self.bad_modes: dict[int, Exception] = {}
         self._rows = np.arange(m)[:, None]
         #: the paper's column: each car's leader is the car before it (the attacker leads itself)
         self._column = np.broadcast_to(np.maximum(np.arange(len(self.ids)) - 1, 0), (m, len(self.ids)))
@@ -141,8 +144,8 @@ class PlatoonBatch:
                     for e, f in enumerate(followers):
                         try:
                             modes[e, self._with_mode.index(i)] = f.controller.mode
-                        except Exception as exc:  # not a number: the episode ends with the error
-                            self.failed.setdefault(e, exc)
+                        except Exception as exc:  # not a number: as alone, the trace will not be made
+                            self.bad_modes.setdefault(e, exc)
         return new_speeds
 
     def detach(self, e: int, k: int, pairs: list[list[Pair]] | None = None) -> Platoon:
@@ -261,8 +264,11 @@ def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_s
     return [ended[e] for e in range(m)]
 
 
-def _ended(batch: PlatoonBatch, alone: dict, e: int, steps: int, rows_x, rows_v, collisions) -> Episode:
+def _ended(batch: PlatoonBatch, alone: dict, e: int, steps: int, rows_x, rows_v, collisions) -> Episode | Exception:
     x, v = rows_x[:steps + 1, e], rows_v[:steps + 1, e]
+    if e in batch.bad_modes:
+        alone.pop(e, None)
+        return batch.bad_modes[e]
     if e in alone:
         trace, min_gaps = alone.pop(e).trace(np.arange(steps + 1) * batch.config.step_s, x, v)
         return Episode(trace, collisions, min_gaps)

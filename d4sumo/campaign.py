@@ -190,12 +190,14 @@ class Evaluator:
         """Samples ``first``, ``first`` + 1, .. played side by side in one SUMO: each result is the one
         `__call__` gives alone. ``on_result`` hears of each as its episode ends (in any order). A
         sample's wall time is its share of the batch's time until its episode ended, plus its scoring."""
-        if len(params) > 1:
+        if len(params) > 1 and self._shares_sumo:
             return self._batch(first, params, on_result)
-        result = self(first, params[0])  # alone: the single-episode engine
-        if on_result:
-            on_result(result)
-        return [result]
+        results = []
+        for i, x in enumerate(params):  # alone, one after the other: the single-episode engine
+            results.append(self(first + i, x))
+            if on_result:
+                on_result(results[-1])
+        return results
 
     def _batch(self, first: int, params: Sequence[np.ndarray], on_result) -> list[SampleResult]:
         t0 = time.perf_counter()
@@ -230,13 +232,9 @@ class Evaluator:
             if not plans:
                 return results  # type: ignore[return-value]
             try:
-                if not self._shares_sumo:  # played one at a time, on the road built for one
-                    road = self.road
-                elif self._batch_road is None or self._batch_road.copies < len(plans):
-                    road = self._batch_road = batch_road(self.network, len(plans))
-                else:
-                    road = self._batch_road
-                simulate_batch(self.campaign.config, plans, road=road, on_episode=done)
+                if self._batch_road is None or self._batch_road.copies < len(plans):
+                    self._batch_road = batch_road(self.network, len(plans))
+                simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
             except _CallerError:
                 raise
             except Exception as exc:  # SUMO failed: every sample not yet finished is errored
@@ -283,7 +281,8 @@ class CampaignRunner:
     told in order. Built from the samples stored so far (re-told to the optimiser, whose asks must
     match them exactly; a sample missing in between, if a database lacks one, is played again) or
     from the ``state`` a previous runner of the same campaign handed over; ``state`` is plain
-    picklable data (the optimiser, the scores told, the points asked and not yet played), so a
+    picklable data (the optimiser, the scores told, the points asked and not yet played, the stored
+    samples not reached yet), so a
     campaign can move between processes or machines between steps and still end as if it had run
     in one piece, whatever the batch size.
     """
@@ -302,7 +301,8 @@ class CampaignRunner:
                 raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} twice or out of range)")
             self.stored[r.index] = r
         if state is not None:
-            self.optimizer, self.scores, self.queue = state
+            self.optimizer, self.scores, self.queue, stored_later = state
+            self.stored.update(stored_later)
             return
         rng = np.random.default_rng(campaign.seed)
         family = evaluator.family
@@ -318,7 +318,9 @@ class CampaignRunner:
 
     @property
     def state(self) -> tuple:
-        return self.optimizer, self.scores, self.queue
+        """Everything to go on with: the optimiser, the scores told, the points asked and not played, and
+        the stored samples not reached yet (a database may have a gap before them)."""
+        return self.optimizer, self.scores, self.queue, dict(self.stored)
 
     def _fill(self) -> None:
         if not self.queue:

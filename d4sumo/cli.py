@@ -312,7 +312,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             stored = min(store.count_samples(known), campaign.samples)
             bar.write(f"d4sumo: campaign {known} in {args.db}: " + (
                 f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
-                if stored >= campaign.samples else f"resuming after {stored} of {campaign.samples} samples stored"),
+                if stored >= campaign.samples else f"{stored} of {campaign.samples} samples stored already: resuming"),
                 file=sys.stderr)
         if campaign.optimizer == "bo" and known is None:
             before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), "batch_size": 1}.items()))

@@ -12,6 +12,7 @@ SUMO's ballistic position update for SUMO-free physics tests (Python followers o
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -30,10 +31,7 @@ class ControllerError(D4sumoError, ValueError):
 def checked_command(c, car: int, k: int) -> float:
     """A follower controller's command as a float in [-1, 1] (a float32 or a numpy scalar becomes the
     float it stands for), or a ControllerError: a user's controller must not corrupt the trace."""
-    try:
-        u = float(c)
-    except (TypeError, ValueError):
-        u = math.nan
+    u = float(c) if isinstance(c, numbers.Real) else math.nan  # not a string that reads as a number
     if not -1.0 <= u <= 1.0:  # NaN fails too
         raise ControllerError(f"the controller of v{car} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
     return u

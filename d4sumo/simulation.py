@@ -357,11 +357,14 @@ def shares_sumo(config: EpisodeConfig) -> bool:
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
     road = road or build_road(config.network)
+    check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):
         try:
             result = simulate(config, plan, road=road)
-        except Exception as exc:  # as alone: this episode's error (SUMO's, or a user's controller's)
+        except (SumoError, ConfigError):
+            raise  # as in a batch: SUMO's failure, or a configuration it cannot play, ends them all
+        except Exception as exc:  # a user's controller: this episode's error, as alone
             result = exc
         results.append(result)
         if on_episode:
@@ -452,15 +455,19 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
         sensed = [vid for i in live for vid in platoons[i]]
         for vid in platoons[e]:  # it costs SUMO nothing more
             vehicle.remove(vid)
-        error = error or batch.failed.get(e)
+        error = error or batch.failed.get(e) or batch.bad_modes.get(e)  # as alone: a failure, else an untraceable mode
         lateral_m = laterals[e].rows() if laterals else None
+        platoon = detached.pop(e, None)
         if error is not None:
             results[e] = error
-        elif e in detached:
-            platoon = detached.pop(e)
+        elif platoon is not None:
             platoon.pairs = recorded[e]
-            trace, min_gaps = platoon.trace(np.arange(steps + 1) * dt, rows_x[:steps + 1, e], rows_v[:steps + 1, e], lateral_m)
-            results[e] = Episode(trace, collisions, min_gaps)
+            try:
+                trace, min_gaps = platoon.trace(np.arange(steps + 1) * dt, rows_x[:steps + 1, e], rows_v[:steps + 1, e],
+                                                lateral_m)
+                results[e] = Episode(trace, collisions, min_gaps)
+            except Exception as exc:  # a user's controller's mode that is not a number, as alone
+                results[e] = exc
         else:
             results[e] = batch.episode(e, steps, rows_x[:steps + 1, e], rows_v[:steps + 1, e], collisions,
                                        recorded[e] if laterals else None, lateral_m)
@@ -503,7 +510,6 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
             try:
                 out = platoon.advance(k, x, rows_v[k, e].tolist(), pairs[e] if pairs else maneuver.pairs(x))
             except Exception as exc:  # a user's controller: as alone, the episode ends with its error
-                detached.pop(e)
                 end(e, k, (), exc)
                 continue
             for vid, v in zip(commanded_ids[e], out):

@@ -172,9 +172,9 @@ def claim(store: Store, sweep: Sweep) -> None:
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
             hint = "Use another --db, or the sweep file that wrote it"
-            if theirs["fingerprint"] == sweep.one_bo_point_per_score().fingerprint():
-                hint = ("It was run when bo proposed one point per score: add `[search.bo] batch_size = 1` to the sweep "
-                        "file to go on with it, or use another --db")
+            if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.one_bo_point_per_score().fingerprint():
+                hint = ("It was run when bo proposed one point per score: set `batch_size = 1` in the sweep file's "
+                        "[search.bo] table to go on with it, or use another --db")
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"

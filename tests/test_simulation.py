@@ -346,6 +346,18 @@ class RaisingController(SwitchingController):
         return np.float32(super().command(gap_m, speed_mps, lead_speed_mps))
 
 
+class BadModeController(SwitchingController):
+    """A user's controller whose mode becomes a word once its gap opens past 12 m, and that gives up past 18 m."""
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if gap_m > 18.0:
+            raise RuntimeError("gave up")
+        u = super().command(gap_m, speed_mps, lead_speed_mps)
+        if gap_m > 12.0:
+            self.mode = "CC"
+        return u
+
+
 BATCH_CONFIGS = {
     "rest": EpisodeConfig(),
     "steady": EpisodeConfig(start="steady", setpoint_m=12.0, speed_mps=20.0),
@@ -358,6 +370,7 @@ BATCH_CONFIGS = {
     "cutin-krauss": EpisodeConfig(maneuver="cutin", lane_change_s=0.0, controller=ControllerConfig("sumo:Krauss")),
     "cutout": EpisodeConfig(maneuver="cutout", obstacle_distance_m=60.0, obstacle_speed_mps=5.0),
     "user-nan": EpisodeConfig(controller=ControllerConfig("test_simulation:FlakyController")),
+    "user-mode": EpisodeConfig(controller=ControllerConfig("test_simulation:BadModeController")),
     "user-raises": EpisodeConfig(controller=(ControllerConfig("test_simulation:RaisingController"),
                                              ControllerConfig("test_simulation:FlakyController", where="controller.v2"),
                                              ControllerConfig("test_simulation:RaisingController", where="controller.v3"))),
@@ -379,6 +392,7 @@ def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, nam
     config = BATCH_CONFIGS[name]
     register_controller("test_simulation:FlakyController", FlakyController)
     register_controller("test_simulation:RaisingController", RaisingController)
+    register_controller("test_simulation:BadModeController", BadModeController)
     plans = random_plans(config, 10 if name.startswith("user") or not name.startswith("sumo-") else 6, seed=4)
     heard = {}
     batched = simulate_batch(config, plans, road=None, on_episode=lambda i, r: heard.setdefault(i, r))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
@@ -410,16 +411,18 @@ def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(
 def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
     """Regression: a stored campaign with a gap (sample 3 gone) made the resumed sweep stop with 'a
     worker returned samples out of order'; the campaign runner plays just the missing samples."""
-    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["ce"]').replace("samples = 6", "samples = 12"))
-    sweep = Sweep.load(path)
+    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["ce", "bo"]').replace("samples = 6", "samples = 30")
+    sweep = Sweep.load(write(tmp_path, text + "\n[search.bo]\nbatch_size = 1\n"))  # one point per score: 30 chunks
     run_sweep(sweep, tmp_path / "whole.sqlite", workers=1)
     db = tmp_path / "r.sqlite"
     run_sweep(sweep, db, workers=1)
-    with Store(db) as store:
-        store.db.execute("DELETE FROM sample WHERE idx = 3")
+    with Store(db) as store:  # a short gap, and one longer than a chunk
+        store.db.execute("DELETE FROM sample WHERE idx = 3 OR idx BETWEEN 8 AND 24")
         store.db.commit()
-    run_sweep(sweep, db, workers=2)
-    assert outcomes(db) == outcomes(tmp_path / "whole.sqlite")
+    for batch in (1, 64):
+        shutil.copy(db, tmp_path / f"b{batch}.sqlite")
+        run_sweep(sweep, tmp_path / f"b{batch}.sqlite", workers=2, batch=batch)
+        assert outcomes(tmp_path / f"b{batch}.sqlite") == outcomes(tmp_path / "whole.sqlite")
 
 
 def test_a_database_of_a_sweep_run_when_bo_proposed_one_point_per_score_says_how_to_go_on_with_it(tmp_path):
@@ -428,9 +431,9 @@ def test_a_database_of_a_sweep_run_when_bo_proposed_one_point_per_score_says_how
     text = TINY.replace('optimizer = ["random"]', 'optimizer = ["bo", "ce"]')
     before = Sweep.load(write(tmp_path, text + "\n[search.bo]\nbatch_size = 1\n", "before.toml"))
     now = Sweep.load(write(tmp_path, text, "now.toml"))
-    assert before.fingerprint() != now.fingerprint() == now.fingerprint()
+    assert before.fingerprint() != now.fingerprint()
     with Store(tmp_path / "r.sqlite") as store:
         store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
-        with pytest.raises(StoreError, match=r"add `\[search.bo\] batch_size = 1`"):
+        with pytest.raises(StoreError, match=r"set `batch_size = 1` in the sweep file's \[search.bo\] table"):
             claim(store, now)
         claim(store, before)  # the sweep file with it goes on

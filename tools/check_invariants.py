@@ -17,7 +17,8 @@ campaign stores a sample, and counts the samples where any of these disagree:
   coordinate) is negative (beyond that precision) before the stored collision time, nor is the
   collision pair's FCD gap positive at it;
 - the episode played in a batch (beside --batch - 1 other random attacks of its configuration, in one
-  SUMO) is bit for bit the episode played alone: every signal, the collision record, the minimum gaps.
+  SUMO, on a random copy of the road) is bit for bit the episode played alone: every signal, the
+  collision record, the minimum gaps.
 
 Usage: python tools/check_invariants.py [N] [--seed S] [--batch K]. Prints the counts; exits 1 if any is
 non-zero.
@@ -163,11 +164,12 @@ def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, 
                   rng: np.random.Generator, road) -> str | None:
     """Play the episode beside ``partners`` random others in one SUMO; what differs from it alone, if anything."""
     f = evaluator.family
-    plans = [evaluator.plan(x) for x in [params, *(f.lower + rng.random(f.dimension) * (f.upper - f.lower)
-                                                   for _ in range(partners))]]
-    batched = simulate_batch(campaign.config, plans)[0]
+    slot = int(rng.integers(0, partners + 1))  # on any copy of the road
+    xs = [f.lower + rng.random(f.dimension) * (f.upper - f.lower) for _ in range(partners)]
+    plans = [evaluator.plan(x) for x in [*xs[:slot], params, *xs[slot:]]]
+    batched = simulate_batch(campaign.config, plans)[slot]
     try:
-        alone = simulate(campaign.config, plans[0], road=road)
+        alone = simulate(campaign.config, plans[slot], road=road)
     except Exception as exc:
         return None if type(batched) is type(exc) and str(batched) == str(exc) else "batch: the error differs from alone"
     if isinstance(batched, Exception):
@@ -184,7 +186,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("n", type=int, nargs="?", default=2000, help="episodes [2000]")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--batch", type=int, default=4, help="play each episode also in a batch of K [4]; 0: not")
+    parser.add_argument("--batch", type=int, default=8,
+                        help="play each episode also in a batch of K (more than simulation.DETACH_AT, so that the "
+                             "arrays command it) [8]; 0: not")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     road = build_road("highway_4lane")
