@@ -141,18 +141,19 @@ class PlatoonBatch:
                 modes[:, mode_columns] = kernel.mode
             for i, _, followers in self._scalar:
                 if followers[0].has_mode:
+                    column = self._with_mode.index(i)
                     for e, f in enumerate(followers):
                         try:
-                            modes[e, self._with_mode.index(i)] = f.controller.mode
+                            modes[e, column] = f.controller.mode
                         except Exception as exc:  # not a number: as alone, the trace will not be made
                             self.bad_modes.setdefault(e, exc)
         return new_speeds
 
-    def detach(self, e: int, k: int, pairs: list[list[Pair]] | None = None) -> Platoon:
+    def detach(self, e: int, k: int) -> Platoon:
         """Episode ``e`` before its step ``k`` as a `Platoon` of its own, in exactly the state it has here
-        (controllers, actuators, what it recorded), to go on one car at a time: a batch whose few
-        episodes left cost less that way than the arrays' fixed cost per step. ``pairs``: the episode's
-        pairs of samples 0 .. k, for a lane-changing maneuver."""
+        (controllers, actuators, the commands and modes it recorded), to go on one car at a time: a batch
+        whose few episodes left cost less that way than the arrays' fixed cost per step. (A lane-changing
+        maneuver's pairs are the caller's: it records them for every episode.)"""
         followers = [f if f.sumo_driven else PythonFollower(f.config, self.config) for f in self.followers]
         for i, _, scalar in self._scalar:  # a user's controller: its own object goes on
             followers[i - 1] = scalar[e]
@@ -178,8 +179,6 @@ class PlatoonBatch:
         platoon.commands = self.commands[:k, e].tolist()
         if self.modes is not None:
             platoon.modes = self.modes[:k, e].tolist()
-        if pairs is not None:
-            platoon.pairs = list(pairs[:k])
         return platoon
 
     def episode(self, e: int, steps: int, positions: np.ndarray, speeds: np.ndarray, collisions: tuple[Collision, ...],

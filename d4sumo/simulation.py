@@ -486,7 +486,7 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
         if 0 < arrayed <= DETACH_AT:  # few left: each goes on alone
             for e in live:
                 if e not in detached:
-                    detached[e] = batch.detach(e, k, recorded[e] if laterals else None)
+                    detached[e] = batch.detach(e, k)
                     active[e] = False
             arrayed = 0
         for e in changes.get(k, ()):
@@ -496,15 +496,10 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
             speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
             for e in batch.failed.keys() & live:  # a user's controller failed: the episode ends with its error
                 end(e, k, ())
-            if len(live) == m:
-                for ids, row in zip(commanded_ids, speeds.tolist()):
-                    for vid, v in zip(ids, row):
-                        set_speed(vid, v)
-            else:
-                for e in live:
-                    if e not in detached:
-                        for vid, v in zip(commanded_ids[e], speeds[e].tolist()):
-                            set_speed(vid, v)
+            rows = speeds.tolist()
+            for e in live:  # none is detached while the arrays command any
+                for vid, v in zip(commanded_ids[e], rows[e]):
+                    set_speed(vid, v)
         for e, platoon in list(detached.items()):
             x = rows_x[k, e].tolist()
             try:

@@ -17,6 +17,17 @@ pytestmark = pytest.mark.sumo
 SMALL = Campaign(optimizer="bo", samples=14, seed=3)  # past BO's 10 initial points
 
 
+class Interrupt(Exception):
+    """A kill, as the campaign sees it: raised from its on_sample."""
+
+
+def interrupt_at(index: int):
+    def on_sample(sample):
+        if sample.index == index:
+            raise Interrupt
+    return on_sample
+
+
 def signature(summary):
     return [(s.params, s.robustness, s.outcome) for s in summary.samples]
 
@@ -34,15 +45,8 @@ def test_an_interrupted_campaign_resumes_with_nothing_lost_or_counted_twice(tmp_
     uninterrupted = run_campaign(SMALL)
     path = tmp_path / "r.sqlite"
 
-    class Interrupt(Exception):
-        pass
-
-    def stop_after_eleven(sample):
-        if sample.index == 10:
-            raise Interrupt
-
     with pytest.raises(Interrupt), Store(path) as store:
-        run_campaign(SMALL, store, on_sample=stop_after_eleven)
+        run_campaign(SMALL, store, on_sample=interrupt_at(10))
     with Store(path) as store:
         assert len(store.samples()) == 11
         resumed = run_campaign(SMALL, store)
@@ -232,15 +236,8 @@ def test_a_campaign_interrupted_inside_a_batch_resumes_with_nothing_lost_or_coun
     uninterrupted = run_campaign(campaign)
     path = tmp_path / "r.sqlite"
 
-    class Interrupt(Exception):
-        pass
-
-    def stop_in_second_batch(sample):
-        if sample.index == 10:
-            raise Interrupt
-
     with pytest.raises(Interrupt), Store(path) as store:
-        run_campaign(campaign, store, on_sample=stop_in_second_batch)
+        run_campaign(campaign, store, on_sample=interrupt_at(10))  # inside the second batch
     with Store(path) as store:
         assert [s.index for s in store.samples()] == list(range(11))
         resumed = run_campaign(campaign, store, batch=3)
