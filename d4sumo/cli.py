@@ -24,7 +24,7 @@ from .attacks import FAMILIES
 from .config import MANEUVERS, START_MODES, EpisodeConfig
 from .errors import ConfigError, D4sumoError, check_number
 from .batch import DEFAULT_BATCH
-from .optimizers import OPTIMIZERS
+from .optimizers import EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
 from .scenarios import MAX_COPIES
 
 EXIT_USAGE = 2
@@ -314,11 +314,13 @@ def cmd_falsify(args: argparse.Namespace) -> int:
                 f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
                 if stored >= campaign.samples else f"{stored} of {campaign.samples} samples stored already: resuming"),
                 file=sys.stderr)
-        if campaign.optimizer == "bo" and known is None:
-            before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), "batch_size": 1}.items()))
-            if before != campaign and store.find_campaign(before.definition()) is not None:
-                bar.write(f"d4sumo: note: {args.db} holds this campaign as run when bo proposed one point per score; this "
-                      "starts a new one. To go on with that one: --set search.bo.batch_size=1", file=sys.stderr)
+        if known is None:
+            for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
+                before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
+                if before != campaign and store.find_campaign(before.definition()) is not None:
+                    bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
+                              f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)
+                    break
         summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
     top = summary.best
     result = {

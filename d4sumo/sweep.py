@@ -47,6 +47,7 @@ from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
 from .maneuvers import MANEUVERS
+from .optimizers import EARLIER_OPTIONS
 from .scenarios import NetworkSource, build_road, network_source
 from .simulation import check_episode
 from .store import Store, StoreError, campaign_key
@@ -85,11 +86,11 @@ class Sweep:
         keys = sorted(campaign_key(c.definition()) for c in self.campaigns)
         return hashlib.sha256(json.dumps(keys).encode()).hexdigest()[:20]
 
-    def one_bo_point_per_score(self) -> "Sweep":
-        """The sweep as d4sumo ran it before bo proposed 5 points at a time (its batch_size then 1)."""
+    def as_run_before(self, optimizer: str, earlier: dict) -> "Sweep":
+        """The sweep with ``earlier`` options (`optimizers.EARLIER_OPTIONS`) for every ``optimizer`` campaign."""
         return dataclasses.replace(self, campaigns=tuple(
-            c.replace(optimizer_options=tuple({**dict(c.optimizer_options), "batch_size": 1}.items()))
-            if c.optimizer == "bo" else c for c in self.campaigns))
+            c.replace(optimizer_options=tuple({**dict(c.optimizer_options), **earlier}.items()))
+            if c.optimizer == optimizer else c for c in self.campaigns))
 
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":
@@ -172,9 +173,12 @@ def claim(store: Store, sweep: Sweep) -> None:
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
             hint = "Use another --db, or the sweep file that wrote it"
-            if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.one_bo_point_per_score().fingerprint():
-                hint = ("It was run when bo proposed one point per score: set `batch_size = 1` in the sweep file's "
-                        "[search.bo] table to go on with it, or use another --db")
+            for optimizer, earlier in ((o, e) for o, es in EARLIER_OPTIONS.items() for e in es):
+                if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.as_run_before(optimizer, earlier).fingerprint():
+                    table = ", ".join(f"`{k} = {v}`" for k, v in earlier.items())
+                    hint = (f"It was run by an earlier d4sumo: set {table} in the sweep file's [search.{optimizer}] "
+                            "table to go on with it, or use another --db")
+                    break
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"

@@ -279,20 +279,25 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
     assert "batch_size" in campaign.definition()["optimizer_options"]
 
 
-def test_bo_proposes_five_at_a_time_and_a_campaign_stored_before_that_keeps_its_identity_and_its_samples():
-    """Stored bo campaigns proposed one point per score and have no batch_size: they must resume and
-    replay as they ran, under the same key."""
+@pytest.mark.parametrize("version, removed, kept", [
+    ("0.2", ("batch_size", "gp_version"), {"batch_size": 1, "gp_version": 1}),
+    ("0.3", ("gp_version",), {"batch_size": 5, "gp_version": 1})])
+def test_a_bo_campaign_an_earlier_version_stored_keeps_its_identity_and_its_options(version, removed, kept):
+    """d4sumo 0.2 stored bo campaigns without batch_size (one point per score) and 0.3 without
+    gp_version (scikit-optimize's GP): they must resume and replay as they ran, under the same key."""
     from d4sumo.store import campaign_key
 
     new = Campaign(optimizer="bo")
     assert new.definition()["optimizer_options"]["batch_size"] == 5
+    assert new.definition()["optimizer_options"]["gp_version"] == 2
     old = copy.deepcopy(new.definition())
-    del old["optimizer_options"]["batch_size"]
+    for key in removed:
+        del old["optimizer_options"][key]
     stored = Campaign.from_definition(old, samples=12)
-    assert dict(stored.optimizer_options)["batch_size"] == 1
+    assert {k: dict(stored.optimizer_options)[k] for k in kept} == kept
     assert campaign_key(stored.definition()) == campaign_key(old)
-    sequential = Campaign(optimizer="bo", optimizer_options={"batch_size": 1}, samples=12)
-    assert sequential.definition() == stored.definition()
+    same = Campaign(optimizer="bo", optimizer_options=kept, samples=12)
+    assert same.definition() == stored.definition()
 
 
 @pytest.mark.parametrize("where", ["a plan that fails", "SUMO failing"])

@@ -228,12 +228,15 @@ def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
 
 
 @pytest.mark.sumo
-def test_falsify_says_how_to_go_on_with_a_bo_campaign_run_when_bo_proposed_one_point_per_score(tmp_path, capsys):
+@pytest.mark.parametrize("earlier", [{"gp_version": 1}, {"gp_version": 1, "batch_size": 1}])
+def test_falsify_says_how_to_go_on_with_a_bo_campaign_an_earlier_version_ran(tmp_path, capsys, earlier):
+    """d4sumo 0.2 ran bo one point per score with scikit-optimize's GP, 0.3 five at a time with it."""
     db = str(tmp_path / "r.sqlite")
-    assert main(["falsify", "--samples", "2", "--set", "search.bo.batch_size=1", "--db", db, "--quiet", "--json"]) == 0
+    flags = [a for k, v in earlier.items() for a in ("--set", f"search.bo.{k}={v}")]
+    assert main(["falsify", "--samples", "2", *flags, "--db", db, "--quiet", "--json"]) == 0
     capsys.readouterr()
     assert main(["falsify", "--samples", "3", "--db", db, "--quiet", "--json"]) == 0
     err = capsys.readouterr().err
-    assert "--set search.bo.batch_size=1" in err and err.count("\n") == 1
-    assert main(["falsify", "--samples", "3", "--set", "search.bo.batch_size=1", "--db", db, "--quiet", "--json"]) == 0
+    assert " ".join(f"--set search.bo.{k}={v}" for k, v in earlier.items()) in err and err.count("\n") == 1
+    assert main(["falsify", "--samples", "3", *flags, "--db", db, "--quiet", "--json"]) == 0
     assert capsys.readouterr().err == ""  # it went on with it

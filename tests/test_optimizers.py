@@ -28,12 +28,12 @@ def best_of(name, seed, budget=100, f=bowl):
     return best
 
 
-@pytest.mark.parametrize("name", ["bo", "ce", "cmaes"])
-def test_bo_ce_and_cmaes_find_the_maximum_of_a_9d_function_far_better_than_random(name):
+@pytest.mark.parametrize("name", ["bo", "turbo", "ce", "cmaes"])
+def test_bo_turbo_ce_and_cmaes_find_the_maximum_of_a_9d_function_far_better_than_random(name):
     random = np.mean([best_of("random", s) for s in range(3)])
     found = np.mean([best_of(name, s) for s in range(3)])
     assert found > random + 0.5, (found, random)  # random's best is around -1.5
-    if name == "bo":
+    if name in ("bo", "turbo"):
         assert found > -0.2, found  # close to the optimum 0
 
 
@@ -105,12 +105,13 @@ def test_bo_keeps_the_learned_noise_between_relearnings():
     """Regression: between re-learnings the GP was refit with noise 0 (skopt zeroes the white kernel
     in kernel_ after a fit, and the next fit reused that kernel_)."""
     rng = np.random.default_rng(3)
-    opt = make_optimizer("bo", LOWER, UPPER, budget=40, rng=np.random.default_rng(0), options={"refit_every": 10})
+    opt = make_optimizer("bo", LOWER, UPPER, budget=40, rng=np.random.default_rng(0),
+                         options={"refit_every": 10, "gp_version": 1})
     for i in range(25):
         x = opt.ask()
         opt.tell(x, rng.normal(0, 1.0))  # pure noise: the GP must learn a noise level
         if i == 19:  # re-learned at 20 samples, when next needed
-            opt._model()
+            opt._skopt_model()
             learned = opt._noise
     assert learned > 1e-4
     assert opt._noise == learned and opt._gp.noise_ == pytest.approx(learned)
@@ -198,7 +199,8 @@ def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
 def test_bo_one_point_per_score_proposes_what_the_version_before_batches_proposed():
     """Campaigns stored before BO proposed in batches replay with batch_size 1 only if its proposals are
     unchanged: these are the proposals of d4sumo before it (the same seed, objective and tells)."""
-    opt = make_optimizer("bo", -np.ones(9), np.ones(9), budget=25, rng=np.random.default_rng(3), options={"batch_size": 1})
+    opt = make_optimizer("bo", -np.ones(9), np.ones(9), budget=25, rng=np.random.default_rng(3),
+                         options={"batch_size": 1, "gp_version": 1})
     asks = []
     for _ in range(25):
         x = opt.ask()
@@ -208,3 +210,61 @@ def test_bo_one_point_per_score_proposes_what_the_version_before_batches_propose
               19: [0.609403667, -0.279143507, 0.66399196], 24: [-0.025321608, 0.160072477, 0.429469124]}
     for i, first in before.items():
         assert np.allclose(asks[i][:3], first, rtol=0, atol=2e-9), i
+
+
+def play_in_batches(opt, f):
+    """Ask as a campaign does (a batch of ready() points, then their scores)."""
+    while opt.asked < opt.budget:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
+        for x in xs:
+            opt.tell(x, f(x))
+
+
+def test_turbo_shrinks_its_trust_region_on_failures_and_restarts_from_a_new_design():
+    opt = make_optimizer("turbo", LOWER, UPPER, budget=200, rng=np.random.default_rng(0),
+                         options={"initial_points": 5, "batch_size": 2, "failure_tolerance": 1, "length_min": 0.1})
+    lengths, runs, ready = [], [], []
+    real_judge = opt._judge
+
+    def judge(batch):
+        real_judge(batch)
+        lengths.append(opt.length)
+        runs.append(opt._run)
+        ready.append(opt.ready())
+
+    opt._judge = judge
+    play_in_batches(opt, lambda x: 0.0)  # a plateau: no batch ever improves
+    assert lengths[:4] == [0.4, 0.2, 0.1, 0.8]  # halved after each failed batch; below 0.1 a new run at 0.8
+    assert runs[:4] == [0, 0, 0, 5 + 4 * 2] and opt.restarts == len(lengths) // 4
+    # each run opens with its own initial design of 5 points, proposed as one batch; then batches of 2
+    assert ready[:4] == [2, 2, 2, 5]
+
+
+def test_turbo_grows_its_trust_region_on_successes_and_keeps_its_candidates_in_it():
+    opt = make_optimizer("turbo", LOWER, UPPER, budget=40, rng=np.random.default_rng(1),
+                         options={"initial_points": 5, "batch_size": 1, "success_tolerance": 2, "length_init": 0.2})
+    count = iter(range(1000))
+    play_in_batches(opt, lambda x: float(next(count)))  # every sample beats the last
+    assert opt.length == 1.6  # doubled every 2 successes, up to length_max
+    centre = opt._box_to_unit(opt.X[int(np.argmax(opt.y[opt._run:])) + opt._run])
+    opt.length = 0.1
+    cand = opt._candidates(centre)
+    weights = opt._process.length_scales / opt._process.length_scales.mean()
+    weights /= np.prod(weights) ** (1 / 9)
+    assert np.all(np.abs(cand - centre) <= weights * 0.1 / 2 + 1e-12)
+    assert np.all((cand != centre).any(axis=1))  # every candidate moves at least one coordinate
+
+
+def test_turbo_finds_the_maximum_of_a_40d_function_where_random_search_does_not():
+    target = np.random.default_rng(7).uniform(-0.5, 0.5, 40)
+
+    def f(x):
+        return -float(np.sum((x - target) ** 2))
+
+    lower, upper = -np.ones(40), np.ones(40)
+    bests = {}
+    for name in ("turbo", "random"):
+        opt = make_optimizer(name, lower, upper, budget=200, rng=np.random.default_rng(0))
+        play_in_batches(opt, f)
+        bests[name] = max(opt.y)
+    assert bests["turbo"] > bests["random"] + 5.0, bests  # random's best is around -15

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import os
 import shutil
 import signal
@@ -425,15 +426,17 @@ def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
         assert outcomes(tmp_path / f"b{batch}.sqlite") == outcomes(tmp_path / "whole.sqlite")
 
 
-def test_a_database_of_a_sweep_run_when_bo_proposed_one_point_per_score_says_how_to_go_on_with_it(tmp_path):
-    """bo proposes 5 points at a time since d4sumo 0.3; a sweep database written before has the grid of
-    batch_size 1, and the refusal says so."""
+@pytest.mark.parametrize("earlier", ["gp_version = 1", "gp_version = 1\nbatch_size = 1"])
+def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):
+    """A sweep database d4sumo 0.2 or 0.3 wrote has another grid (bo's options then), and the refusal
+    says which options give it back."""
     text = TINY.replace('optimizer = ["random"]', 'optimizer = ["bo", "ce"]')
-    before = Sweep.load(write(tmp_path, text + "\n[search.bo]\nbatch_size = 1\n", "before.toml"))
+    before = Sweep.load(write(tmp_path, text + f"\n[search.bo]\n{earlier}\n", "before.toml"))
     now = Sweep.load(write(tmp_path, text, "now.toml"))
     assert before.fingerprint() != now.fingerprint()
+    table = ", ".join(f"`{line}`" for line in earlier.split("\n"))
     with Store(tmp_path / "r.sqlite") as store:
         store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
-        with pytest.raises(StoreError, match=r"set `batch_size = 1` in the sweep file's \[search.bo\] table"):
+        with pytest.raises(StoreError, match=f"set {re.escape(table)} in the sweep file's \\[search.bo\\] table"):
             claim(store, now)
         claim(store, before)  # the sweep file with it goes on

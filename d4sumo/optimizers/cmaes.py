@@ -1,0 +1,74 @@
+"""CMA-ES with restarts (IPOP), on pycma."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .base import Optimizer
+
+
+class CMAES(Optimizer):
+    """CMA-ES (pycma) in the unit box, restarted with a doubled population when it converges or stalls
+    (IPOP-CMA-ES, as in falsification competitions). It draws its normals from the campaign's Generator,
+    never from numpy's global state. ``popsize`` 0 is pycma's default, 4 + 3 ln(dimension)."""
+
+    name = "cmaes"
+    OPTIONS = {"popsize": (0, 0, 10_000), "sigma0": (0.3, 1e-3, 1.0), "restart_factor": (2.0, 1.0, 10.0)}
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._popsize = self.options["popsize"] or 4 + int(3 * np.log(self.dimension))
+        self._pending: list[np.ndarray] = []
+        self._population: list[np.ndarray] = []
+        self._scores: list[float] = []
+        self.restarts = 0
+        self._es = self._start(np.full(self.dimension, 0.5))
+
+    def _start(self, x0: np.ndarray):
+        import cma
+
+        options = {"bounds": [0.0, 1.0], "popsize": self._popsize, "seed": np.nan, "verbose": -9,
+                   "randn": _Normals(self.rng)}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return cma.CMAEvolutionStrategy(list(x0), self.options["sigma0"], options)
+
+    def ready(self) -> int:  # the rest of the current population
+        population = len(self._population) if self._population else self._popsize
+        return population - len(self._scores) - self.outstanding
+
+    def _ask(self) -> np.ndarray:
+        if not self._pending:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._population = [np.clip(np.asarray(z, float), 0.0, 1.0) for z in self._es.ask()]
+            self._pending = list(self._population)
+            self._scores = []
+        return self._unit_to_box(self._pending.pop(0))
+
+    def tell(self, x: np.ndarray, score: float) -> None:
+        super().tell(x, score)
+        self._scores.append(self.y[-1])
+        if len(self._scores) < len(self._population):
+            return
+        with warnings.catch_warnings():  # flat fitness is reported as a warning; CMA widens by itself
+            warnings.simplefilter("ignore")
+            self._es.tell(self._population, [-v for v in self._scores])  # pycma minimises
+        if self._es.stop():
+            self.restarts += 1
+            self._popsize = int(round(self._popsize * self.options["restart_factor"]))
+            self._es = self._start(self.rng.random(self.dimension))
+        self._pending, self._population, self._scores = [], [], []
+
+
+class _Normals:
+    """pycma's source of normal draws: the campaign's Generator (a class, not a lambda, so that the
+    optimiser's state pickles: a sweep sends it between processes)."""
+
+    def __init__(self, rng: np.random.Generator):
+        self.rng = rng
+
+    def __call__(self, lam: int, n: int) -> np.ndarray:
+        return self.rng.standard_normal((lam, n))

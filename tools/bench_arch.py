@@ -1,0 +1,157 @@
+"""The optimisers on a falsification benchmark outside SUMO, of the kind ARCH-COMP's falsification
+category uses: a black-box model with 40 piecewise-constant inputs and long plateaus of nearly
+constant robustness.
+
+The model (numpy, 0.1 s steps, 100 s): five cars in a row. The first car's throttle and brake, each in
+[0, 1] and constant over 20 segments of 5 s, are the 40 inputs. Cars 2-5 follow their leader with a constant time-gap ACC
+(a = 0.2 (gap - 5 m - 1 s * v) + 0.6 (v_leader - v), limited to [-6, 3] m/s^2) behind a first-order
+actuator lag of 0.6 s, which makes the platoon string-unstable. The first car's acceleration is
+2.5 (throttle - brake) m/s^2, speeds stay in [0, 40] m/s. All start at 20 m/s, 25 m apart (their
+equilibrium). Specifications (y_i the position of car i, front to back):
+- ``gap``: the last gap never opens past 48.5 m: G[0,100] (y4 - y5 <= 48.5);
+- ``close``: no gap ever closes below 1.75 m: G[0,100] min_i (y_i - y_{i+1}) >= 1.75;
+- ``held``: the last gap never stays above 48 m for 10 s: G[0,90] F[0,10] (y4 - y5 <= 48).
+About 1-2% of uniformly random inputs falsify each; most leave the gaps near their equilibrium, where
+the robustness is nearly constant (a plateau).
+
+For each optimiser and specification, ``--runs`` runs (seeds 0, 1, ...) of at most ``--samples``
+simulations each, stopped at the first falsification, as ARCH-COMP counts: falsified runs and the
+median simulations to falsify. Then each optimiser's own time (ask + tell) per proposal over one run of
+the full budget on the ``gap`` specification, against a SUMO episode of d4sumo's default scenario
+measured in the same run (target: at most half an episode).
+
+Usage: python tools/bench_arch.py [--runs 10] [--samples 300] [--optimizers ...] [--specs gap close held]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+from d4sumo.optimizers import make_optimizer
+
+DT, DURATION, SEGMENTS = 0.1, 100.0, 20
+STEPS = int(round(DURATION / DT))
+CARS = 5
+LEAD_THROTTLE, LEAD_BRAKE, MAX_SPEED = 2.5, 2.5, 40.0  # m/s^2, m/s^2, m/s
+# thresholds where about 1-2% of uniformly random inputs falsify: random search falsifies most runs of
+# 300 simulations, and a search that narrows too early on the plateau does not
+GAP_OPEN_M, GAP_CLOSED_M, GAP_HELD_M = 48.5, 1.75, 48.0
+
+
+def simulate(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and speeds, runs x (steps + 1) x cars, of the five cars under rows of 40 inputs (20
+    throttle, 20 brake): one run per row, all at once."""
+    params = np.atleast_2d(params)
+    runs = len(params)
+    hold = STEPS // SEGMENTS
+    lead_accel = np.repeat(LEAD_THROTTLE * params[:, :SEGMENTS] - LEAD_BRAKE * params[:, SEGMENTS:], hold, axis=1)
+    y = np.tile(-25.0 * np.arange(CARS, dtype=float), (runs, 1))
+    v = np.full((runs, CARS), 20.0)
+    a = np.zeros((runs, CARS))
+    ys, vs = np.empty((runs, STEPS + 1, CARS)), np.empty((runs, STEPS + 1, CARS))
+    ys[:, 0], vs[:, 0] = y, v
+    lag = DT / 0.6
+    for k in range(STEPS):
+        gap = y[:, :-1] - y[:, 1:]
+        wanted = np.clip(0.2 * (gap - 5.0 - 1.0 * v[:, 1:]) + 0.6 * (v[:, :-1] - v[:, 1:]), -6.0, 3.0)
+        a[:, 0] = lead_accel[:, k]
+        a[:, 1:] += lag * (wanted - a[:, 1:])
+        v_new = np.clip(v + a * DT, 0.0, MAX_SPEED)
+        y = y + 0.5 * (v + v_new) * DT
+        v = v_new
+        ys[:, k + 1], vs[:, k + 1] = y, v
+    return ys, vs
+
+
+def _sliding_min(x: np.ndarray, width: int) -> np.ndarray:
+    return np.lib.stride_tricks.sliding_window_view(x, width, axis=-1).min(axis=-1)
+
+
+def robustness(spec: str, params: np.ndarray) -> np.ndarray:
+    """Robustness of the specification for each row of inputs: negative means falsified."""
+    ys, vs = simulate(params)
+    gaps = ys[:, :, :-1] - ys[:, :, 1:]
+    if spec == "gap":
+        return np.min(GAP_OPEN_M - gaps[:, :, -1], axis=1)
+    if spec == "close":
+        return np.min(gaps - GAP_CLOSED_M, axis=(1, 2))
+    if spec == "held":  # G[0,90] F[0,10] (y4 - y5 <= GAP_HELD): every 10 s window has a moment at or below it
+        window = int(round(10.0 / DT)) + 1
+        return np.min(GAP_HELD_M - _sliding_min(gaps[:, :, -1], window), axis=1)
+    raise ValueError(spec)
+
+
+SPECS = ("gap", "close", "held")
+
+
+def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple[int | None, float, int]:
+    """(simulations to the first falsification or None, own seconds, proposals)."""
+    lower, upper = np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS)
+    name, _, options = optimizer.partition(":")
+    opts = {k: float(v) if "." in v else int(v) for k, v in (o.split("=") for o in options.split(",") if o)}
+    opt = make_optimizer(name, lower, upper, budget=samples, rng=np.random.default_rng(seed), options=opts)
+    own, found = 0.0, None
+    while opt.asked < samples:
+        t0 = time.perf_counter()
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), samples - opt.asked)))]
+        own += time.perf_counter() - t0
+        scores = [float(-r) for r in robustness(spec, np.array(xs))]  # the optimisers maximise
+        t0 = time.perf_counter()
+        for x, s in zip(xs, scores):
+            opt.tell(x, s)
+        own += time.perf_counter() - t0
+        for i, s in enumerate(scores):
+            if s > 0 and found is None:
+                found = len(opt.y) - len(scores) + i + 1
+        if found is not None and stop:
+            break
+    return found, own, opt.asked
+
+
+def sumo_episode_seconds(repeats: int = 20) -> float:
+    """One episode of d4sumo's default scenario (random knot attacks, played alone), simulation and scoring."""
+    from d4sumo.campaign import Campaign, Evaluator
+
+    ev = Evaluator(Campaign())
+    rng = np.random.default_rng(0)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        ev.batch(0, [rng.uniform(ev.family.lower, ev.family.upper)], None)
+    return (time.perf_counter() - t0) / repeats
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--samples", type=int, default=300)
+    parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "turbo"])
+    parser.add_argument("--specs", nargs="+", default=list(SPECS), choices=SPECS)
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    simulate(np.zeros(2 * SEGMENTS))
+    print(f"model: 5 cars, 40 piecewise-constant inputs, {STEPS} steps: {(time.perf_counter() - t0) * 1e3:.1f} ms a simulation")
+    falsified: dict[str, dict[str, str]] = {o: {} for o in args.optimizers}
+    for spec in args.specs:
+        for o in args.optimizers:
+            found = [run(o, spec, seed, args.samples, stop=True)[0] for seed in range(args.runs)]
+            hits = [f for f in found if f is not None]
+            median = f"{statistics.median(hits):.0f}" if hits else "-"
+            falsified[o][spec] = f"{len(hits)}/{args.runs} ({median})"
+            print(f"[{spec}] {o:12s}: falsified {len(hits)}/{args.runs} runs; simulations to falsify {found}", flush=True)
+    episode = sumo_episode_seconds()
+    print(f"\nfalsified runs of {args.runs} (median simulations to falsify), {args.samples} simulations per run; "
+          f"own time (ask + tell) per proposal over {args.samples} proposals on `gap`, against one SUMO episode "
+          f"of the default scenario ({episode * 1e3:.1f} ms)")
+    print(f"{'optimizer':12s}" + "".join(f"{s:>16s}" for s in args.specs) + f"{'own ms':>10s}{'own/episode':>13s}")
+    for o in args.optimizers:
+        _, own, asked = run(o, "gap", 0, args.samples, stop=False)
+        print(f"{o:12s}" + "".join(f"{falsified[o][s]:>16s}" for s in args.specs)
+              + f"{own / asked * 1e3:10.1f}{own / asked / episode:13.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
