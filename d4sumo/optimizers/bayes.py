@@ -21,7 +21,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from .base import Optimizer
-from .gp import GaussianProcess
+from .gp import GaussianProcess, one_blas_thread
 
 
 class GaussianProcessSearch(Optimizer):
@@ -41,6 +41,7 @@ class GaussianProcessSearch(Optimizer):
         self.batch_size = o["batch_size"]
         self._initial = qmc.Halton(d=self.dimension, scramble=True, seed=self.rng)
         self._pending: list[np.ndarray] = []  # asked, not told yet (unit box)
+        self._told: list[np.ndarray] = []  # the points told, in the unit box
         self._gp = None
         self._fitted = 0  # the scores told when the GP was last fitted
         self._learned = 0  # the scores modelled when the hyperparameters were last learned
@@ -61,25 +62,27 @@ class GaussianProcessSearch(Optimizer):
 
     def tell(self, x: np.ndarray, score: float) -> None:
         super().tell(x, score)
+        self._told.append(self._box_to_unit(self.X[-1]))
         if self._pending:
             self._pending.pop(0)  # told in the order asked
 
     @property
     def X_unit(self) -> list[np.ndarray]:
-        return [self._box_to_unit(x) for x in self.X]
+        return self._told
 
     def _candidates(self, best: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
     def _propose(self) -> np.ndarray:
-        Z, scores = self._data()
-        gp = self._model(Z, scores)
-        if self._pending:  # a batch (constant liar): each point asked but not told scores the worst seen
-            gp = copy.copy(gp)
-            for z in self._pending:
-                gp.add(z, scores.min())
-        cand = self._candidates(Z[int(np.argmax(scores))])
-        return cand[int(np.argmax(gp.expected_improvement(cand, scores.max(), self.xi)))]
+        with one_blas_thread():
+            Z, scores = self._data()
+            gp = self._model(Z, scores)
+            if self._pending:  # a batch (constant liar): each point asked but not told scores the worst seen
+                gp = copy.copy(gp)
+                for z in self._pending:
+                    gp.add(z, scores.min())
+            cand = self._candidates(Z[int(np.argmax(scores))])
+            return cand[int(np.argmax(gp.expected_improvement(cand, scores.max(), self.xi)))]
 
     def _data(self) -> tuple[np.ndarray, np.ndarray]:
         """The points (unit box) and scores the GP models."""
@@ -250,7 +253,9 @@ class TrustRegionBO(GaussianProcessSearch):
         return np.asarray(self.X_unit[self._run:]), np.asarray(self.y[self._run:])
 
     def _candidates(self, centre: np.ndarray) -> np.ndarray:
-        weights = self._process.length_scales
+        # TuRBO's bounds on the length scales: a dimension the GP found irrelevant (a length scale of
+        # 100) must not squeeze the others' sides to nothing
+        weights = np.clip(self._process.length_scales, 0.005, 2.0)
         weights = weights / weights.mean()
         weights = weights / np.prod(weights) ** (1.0 / self.dimension)
         lower = np.clip(centre - weights * self.length / 2.0, 0.0, 1.0)
