@@ -10,18 +10,17 @@
   leaves the distribution as it was.
 - ``ce-bucket``: VerifAI's cross-entropy over buckets, the sampler the paper ran, for comparison.
 - ``cmaes``: CMA-ES (pycma) with restarts and a growing population (IPOP).
-- ``bo``: Bayesian optimisation: scikit-optimize's Gaussian process (Matern 5/2 with a length scale
-  per dimension, learned noise) and expected improvement, maximised over random candidates and
-  perturbations of the incumbent. Kernel hyperparameters are re-learned every ``refit_every`` samples
-  and kept in between (the GP is still conditioned on every sample): this keeps BO's own time per
-  sample below an episode's, where scikit-optimize's Optimizer spends ~2 s per tell. It proposes
-  ``batch_size`` points at once (5; 1 is the paper's one point per score): the constant liar, each
-  point proposed but not yet scored counts as the worst score seen, so their episodes can be played
-  side by side (and the batch spreads out: it found more distinct attacks than one at a time).
+- ``bo``: Bayesian optimisation: a Gaussian process (Matern 5/2 with a length scale per dimension,
+  learned noise; d4sumo's own, `gp.py`) and expected improvement, maximised over random candidates and
+  perturbations of the incumbent. It proposes ``batch_size`` points at once (5; 1 is the paper's one
+  point per score) by the constant liar. ``gp_version = 1`` runs scikit-optimize's GP instead, as
+  campaigns stored by d4sumo 0.3 and before did (5-20 times BO's own time).
+- ``turbo``: TuRBO-1, the same inside a trust region that follows the best point, grows on successes,
+  shrinks on failures and restarts when it collapses: for 10-40 dimensions.
 
 ``ready()`` says how many points an optimiser can propose before it is told a score, with exactly the
 points it would propose one at a time: a cross-entropy generation, a CMA-ES population, any number of
-random or Halton points, BO's initial design. The campaign plays them as one batch (`batch`).
+random or Halton points, BO's and TuRBO's initial designs, their constant-liar batches. The campaign plays them as one batch (`batch`).
 
 Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly. Options
 (``OPTIONS`` of each class) come from a config's ``[search.<optimizer>]`` table, validated by
@@ -63,7 +62,7 @@ OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_versio
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
-#: (0.3: scikit-optimize's GP; 0.2: also one point per score)
+#: (bo in 0.3: scikit-optimize's GP; in 0.2 also one point per score)
 EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"gp_version": 1}, {"gp_version": 1, "batch_size": 1})}
 
 

@@ -194,7 +194,7 @@ class TrustRegionBO(GaussianProcessSearch):
     """
 
     name = "turbo"
-    OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (1000, 10, 1_000_000),
+    OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "xi": (0.01, 0.0, 10.0), "batch_size": (5, 1, 64), "length_init": (0.8, 1e-3, 2.0),
                "length_min": (0.5 ** 7, 1e-6, 1.0), "length_max": (1.6, 1e-3, 2.0), "success_tolerance": (3, 1, 1000),
                "failure_tolerance": (0, 0, 1000)}
