@@ -218,6 +218,7 @@ def full_signature(summary):
 @pytest.mark.parametrize("optimizer, options", [
     ("random", {}), ("halton", {}), ("ce", {"batch_size": 6}), ("cmaes", {}), ("ce-bucket", {}),
     ("bo", {"initial_points": 6, "batch_size": 1}), ("bo", {"initial_points": 4, "batch_size": 3}),
+    ("turbo", {"initial_points": 4, "batch_size": 3, "failure_tolerance": 1}),
 ])
 def test_a_campaign_played_in_batches_is_the_campaign_played_one_episode_at_a_time(optimizer, options):
     """Issue 13: batches change the speed, never a sample."""

@@ -75,7 +75,7 @@ def test_cross_entropy_samples_stay_in_the_box_near_its_edges():
 
 
 def test_unknown_optimizer_lists_the_allowed_ones():
-    with pytest.raises(ConfigError, match="bo, ce, ce-bucket, cmaes, random, halton"):
+    with pytest.raises(ConfigError, match="bo, turbo, ce, ce-bucket, cmaes, random, halton"):
         make_optimizer("annealing", LOWER, UPPER, budget=10, rng=np.random.default_rng(0))
 
 
@@ -194,6 +194,66 @@ def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
         return asked
 
     assert run(split=True) == run(split=False)
+
+
+@pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("turbo", {"failure_tolerance": 1})])
+def test_a_bayesian_optimisers_state_pickles_inside_a_batch_and_goes_on_exactly(name, options):
+    """A sweep sends the state between chunks; a chunk may end with points asked and not told."""
+    import pickle
+
+    def run(split: bool) -> list:
+        opt = make_optimizer(name, np.zeros(4), np.ones(4), budget=40, rng=np.random.default_rng(5),
+                             options={"initial_points": 5, **options})
+        asked = []
+        while opt.asked < opt.budget:
+            xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
+            asked.extend(tuple(x) for x in xs)
+            for i, x in enumerate(xs):
+                if split and i == 1:
+                    opt = pickle.loads(pickle.dumps(opt))
+                opt.tell(x, -float(np.sum((x - 0.3) ** 2)))
+        return asked
+
+    assert run(split=True) == run(split=False)
+
+
+def test_turbo_refuses_lengths_that_do_not_nest():
+    from d4sumo.optimizers import resolve_options
+
+    with pytest.raises(ConfigError, match="search.turbo.length_min.*below length_init"):
+        resolve_options("turbo", {"length_min": 0.9, "length_init": 0.5})
+    with pytest.raises(ConfigError, match="search.turbo.length_max.*at least length_init"):
+        make_optimizer("turbo", LOWER, UPPER, budget=10, rng=np.random.default_rng(0), options={"length_max": 0.5})
+
+
+def test_turbo_learns_its_gp_afresh_after_a_restart():
+    opt = make_optimizer("turbo", LOWER, UPPER, budget=60, rng=np.random.default_rng(0),
+                         options={"initial_points": 5, "batch_size": 2, "failure_tolerance": 1, "length_min": 0.3})
+    learned = []
+    real = opt._process.fit
+
+    def spy(process):
+        fit = process.fit
+
+        def record(Z, y, learn):
+            learned.append((opt._run, len(y), learn))
+            return fit(Z, y, learn)
+        process.fit = record
+
+    spy(opt._process)
+    real_start = opt._start_run
+
+    def start():
+        real_start()
+        spy(opt._process)
+
+    opt._start_run = start
+    play_in_batches(opt, lambda x: 0.0)
+    assert opt.restarts >= 2 and real is not None
+    firsts = {}
+    for run, n, learn in learned:
+        firsts.setdefault(run, (n, learn))
+    assert all(learn and n == 5 for n, learn in firsts.values()), firsts  # each run's first fit learns
 
 
 def test_bo_one_point_per_score_proposes_what_the_version_before_batches_proposed():

@@ -92,7 +92,7 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
     """(simulations to the first falsification or None, own seconds, proposals)."""
     lower, upper = np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS)
     name, _, options = optimizer.partition(":")
-    opts = {k: float(v) if "." in v else int(v) for k, v in (o.split("=") for o in options.split(",") if o)}
+    opts = {k: int(v) if v.lstrip("-").isdigit() else float(v) for k, v in (o.split("=") for o in options.split(",") if o)}
     opt = make_optimizer(name, lower, upper, budget=samples, rng=np.random.default_rng(seed), options=opts)
     own, found = 0.0, None
     while opt.asked < samples:

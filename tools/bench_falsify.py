@@ -128,7 +128,7 @@ def timed_optimizer():
 def optimizer_of(spec: str) -> tuple[str, dict]:
     """``name`` or ``name:key=value,key=value``: an optimiser and its options."""
     name, _, options = spec.partition(":")
-    return name, {k: float(v) if "." in v else int(v) for k, v in (o.split("=") for o in options.split(",") if o)}
+    return name, {k: int(v) if v.lstrip("-").isdigit() else float(v) for k, v in (o.split("=") for o in options.split(",") if o)}
 
 
 def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:

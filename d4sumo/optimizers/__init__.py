@@ -18,9 +18,10 @@
 - ``turbo``: TuRBO-1, the same inside a trust region that follows the best point, grows on successes,
   shrinks on failures and restarts when it collapses: for 10-40 dimensions.
 
-``ready()`` says how many points an optimiser can propose before it is told a score, with exactly the
-points it would propose one at a time: a cross-entropy generation, a CMA-ES population, any number of
-random or Halton points, BO's and TuRBO's initial designs, their constant-liar batches. The campaign plays them as one batch (`batch`).
+``ready()`` says how many points an optimiser proposes before it is told a score: a cross-entropy
+generation, a CMA-ES population, any number of random or Halton points, BO's and TuRBO's initial
+designs and their constant-liar batches. The campaign always asks for that many at once and plays them
+side by side (`batch`), so how many episodes share a SUMO changes no proposal.
 
 Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly. Options
 (``OPTIONS`` of each class) come from a config's ``[search.<optimizer>]`` table, validated by
@@ -81,7 +82,9 @@ def resolve_options(name: str, options: dict | None) -> dict:
     """Every option of optimiser ``name``, defaults filled in, each value checked."""
     if name not in _FACTORIES:
         raise ConfigError("search.optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
-    return check_options(name, _FACTORIES[name].OPTIONS, options)
+    resolved = check_options(name, _FACTORIES[name].OPTIONS, options)
+    _FACTORIES[name].check_together(resolved)
+    return resolved
 
 
 def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Generator, options: dict | None = None) -> Optimizer:
@@ -91,4 +94,4 @@ def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Gener
 
 
 __all__ = ["OPTIMIZERS", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
-           "CMAES", "CrossEntropy", "Halton", "RandomSearch", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]
+           "CMAES", "CrossEntropy", "Halton", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]

@@ -21,9 +21,14 @@ class Optimizer:
         self.budget = budget
         self.rng = rng
         self.options = check_options(self.name, self.OPTIONS, options)
+        self.check_together(self.options)
         self.asked = 0
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
+
+    @staticmethod
+    def check_together(options: dict) -> None:
+        """Refuse options that are each allowed but not together (a ConfigError)."""
 
     @property
     def outstanding(self) -> int:

@@ -1,7 +1,8 @@
 """Bayesian optimisation: ``bo`` (a Gaussian process and expected improvement over the whole box) and
 ``turbo`` (the same inside a trust region that follows the best point, for 10-40 dimensions).
 
-``bo`` proposes ``batch_size`` points at once (5; 1 is the paper's one point per score): the constant
+``xi`` is in units of the scores' standard deviation (scikit-optimize's GP, ``gp_version = 1``, reads
+it in score units). ``bo`` proposes ``batch_size`` points at once (5; 1 is the paper's one point per score): the constant
 liar, each point proposed but not yet scored counts as the worst score seen, so their episodes can be
 played side by side (and the batch spreads out: it found more distinct attacks than one at a time).
 Expected improvement is maximised over random candidates and perturbations of the incumbent.
@@ -20,6 +21,7 @@ import warnings
 import numpy as np
 from scipy.stats import qmc
 
+from ..errors import ConfigError
 from .base import Optimizer
 from .gp import GaussianProcess, one_blas_thread
 
@@ -92,7 +94,7 @@ class GaussianProcessSearch(Optimizer):
         """The GP of the scores modelled, fitted when first needed after new scores (once per batch)."""
         n = len(scores)
         if self._gp is None or self._fitted != len(self.y):
-            learn = self._gp is None or n < self._learned or n - self._learned >= max(self.refit_every, self._learned // 4)
+            learn = self._gp is None or n - self._learned >= max(self.refit_every, self._learned // 4)
             self._gp = self._process.fit(Z, scores, learn)
             self._fitted = len(self.y)
             if learn:
@@ -199,6 +201,14 @@ class TrustRegionBO(GaussianProcessSearch):
                "length_min": (0.5 ** 7, 1e-6, 1.0), "length_max": (1.6, 1e-3, 2.0), "success_tolerance": (3, 1, 1000),
                "failure_tolerance": (0, 0, 1000)}
 
+    @staticmethod
+    def check_together(options: dict) -> None:
+        if not options["length_min"] < options["length_init"]:
+            raise ConfigError("search.turbo.length_min", options["length_min"],
+                              f"below length_init ({options['length_init']}): else every batch restarts the search")
+        if not options["length_init"] <= options["length_max"]:
+            raise ConfigError("search.turbo.length_max", options["length_max"], f"at least length_init ({options['length_init']})")
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         o = self.options
@@ -211,7 +221,8 @@ class TrustRegionBO(GaussianProcessSearch):
         self._run = len(self.X)  # the first sample of the current run
         self._successes = self._failures = 0
         self._judged = len(self.X)  # samples up to here have moved the region already
-        self._learned = 0
+        self._gp, self._learned = None, 0  # a new run learns its GP afresh, as TuRBO does
+        self._process = GaussianProcess(self.dimension)
 
     def ready(self) -> int:
         if self.asked - self._run < self.initial_points:  # the run's initial design does not depend on scores
@@ -256,8 +267,7 @@ class TrustRegionBO(GaussianProcessSearch):
         # TuRBO's bounds on the length scales: a dimension the GP found irrelevant (a length scale of
         # 100) must not squeeze the others' sides to nothing
         weights = np.clip(self._process.length_scales, 0.005, 2.0)
-        weights = weights / weights.mean()
-        weights = weights / np.prod(weights) ** (1.0 / self.dimension)
+        weights = weights / np.exp(np.mean(np.log(weights)))  # volume length^d (a product would underflow)
         lower = np.clip(centre - weights * self.length / 2.0, 0.0, 1.0)
         upper = np.clip(centre + weights * self.length / 2.0, 0.0, 1.0)
         points = lower + (upper - lower) * self.rng.random((self.candidates, self.dimension))

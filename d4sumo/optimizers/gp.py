@@ -70,7 +70,7 @@ class GaussianProcess:
     def __init__(self, dimension: int, max_iterations: int = 50):
         self.dimension = dimension
         self.max_iterations = max_iterations
-        # log length scales, log signal variance, log noise variance (skopt's starting point)
+        # log length scales, log signal variance, log noise variance (length scales 1 as skopt's start; little noise)
         self.theta = np.concatenate([np.zeros(dimension), [0.0, np.log(1e-2)]])
         self._bounds = [tuple(np.log(LENGTH_SCALE))] * dimension + [tuple(np.log(SIGNAL_VARIANCE)),
                                                                     tuple(np.log(NOISE_VARIANCE))]
