@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from bench_falsify import optimizer_of  # tools/ is on the path of a script run from it
 from d4sumo.optimizers import make_optimizer
 
 DT, DURATION, SEGMENTS = 0.1, 100.0, 20
@@ -91,9 +92,8 @@ SPECS = ("gap", "close", "held")
 def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple[int | None, float, int]:
     """(simulations to the first falsification or None, own seconds, proposals)."""
     lower, upper = np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS)
-    name, _, options = optimizer.partition(":")
-    opts = {k: int(v) if v.lstrip("-").isdigit() else float(v) for k, v in (o.split("=") for o in options.split(",") if o)}
-    opt = make_optimizer(name, lower, upper, budget=samples, rng=np.random.default_rng(seed), options=opts)
+    name, options = optimizer_of(optimizer)
+    opt = make_optimizer(name, lower, upper, budget=samples, rng=np.random.default_rng(seed), options=options)
     own, found = 0.0, None
     while opt.asked < samples:
         t0 = time.perf_counter()

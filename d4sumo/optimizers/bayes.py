@@ -48,14 +48,15 @@ class GaussianProcessSearch(Optimizer):
         self._fitted = 0  # the scores told when the GP was last fitted
         self._learned = 0  # the scores modelled when the hyperparameters were last learned
         self._process = GaussianProcess(self.dimension)
+        self._run = 0  # the first sample of the current run (turbo starts new runs)
 
     def ready(self) -> int:
-        if self.asked < self.initial_points:  # the initial design does not depend on scores
-            return self.initial_points - self.asked
+        if self.asked - self._run < self.initial_points:  # the run's initial design does not depend on scores
+            return min(self.initial_points - (self.asked - self._run), self.budget - self.asked)
         return self.batch_size if not self.outstanding else 0
 
     def _ask(self) -> np.ndarray:
-        if len(self.y) < self.initial_points:
+        if len(self.y) - self._run < self.initial_points:
             z = self._initial.random(1)[0]
         else:
             z = self._propose()
@@ -223,19 +224,6 @@ class TrustRegionBO(GaussianProcessSearch):
         self._judged = len(self.X)  # samples up to here have moved the region already
         self._gp, self._learned = None, 0  # a new run learns its GP afresh, as TuRBO does
         self._process = GaussianProcess(self.dimension)
-
-    def ready(self) -> int:
-        if self.asked - self._run < self.initial_points:  # the run's initial design does not depend on scores
-            return min(self.initial_points - (self.asked - self._run), self.budget - self.asked)
-        return self.batch_size if not self.outstanding else 0
-
-    def _ask(self) -> np.ndarray:
-        if self.asked - 1 - self._run < self.initial_points:
-            z = self._initial.random(1)[0]
-        else:
-            z = self._propose()
-        self._pending.append(z)
-        return self._unit_to_box(z)
 
     def tell(self, x: np.ndarray, score: float) -> None:
         super().tell(x, score)
