@@ -13,10 +13,13 @@ Shapes: M episodes, n cars (config.vehicle_ids), C commanded cars (`Platoon.comm
 
 from __future__ import annotations
 
+import json
+from typing import Sequence
+
 import numpy as np
 
 from .config import EpisodeConfig
-from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl
+from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl, per_row
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
 from .platoon import (Platoon, PythonFollower, assemble_trace, checked_command, collisions_at, cruise_params,
                       followers_of)
@@ -27,27 +30,59 @@ from .trace import Collision, Episode
 DEFAULT_BATCH = 64
 
 
-class PlatoonBatch:
-    """M platoons of one configuration, each playing its own attack signal (row of ``attacks_u``)."""
+def batch_key(config: EpisodeConfig) -> str:
+    """Configurations whose episodes may play in one batch have the same key: they differ at most in
+    the setpoint, the target speed and the start from rest or steady (what the batch carries per
+    episode), so several campaigns of a sweep can share one SUMO. Followers driven by SUMO's models
+    read the target speed from their vehicle type, so theirs must be the same too."""
+    scenario = dict(config.to_dict())
+    scenario["scenario"] = {k: v for k, v in scenario["scenario"].items() if k not in _PER_EPISODE}
+    if config.start == "warmup":  # the warm-up's length decides the attack's start
+        scenario["scenario"]["start"] = "warmup"
+    if config.sumo_driven:
+        scenario["scenario"]["speed_mps"] = config.speed_mps
+    return json.dumps(scenario, sort_keys=True, default=str)
 
-    def __init__(self, config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_speed_mps: float):
+
+#: what may differ between the episodes of one batch (`batch_key`)
+_PER_EPISODE = ("setpoint_m", "speed_mps", "start")
+
+
+class PlatoonBatch:
+    """M platoons, each playing its own attack signal (row of ``attacks_u``): of one configuration, or
+    of one per episode (``config`` a sequence, all with one `batch_key`)."""
+
+    def __init__(self, config: EpisodeConfig | Sequence[EpisodeConfig], attacks_u: np.ndarray, attacker_max_speed_mps: float):
         attacks_u = np.asarray(attacks_u, dtype=float)
+        configs = [config] * attacks_u.shape[0] if isinstance(config, EpisodeConfig) else list(config)
+        config = configs[0]
         if attacks_u.ndim != 2 or attacks_u.shape[1] != config.steps:
             raise ValueError(f"attack signals have shape {attacks_u.shape}, expected (episodes, {config.steps})")
-        self.config = config
+        if len(configs) != attacks_u.shape[0]:
+            raise ValueError(f"{len(configs)} configurations for {attacks_u.shape[0]} attack signals")
+        distinct = {id(c): c for c in configs}
+        if len(distinct) > 1 and len({batch_key(c) for c in distinct.values()}) > 1:
+            raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
+        self.config = config  # what every episode shares
+        self.configs = configs
         self.maneuver = maneuver_of(config)
         self.ids = config.vehicle_ids
         self.size = m = attacks_u.shape[0]
         self.attacks_u = attacks_u
         vehicle, dt, n = config.vehicle, config.step_s, config.followers + 1
         self.followers = followers_of(config)  # the kinds, for the trace: the same in every episode
+        # each distinct configuration's followers: their controllers carry its setpoint and target speed
+        rows_followers = {k: (self.followers if c is config else followers_of(c)) for k, c in distinct.items()}
+        episode_followers = [rows_followers[id(c)] for c in configs]
         gains = cruise_params(config)
-        self.attacker_cruise = CruiseArray(gains, config.speed_mps, dt, (m,))
+        speed = per_row([c.speed_mps for c in configs], (m,))
+        self.attacker_cruise = CruiseArray(gains, speed, dt, (m,))
         self._command = CommandArray(vehicle)
         self._attacking = np.zeros(m, dtype=bool)
         others = list(range(n, len(self.ids)))
         self._others = np.array(others, dtype=int)
-        self._lead = CruiseArray(gains, config.speed_mps, dt, (m, len(others))) if self.maneuver.other_cruises else None
+        self._lead = (CruiseArray(gains, per_row([c.speed_mps for c in configs], (m, len(others))), dt, (m, len(others)))
+                      if self.maneuver.other_cruises else None)
         python = [i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         self.commanded = (0, *python, *others)
         self._commanded = _index(list(self.commanded))
@@ -64,12 +99,13 @@ class PlatoonBatch:
             kernel = ARRAY_KERNELS.get(type(prototype))
             if kernel is None:
                 for i, column in members:
-                    self._scalar.append((i, column, [PythonFollower(controller, config) for _ in range(m)]))
+                    self._scalar.append((i, column, [PythonFollower(controller, c) for c in configs]))
                 continue
             columns = [c for _, c in members]
             modes = [self._with_mode.index(i) for i, _ in members]
+            rows = [f[cars[0] - 1].controller for f in episode_followers]  # one prototype per episode
             self._kernels.append((_index(cars.tolist()), _index([i - 1 for i in cars.tolist()]), _index(columns),
-                                  _index(modes), kernel(prototype, (m, len(cars)), dt)))
+                                  _index(modes), kernel(rows, (m, len(cars)), dt)))
         max_speeds = [attacker_max_speed_mps] + [np.inf] * len(python) + [attacker_max_speed_mps] * len(others)
         self.actuator = ActuatorArray(vehicle, dt, (m, len(self.commanded)), np.array(max_speeds))
         self.commands = np.zeros((config.steps, m, len(self.commanded)))  # each step's commands, as played
@@ -154,10 +190,11 @@ class PlatoonBatch:
         (controllers, actuators, the commands and modes it recorded), to go on one car at a time: a batch
         whose few episodes left cost less that way than the arrays' fixed cost per step. (A lane-changing
         maneuver's pairs are the caller's: it records them for every episode.)"""
-        followers = [f if f.sumo_driven else PythonFollower(f.config, self.config) for f in self.followers]
+        config = self.configs[e]
+        followers = [f if f.sumo_driven else PythonFollower(f.config, config) for f in self.followers]
         for i, _, scalar in self._scalar:  # a user's controller: its own object goes on
             followers[i - 1] = scalar[e]
-        platoon = Platoon(self.config, self.attacks_u[e], float(self.actuator.max_speed_mps[e, 0]), followers)
+        platoon = Platoon(config, self.attacks_u[e], float(self.actuator.max_speed_mps[e, 0]), followers)
         _carry(self.attacker_cruise, e, platoon.attacker_cruise)
         platoon._attacking = bool(self._attacking[e])
         accel = self.actuator.accel_mps2[e].tolist()
@@ -186,7 +223,7 @@ class PlatoonBatch:
         """Episode ``e`` after ``steps`` steps, from its sensed rows (steps + 1 samples x n)."""
         times = np.arange(steps + 1) * self.config.step_s
         modes = self.modes[:steps, e] if self.modes is not None else None
-        trace, min_gaps = assemble_trace(self.config, self.followers, self.commanded, times, positions, speeds,
+        trace, min_gaps = assemble_trace(self.configs[e], self.followers, self.commanded, times, positions, speeds,
                                          self.commands[:steps, e], modes, pairs or [], lateral_m)
         return Episode(trace, collisions, min_gaps)
 
@@ -213,19 +250,20 @@ def collided(gap: np.ndarray) -> np.ndarray:
     return (gap < 0.0).any(axis=1)
 
 
-def integrate_batch(config: EpisodeConfig, attacks_u: np.ndarray, attacker_max_speed_mps: float = float("inf"), *,
-                    detach_at_step: int | None = None) -> list[Episode | Exception]:
-    """`platoon.integrate` for many attacks at once: ballistic positions, no SUMO, the paper's maneuver;
-    from step ``detach_at_step`` on, each episode left goes on alone (`PlatoonBatch.detach`). For
-    physics tests of the array laws against the scalar ones."""
+def integrate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], attacks_u: np.ndarray,
+                    attacker_max_speed_mps: float = float("inf"), *, detach_at_step: int | None = None) -> list[Episode | Exception]:
+    """`platoon.integrate` for many attacks at once (of one configuration, or of one each): ballistic
+    positions, no SUMO, the paper's maneuver; from step ``detach_at_step`` on, each episode left goes
+    on alone (`PlatoonBatch.detach`). For physics tests of the array laws against the scalar ones."""
     from .maneuvers import initial_state
 
     batch = PlatoonBatch(config, attacks_u, attacker_max_speed_mps)
+    config = batch.config
     m, dt, ids = batch.size, config.step_s, config.vehicle_ids
-    x0, v0 = initial_state(config)
     rows_x = np.zeros((config.steps + 1, m, len(ids)))
     rows_v = np.zeros_like(rows_x)
-    rows_x[0], rows_v[0] = x0, v0
+    for e, c in enumerate(batch.configs):
+        rows_x[0, e], rows_v[0, e] = initial_state(c)
     active = np.ones(m, dtype=bool)
     alone: dict[int, Platoon] = {}
     ended: dict[int, Episode | Exception] = {}

@@ -314,6 +314,16 @@ def _c(value: float) -> np.ndarray:
     return np.array(value, dtype=float)
 
 
+def per_row(values, shape: tuple[int, ...]) -> np.ndarray:
+    """A value that may differ between episodes (rows: a batch of several campaigns' episodes): a 0-d
+    array when it is the same in every row, else one value per row, broadcasting against ``shape``.
+    Each element is the very float the scalar code uses, so the arithmetic stays the same."""
+    values = [float(v) for v in values]
+    if len(set(values)) <= 1:
+        return _c(values[0])
+    return np.array(values, dtype=float).reshape((len(values),) + (1,) * (len(shape) - 1))
+
+
 _ZERO, _ONE, _MINUS_ONE = _c(0.0), _c(1.0), _c(-1.0)
 
 
@@ -342,14 +352,15 @@ class ActuatorArray:
 
 
 class CruiseArray:
-    """`CruiseControl` over an array of cars; only the cars in ``active`` use it (and change its state)."""
+    """`CruiseControl` over an array of cars; only the cars in ``active`` use it (and change its state).
+    ``target_speed_mps``: one speed, or an array broadcasting against ``shape`` (`per_row`)."""
 
-    def __init__(self, params: SwitchingParams, target_speed_mps: float, step_s: float, shape: tuple[int, ...]):
+    def __init__(self, params: SwitchingParams, target_speed_mps, step_s: float, shape: tuple[int, ...]):
         self.kp, self.ki, self.kd = _c(params.cruise_kp), _c(params.cruise_ki), _c(params.cruise_kd)
         self.clamp, self.minus_clamp = _c(params.cruise_integral_clamp), _c(-params.cruise_integral_clamp)
         self.limit, self.minus_limit = _c(params.cruise_output_limit_mps2), _c(-params.cruise_output_limit_mps2)
         self.step_s = _c(step_s)
-        self.target_mps = _c(target_speed_mps)
+        self.target_mps = np.asarray(target_speed_mps, dtype=float)
         self.integral = np.zeros(shape)
         self.prev_error = np.zeros(shape)
         self.engaged = np.zeros(shape, dtype=bool)  # False: prev_error is None (no derivative kick)
@@ -389,21 +400,25 @@ class CommandArray:
 
 
 class SwitchingArray:
-    """`SwitchingController` (or `TimeGapController`) over an array of followers that share its
-    parameters: built from one such controller, whose ``desired_gap_m`` takes arrays."""
+    """`SwitchingController` (or `TimeGapController`) over an array of followers (episodes x cars) that
+    share its gains: built from one such controller per episode (row), whose setpoint and target
+    speed may differ from row to row (a batch of several campaigns' episodes)."""
 
-    def __init__(self, controller: SwitchingController, shape: tuple[int, ...], step_s: float):
-        self.cruise = CruiseArray(controller.params, controller.target_speed_mps, step_s, shape)
+    def __init__(self, controllers: "SwitchingController | list[SwitchingController]", shape: tuple[int, ...], step_s: float):
+        rows = controllers if isinstance(controllers, list) else [controllers]
+        controller = rows[0]
+        self.cruise = CruiseArray(controller.params, per_row([c.target_speed_mps for c in rows], shape), step_s, shape)
         self.mode = np.full(shape, MODE_CC)
         self._mode_known = False
         self._time_gap = isinstance(controller, TimeGapController)
         # the thresholds of Eq. 1's switch, with the same arithmetic as SwitchingController.select_mode
-        d = controller.setpoint_m
-        self._setpoint = _c(d)
-        self._cc_gap, self._acc_gap = _c(d + controller._eps_x - GAP_TOLERANCE_M), _c(d + GAP_TOLERANCE_M)
+        self._setpoint = per_row([c.setpoint_m for c in rows], shape)
+        self._cc_gap = per_row([c.setpoint_m + c._eps_x - GAP_TOLERANCE_M for c in rows], shape)
+        self._acc_gap = per_row([c.setpoint_m + GAP_TOLERANCE_M for c in rows], shape)
         self._h = _c(getattr(controller, "time_gap_s", 0.0))
         self._eps_x, self._tolerance = _c(controller._eps_x), _c(GAP_TOLERANCE_M)
-        self._cc_speed, self._acc_speed = _c(controller._cc_speed), _c(controller._acc_speed)
+        self._cc_speed = per_row([c._cc_speed for c in rows], shape)
+        self._acc_speed = per_row([c._acc_speed for c in rows], shape)
         self._acc_kp, self._acc_kv = _c(controller._acc_kp), _c(controller._acc_kv)
         self._command = CommandArray(controller.vehicle)
 

@@ -26,7 +26,7 @@ import numpy as np
 from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
 from .maneuvers import CAR_WIDTH_M, AttackPlan, check_road_lanes, maneuver_of, occupied_lanes
-from .batch import PlatoonBatch, collided
+from .batch import PlatoonBatch, batch_key, collided
 from .platoon import Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
 from .scenarios import MAX_COPIES, Road, batch_road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
@@ -179,10 +179,12 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     return cmd
 
 
-def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1) -> list[tuple[str, ...]]:
+def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1,
+                 configs: Sequence[EpisodeConfig] | None = None) -> list[tuple[str, ...]]:
     """Insert every car of the maneuver, each in its lane, and hand Python the ones it commands; with
-    ``episodes`` > 1, one platoon on each copy of the road (`scenarios.batch_road`). Returns each
-    platoon's SUMO vehicle ids, in the order of ``config.vehicle_ids`` (the same ids for one platoon)."""
+    ``episodes`` > 1, one platoon on each copy of the road (`scenarios.batch_road`), each placed as
+    its own entry of ``configs`` says (default: ``config``). Returns each platoon's SUMO vehicle ids,
+    in the order of ``config.vehicle_ids`` (the same ids for one platoon)."""
     v = config.vehicle
     api.vehicletype.copy("DEFAULT_VEHTYPE", VTYPE_ID)
     api.vehicletype.setLength(VTYPE_ID, v.length_m)
@@ -203,13 +205,14 @@ def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1) -> l
     n = config.followers + 1
     type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
     type_ids += [VTYPE_ID] * (len(config.vehicle_ids) - n)  # the benign lead or the obstacle
-    cars = maneuver_of(config).cars()
+    configs = configs or [config] * episodes
+    placed = {id(c): maneuver_of(c).cars() for c in configs}
     platoons = [config.vehicle_ids if episodes == 1 else tuple(f"{e}.{vid}" for vid in config.vehicle_ids)
                 for e in range(episodes)]
     for e, ids in enumerate(platoons):
         route = f"{ROUTE_ID}{e}" if episodes > 1 else ROUTE_ID
         api.route.add(route, list(road.route(e)))
-        for vid, car, type_id in zip(ids, cars, type_ids):
+        for vid, car, type_id in zip(ids, placed[id(configs[e])], type_ids):
             api.vehicle.add(vid, route, typeID=type_id, depart="0", departLane=str(car.lane),
                             departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
     api.simulationStep()  # inserts the cars: this state is t = 0
@@ -372,10 +375,13 @@ def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Roa
     return results
 
 
-def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: Road | None = None,
+def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *,
+                   road: Road | None = None,
                    on_episode: Callable[[int, "Episode | Exception"], None] | None = None) -> list["Episode | Exception"]:
-    """Play many episodes of one configuration side by side in one SUMO instance, each platoon on its
-    own copy of the road (`scenarios.batch_road`), commanded together (`batch.PlatoonBatch`).
+    """Play many episodes side by side in one SUMO instance, each platoon on its own copy of the road
+    (`scenarios.batch_road`), commanded together (`batch.PlatoonBatch`). ``config``: one for every
+    episode, or one per plan, differing at most in setpoint, target speed and start from rest or
+    steady (`batch.batch_key`: several campaigns' episodes in one SUMO).
 
     Each result is bit for bit what `simulate` gives for the same plan alone: the episode, or the
     exception a user's follower controller raised in it (alone it would end that episode). An episode
@@ -387,12 +393,27 @@ def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: 
         return []
     if len(plans) > MAX_COPIES:
         raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
+    configs = [config] * len(plans) if isinstance(config, EpisodeConfig) else list(config)
+    if len(configs) != len(plans):
+        raise ValueError(f"{len(configs)} configurations for {len(plans)} plans")
+    config = configs[0]
+    distinct = list({id(c): c for c in configs}.values())
+    if len(distinct) > 1 and len({batch_key(c) for c in distinct}) > 1:
+        raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
     if not shares_sumo(config):
-        return _one_at_a_time(config, plans, road if road is not None and road.copies == 1 else None, on_episode)
+        alone = road if road is not None and road.copies == 1 else None
+        if len(distinct) == 1:
+            return _one_at_a_time(config, plans, alone, on_episode)
+        results = []
+        for i, (c, plan) in enumerate(zip(configs, plans)):  # each with its own configuration, in turn
+            results += _one_at_a_time(c, [plan], alone, on_episode and (lambda _, r, i=i: on_episode(i, r)))
+        return results
     if road is None or road.copies < len(plans):
         road = batch_road(config.network, len(plans))
     types_file = check_episode(config, road)
-    batch = PlatoonBatch(config, np.array([p.u for p in plans]), attacker_max_speed_mps=road.speed_limit_mps)
+    for c in distinct[1:]:
+        check_episode(c, road)
+    batch = PlatoonBatch(configs, np.array([p.u for p in plans]), attacker_max_speed_mps=road.speed_limit_mps)
     import libsumo as api
 
     try:
@@ -400,7 +421,7 @@ def simulate_batch(config: EpisodeConfig, plans: Sequence[AttackPlan], *, road: 
     except Exception as exc:  # libsumo raises its own types
         raise SumoError(f"SUMO did not start: {exc}") from None
     try:
-        platoons = load_platoon(api, config, road, len(plans))
+        platoons = load_platoon(api, config, road, len(plans), configs)
         return _run_batch(api, config, batch, road, platoons, [p.lane_change_step for p in plans], on_episode)
     except api.TraCIException as exc:
         raise SumoError(f"SUMO failed during the episode: {exc}") from None

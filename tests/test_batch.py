@@ -78,3 +78,38 @@ def test_a_user_controller_without_an_array_form_runs_per_episode_and_fails_alon
         assert_same_episode(result, alone)
         kinds.add("episode")
     assert kinds == {"error", "episode"}
+
+
+MIXED = {  # several campaigns' configurations in one batch: setpoints, target speeds, rest and steady
+    "switching": [EpisodeConfig(setpoint_m=s, speed_mps=v, start=start)
+                  for s, v, start in ((3.0, 20.0, "rest"), (7.0, 25.0, "steady"), (12.0, 30.0, "rest"), (9.0, 20.0, "steady"))],
+    "timegap": [EpisodeConfig(setpoint_m=s, speed_mps=v, start="steady",
+                              controller=ControllerConfig("timegap", params=(("time_gap_s", 0.6),)))
+                for s, v in ((4.0, 20.0), (8.0, 30.0))],
+}
+
+
+@pytest.mark.parametrize("name", MIXED)
+@pytest.mark.parametrize("detach_at_step", [None, 300])
+def test_episodes_of_several_configurations_in_one_batch_are_each_the_episode_alone(name, detach_at_step):
+    """A sweep's campaigns share one batch: each row keeps its own setpoint, target speed and start."""
+    configs = MIXED[name] * 3
+    signals = np.array([random_plans(c, 1, seed=i)[0].u for i, c in enumerate(configs)])
+    batched = integrate_batch(configs, signals, 40.0, detach_at_step=detach_at_step)
+    for config, u, episode in zip(configs, signals, batched):
+        assert_same_episode(episode, integrate(config, u, 40.0))
+    assert len({(e.outcome, len(e.trace)) for e in batched}) >= 2
+
+
+def test_a_batch_refuses_configurations_that_differ_in_more_than_setpoint_speed_and_start():
+    from d4sumo.batch import batch_key
+
+    configs = [EpisodeConfig(), EpisodeConfig(followers=4)]
+    signals = np.zeros((2, configs[0].steps))
+    with pytest.raises(ValueError, match="differ in more than"):
+        integrate_batch(configs, signals)
+    assert batch_key(EpisodeConfig(setpoint_m=3, speed_mps=20, start="steady")) == batch_key(EpisodeConfig())
+    assert batch_key(EpisodeConfig(start="warmup")) != batch_key(EpisodeConfig())
+    sumo = ControllerConfig("sumo:ACC")
+    assert batch_key(EpisodeConfig(controller=sumo, speed_mps=20)) != batch_key(EpisodeConfig(controller=sumo))
+    assert batch_key(EpisodeConfig(controller=sumo, setpoint_m=3)) == batch_key(EpisodeConfig(controller=sumo))

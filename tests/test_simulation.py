@@ -411,3 +411,23 @@ def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, nam
     models = {c.sumo_model for c in config.controllers if c.sumo_model}
     assert shared == (models <= SHARE_SUMO and name != "krauss-sigma")
 
+
+
+@pytest.mark.parametrize("controller", ["switching", "sumo:ACC"])
+def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alone(road, controller):
+    """Issue 13: a sweep's campaigns of other setpoints, target speeds and starts share one SUMO
+    (SUMO's models keep one target speed: it is their vehicle type's)."""
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.simulation import simulate_batch
+
+    c = ControllerConfig(controller)
+    speeds = (20.0, 25.0, 30.0) if controller == "switching" else (25.0,)
+    configs = [EpisodeConfig(setpoint_m=s, speed_mps=speeds[i % len(speeds)], start=("rest", "steady")[i % 2], controller=c)
+               for i, s in enumerate((3.0, 7.0, 12.0, 5.0, 9.0, 4.0, 15.0, 6.0))]
+    plans = [random_plans(config, 1, seed=i)[0] for i, config in enumerate(configs)]
+    heard = {}
+    batched = simulate_batch(configs, plans, on_episode=lambda i, r: heard.setdefault(i, r))
+    assert heard.keys() == set(range(len(plans)))
+    for config, plan, result in zip(configs, plans, batched):
+        assert_same_episode(result, simulate(config, plan, road=road))
+    assert len({tuple(e.min_gaps_m().values()) for e in batched}) == len(plans)  # not one episode eight times
