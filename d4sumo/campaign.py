@@ -21,7 +21,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .attacks import AttackFamily, make_attack
-from .batch import DEFAULT_BATCH
+from .batch import DEFAULT_BATCH, batch_key
 from .config import EpisodeConfig
 from .errors import ConfigError, SumoError, check_int, check_number
 from .maneuvers import AttackPlan, attack_plan, maneuver_of
@@ -190,60 +190,13 @@ class Evaluator:
         """Samples ``first``, ``first`` + 1, .. played side by side in one SUMO: each result is the one
         `__call__` gives alone. ``on_result`` hears of each as its episode ends (in any order). A
         sample's wall time is its share of the batch's time until its episode ended, plus its scoring."""
-        if len(params) > 1 and self._shares_sumo:
-            return self._batch(first, params, on_result)
-        results = []
-        for i, x in enumerate(params):  # alone, one after the other: the single-episode engine
-            results.append(self(first + i, x))
-            if on_result:
-                on_result(results[-1])
-        return results
+        return play_together([(self, first, params)], on_result and (lambda _, r: on_result(r)))[0]
 
-    def _batch(self, first: int, params: Sequence[np.ndarray], on_result) -> list[SampleResult]:
-        t0 = time.perf_counter()
-        xs = [tuple(float(v) for v in p) for p in params]
-        results: list[SampleResult | None] = [None] * len(xs)
-
-        def finish(i: int, r: SampleResult) -> None:
-            results[i] = r
-            if on_result:
-                try:
-                    on_result(r)
-                except BaseException as exc:  # the caller's own failure (storing, say): not the episode's
-                    raise _CallerError(exc) from exc
-
-        def done(j: int, episode) -> None:
-            i = playing[j]
-            t = time.perf_counter()
-            if isinstance(episode, Exception):  # a user's controller failed in it
-                r = self._failed(first + i, xs[i], episode, 0.0)
-            else:
-                r = self._scored(first + i, xs[i], episode, t)
-            finish(i, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(xs)))  # plus its share so far
-
-        plans, playing = [], []
-        try:
-            for i, x in enumerate(xs):
-                try:
-                    plans.append(self.plan(x))
-                    playing.append(i)
-                except Exception as exc:
-                    finish(i, self._failed(first + i, x, exc, 0.0))
-            if not plans:
-                return results  # type: ignore[return-value]
-            try:
-                if self._batch_road is None or self._batch_road.copies < len(plans):
-                    self._batch_road = batch_road(self.network, len(plans))
-                simulate_batch(self.campaign.config, plans, road=self._batch_road, on_episode=done)
-            except _CallerError:
-                raise
-            except Exception as exc:  # SUMO failed: every sample not yet finished is errored
-                for i in playing:
-                    if results[i] is None:
-                        finish(i, self._failed(first + i, xs[i], exc, (time.perf_counter() - t0) / len(xs)))
-        except _CallerError as exc:  # the caller's own exception, as it raised it
-            raise exc.__cause__ from None
-        return results  # type: ignore[return-value]
+    def batch_road(self, episodes: int) -> Road:
+        """The road with at least this many copies side by side (built once, then grown as needed)."""
+        if self._batch_road is None or self._batch_road.copies < episodes:
+            self._batch_road = batch_road(self.network, episodes)
+        return self._batch_road
 
     def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:
         try:
@@ -264,6 +217,78 @@ class Evaluator:
 
 class _CallerError(Exception):
     """Carries an exception raised by the caller's ``on_result`` out of a batch, untouched."""
+
+
+#: consecutive samples of one campaign to play: its evaluator, the first sample's index, their points
+Job = tuple[Evaluator, int, Sequence[np.ndarray]]
+
+
+def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], None] | None = None) -> list[list[SampleResult]]:
+    """Play the jobs' samples side by side in one SUMO, whichever campaigns they belong to (their
+    configurations share one `batch.batch_key`): each result is the one `Evaluator.__call__` gives
+    alone, each job's in order. ``on_result(job, result)`` hears of each sample as its episode ends
+    (in any order; ``job``: its job's position in ``jobs``).
+    A single episode, or followers that may not share SUMO, play one at a time instead."""
+    if sum(len(params) for _, _, params in jobs) <= 1 or not all(ev._shares_sumo for ev, _, _ in jobs):
+        out = []
+        for j, (ev, first, params) in enumerate(jobs):  # alone, one after the other: the single-episode engine
+            results = []
+            for i, x in enumerate(params):
+                results.append(ev(first + i, x))
+                if on_result:
+                    on_result(j, results[-1])
+            out.append(results)
+        return out
+    t0 = time.perf_counter()
+    samples = [(ev, first + i, tuple(float(v) for v in x)) for ev, first, params in jobs for i, x in enumerate(params)]
+    job_of = [j for j, (_, _, params) in enumerate(jobs) for _ in params]
+    results: list[SampleResult | None] = [None] * len(samples)
+
+    def finish(s: int, r: SampleResult) -> None:
+        results[s] = r
+        if on_result:
+            try:
+                on_result(job_of[s], r)
+            except BaseException as exc:  # the caller's own failure (storing, say): not the episode's
+                raise _CallerError(exc) from exc
+
+    def done(j: int, episode) -> None:
+        s = playing[j]
+        ev, index, x = samples[s]
+        t = time.perf_counter()
+        if isinstance(episode, Exception):  # a user's controller failed in it
+            r = ev._failed(index, x, episode, 0.0)
+        else:
+            r = ev._scored(index, x, episode, t)
+        finish(s, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(samples)))  # plus its share so far
+
+    plans, configs, playing = [], [], []
+    try:
+        for s, (ev, index, x) in enumerate(samples):
+            try:
+                plans.append(ev.plan(x))
+                configs.append(ev.campaign.config)
+                playing.append(s)
+            except Exception as exc:
+                finish(s, ev._failed(index, x, exc, 0.0))
+        if plans:
+            try:
+                road = jobs[0][0].batch_road(len(plans))
+                simulate_batch(configs, plans, road=road, on_episode=done)
+            except _CallerError:
+                raise
+            except Exception as exc:  # SUMO failed: every sample not yet finished is errored
+                for s in playing:
+                    if results[s] is None:
+                        ev, index, x = samples[s]
+                        finish(s, ev._failed(index, x, exc, (time.perf_counter() - t0) / len(samples)))
+    except _CallerError as exc:  # the caller's own exception, as it raised it
+        raise exc.__cause__ from None
+    out, s = [], 0
+    for _, _, params in jobs:
+        out.append(results[s:s + len(params)])  # type: ignore[arg-type]
+        s += len(params)
+    return out
 
 
 def _score(result: SampleResult, history: list[float]) -> float:
@@ -346,9 +371,9 @@ class CampaignRunner:
         self.optimizer.tell(x, score)
         self.scores.append(score)
 
-    def step(self, on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
-        """Play the next batch of asked points (samples stored already are not played again), tell the
-        optimiser; the new samples' results in order. ``on_result`` hears of each as it finishes."""
+    def pending(self) -> list[tuple[int, list[np.ndarray]]]:
+        """The next batch of asked points that still has to be played: runs of consecutive samples
+        (first index, points); samples stored already are not played again."""
         if self.done >= self.campaign.samples:
             raise ValueError(f"the campaign's budget of {self.campaign.samples} samples is spent")
         self._fill()
@@ -357,10 +382,12 @@ class CampaignRunner:
             if first + i in self.stored:
                 self._check(x, self.stored[first + i])
         missing = [i for i in range(len(xs)) if first + i not in self.stored]
-        played: dict[int, SampleResult] = {}
-        for run in _runs(missing):  # consecutive missing samples play as one batch
-            for r in self.evaluate.batch(first + run[0], [xs[i] for i in run], on_result):
-                played[r.index] = r
+        return [(first + run[0], [xs[i] for i in run]) for run in _runs(missing)]
+
+    def accept(self, played: dict[int, SampleResult]) -> list[SampleResult]:
+        """Tell the optimiser the batch `pending` gave, now played (index -> result); the new samples'
+        results in order."""
+        first, xs = self.done, self.queue[:self.batch]
         results = []
         for i, x in enumerate(xs):
             r = self.stored.pop(first + i, None) or played[first + i]
@@ -370,6 +397,44 @@ class CampaignRunner:
         del self.queue[:len(xs)]
         self._replay()
         return results
+
+    def step(self, on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
+        """Play the next batch of asked points (samples stored already are not played again), tell the
+        optimiser; the new samples' results in order. ``on_result`` hears of each as it finishes."""
+        played: dict[int, SampleResult] = {}
+        for first, xs in self.pending():  # consecutive missing samples play as one batch
+            for r in self.evaluate.batch(first, xs, on_result):
+                played[r.index] = r
+        return self.accept(played)
+
+
+def step_together(runners: Sequence[CampaignRunner], batch: int = DEFAULT_BATCH,
+                  on_result: Callable[[CampaignRunner, SampleResult], None] | None = None) -> list[list[SampleResult]]:
+    """One step of several campaigns at once: each runner's next batch, played side by side in as few
+    SUMO instances as hold them (at most ``batch`` episodes each); campaigns whose configurations do
+    not share a `batch.batch_key` play apart. The same samples as stepping each runner alone.
+    ``on_result(runner, result)`` hears of each sample as its episode ends."""
+    cap = max(1, min(int(batch), MAX_COPIES))
+    groups: dict[tuple, list[tuple[CampaignRunner, int, list[np.ndarray]]]] = {}
+    for runner in runners:
+        for first, xs in runner.pending():
+            key = (batch_key(runner.campaign.config), runner.evaluate.network)
+            groups.setdefault(key, []).append((runner, first, xs))
+    played: dict[int, dict[int, SampleResult]] = {id(r): {} for r in runners}
+    for members in groups.values():
+        loads: list[list[tuple[CampaignRunner, int, list[np.ndarray]]]] = [[]]
+        for runner, first, xs in members:  # fill one SUMO after the other, each with at most `cap` episodes
+            for at in range(0, len(xs), cap):
+                part = xs[at:at + cap]
+                if sum(len(p) for _, _, p in loads[-1]) + len(part) > cap:
+                    loads.append([])
+                loads[-1].append((runner, first + at, part))
+        for load in loads:
+            heard = (lambda j, r, load=load: on_result(load[j][0], r)) if on_result else None
+            jobs = [(r.evaluate, first, xs) for r, first, xs in load]
+            for (runner, _, _), results in zip(load, play_together(jobs, heard)):
+                played[id(runner)].update((r.index, r) for r in results)
+    return [runner.accept(played[id(runner)]) for runner in runners]
 
 
 def _runs(indices: list[int]) -> list[list[int]]:

@@ -42,7 +42,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
 
-from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, stored_results
+from .batch import batch_key
+from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, step_together, stored_results
 from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
@@ -200,14 +201,18 @@ def stored_counts(store: Store, sweep_name: str) -> tuple[int, int]:
     return int(row[0]), int(row[1])
 
 
-CHUNK_SAMPLES = 10  # a task returns once it has this many samples (a batch is played whole) ...
-CHUNK_WALL_S = 2.0  # ... and a task returns after this long, so results reach the client often
+CHUNK_SAMPLES = 10  # a task returns once each of its campaigns has this many samples (a batch is played whole) ...
+CHUNK_WALL_S = 2.0  # ... or after this long, so results reach the client often
 MAX_TASK_FAILURES = 3  # a chunk that fails this often (a bug, not a lost worker) stops the sweep
+#: a task steps up to this many campaigns together, their episodes side by side in one SUMO: a
+#: campaign that proposes one point per score (the paper's BO) then still plays in batches
+GANG_SIZE = 16
 
 
 @dataclass(frozen=True)
 class Chunk:
-    """A task: continue ``campaign`` from ``state`` (None: from the ``stored`` samples) for a chunk."""
+    """A task's share of one campaign: continue ``campaign`` from ``state`` (None: from the ``stored``
+    samples) for a chunk."""
 
     campaign: Campaign
     network: NetworkSource
@@ -219,28 +224,44 @@ class Chunk:
 _EVALUATORS: dict[str, Evaluator] = {}  # per worker process: roads built and formulas parsed once
 
 
-def run_chunk(chunk: Chunk) -> tuple[list[SampleResult], tuple]:
-    """Worker task: the next samples of a campaign (at least one), and the optimiser's state after them."""
-    from threadpoolctl import threadpool_limits
-
+def _evaluator(chunk: Chunk) -> Evaluator:
     key = campaign_key(chunk.campaign.definition())
     evaluator = _EVALUATORS.get(key)
     if evaluator is None:
-        if len(_EVALUATORS) >= 16:
+        if len(_EVALUATORS) >= 8 * GANG_SIZE:
             _EVALUATORS.clear()
         evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network), network=chunk.network)
+    return evaluator
+
+
+def run_chunk(chunk: Chunk) -> tuple[list[SampleResult], tuple]:
+    """Worker task: the next samples of a campaign (at least one), and the optimiser's state after them."""
+    return run_chunks((chunk,))[0]
+
+
+def run_chunks(chunks: tuple[Chunk, ...]) -> list[tuple[list[SampleResult], tuple]]:
+    """Worker task: the next samples of several campaigns (at least one each), stepped together so
+    that their episodes share SUMO instances (`campaign.step_together`), and each optimiser's state
+    after them. Each campaign's samples are the ones it gives run alone."""
+    from threadpoolctl import threadpool_limits
+
     # One BLAS thread per task: the GP's matrices are small, and a BLAS pool per worker process
     # oversubscribes the cores (two workers on two cores ran no faster than one).
     with threadpool_limits(limits=1):
-        runner = CampaignRunner(chunk.campaign, evaluator, stored=chunk.stored, state=chunk.state,
-                                where=f"campaign {key}", batch=chunk.batch)
-        results: list[SampleResult] = []
+        runners = [CampaignRunner(c.campaign, _evaluator(c), stored=c.stored, state=c.state,
+                                  where=f"campaign {campaign_key(c.campaign.definition())}", batch=c.batch)
+                   for c in chunks]
+        results: list[list[SampleResult]] = [[] for _ in chunks]
         t0 = time.monotonic()
-        while runner.done < chunk.campaign.samples and len(results) < CHUNK_SAMPLES:
-            results.extend(runner.step())
+        while True:
+            going = [i for i, r in enumerate(runners) if r.done < r.campaign.samples and len(results[i]) < CHUNK_SAMPLES]
+            if not going:
+                break
+            for i, new in zip(going, step_together([runners[i] for i in going], batch=chunks[0].batch)):
+                results[i].extend(new)
             if time.monotonic() - t0 > CHUNK_WALL_S:
                 break
-    return results, runner.state
+    return [(r, runner.state) for r, runner in zip(results, runners)]
 
 
 @dataclass
@@ -343,40 +364,66 @@ def _accept(active: _Active, chunk_result: tuple[list[SampleResult], tuple], sto
     return active.done >= active.campaign.samples
 
 
+def _gangs(todo: list[_Active], workers: int) -> list[list[_Active]]:
+    """The campaigns in tasks of up to GANG_SIZE that step together: ones whose episodes may share
+    SUMO (one `batch.batch_key` and road) and that propose alike (one optimiser and batch size), so
+    that they keep pace. Smaller tasks where there are few campaigns, to keep every worker busy."""
+    size = max(1, min(GANG_SIZE, -(-len(todo) // (2 * workers))))
+    groups: dict[tuple, list[_Active]] = {}
+    for a in todo:
+        c = a.campaign
+        key = (batch_key(c.config), a.network, c.optimizer, dict(c.optimizer_options).get("batch_size"))
+        groups.setdefault(key, []).append(a)
+    return [g[i:i + size] for g in groups.values() for i in range(0, len(g), size)]
+
+
+def _task(gang: list[_Active]) -> tuple[Chunk, ...]:
+    return tuple(a.chunk() for a in gang)
+
+
+def _accept_gang(gang: list[_Active], chunk_results: list, store_results) -> list[_Active]:
+    """Store a finished task's chunks; the gang's campaigns not complete yet."""
+    if len(chunk_results) != len(gang):
+        raise D4sumoError(f"a worker returned {len(chunk_results)} chunks for {len(gang)} campaigns; nothing of them was stored")
+    return [a for a, result in zip(gang, chunk_results) if not _accept(a, result, store_results)]
+
+
 def _run_inline(todo: list[_Active], store_results) -> None:
-    for active in todo:
-        while active.done < active.campaign.samples:
-            _accept(active, run_chunk(active.chunk()), store_results)
+    for gang in _gangs(todo, 1):
+        while gang:
+            gang = _accept_gang(gang, run_chunks(_task(gang)), store_results)
 
 
 def _run_local(todo: list[_Active], store_results, workers: int) -> None:
     """Chunks on local worker processes (spawned clean: libsumo keeps one simulation per process).
-    Campaigns run a few at a time, so an interrupted sweep leaves few of them half done."""
-    queue = list(todo)
-    running: dict[Future, _Active] = {}
+    Campaigns run a few tasks at a time, so an interrupted sweep leaves few of them half done."""
+    queue = _gangs(todo, workers)
+    running: dict[Future, list[_Active]] = {}
     pool = _new_pool(workers)
     try:
         while queue or running:
             while queue and len(running) < workers + 1:
-                active = queue.pop(0)
-                running[pool.submit(run_chunk, active.chunk())] = active
+                gang = queue.pop(0)
+                running[pool.submit(run_chunks, _task(gang))] = gang
             finished, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
             for future in finished:
-                active = running.pop(future)
+                gang = running.pop(future)
                 try:
-                    chunk_result = future.result()
+                    chunk_results = future.result()
                 except BrokenProcessPool:
                     # a worker died (killed, out of memory): its chunk and the others in flight run again
-                    _check_failures(active, "its worker process died")
+                    for active in gang:
+                        _check_failures(active, "its worker process died")
                     for other in running.values():
                         queue.insert(0, other)
-                    queue.insert(0, active)
+                    queue.insert(0, gang)
                     running.clear()
                     _kill_pool(pool)
                     pool = _new_pool(workers)
                     break
-                if not _accept(active, chunk_result, store_results):
-                    running[pool.submit(run_chunk, active.chunk())] = active
+                gang = _accept_gang(gang, chunk_results, store_results)
+                if gang:
+                    running[pool.submit(run_chunks, _task(gang))] = gang
     finally:
         _kill_pool(pool)
 
@@ -469,33 +516,35 @@ def _dask_client(address: str, timeout_s: float, workers: int):
 def _run_dask(todo: list[_Active], store_results, client) -> None:
     from distributed import as_completed
 
-    queue = list(todo)
+    queue = _gangs(todo, max(1, sum(client.nthreads().values())))
     running: dict = {}
     futures = as_completed()
 
     def slots() -> int:
         return max(1, sum(client.nthreads().values())) + 1
 
-    def submit(active: _Active) -> None:
+    def submit(gang: list[_Active]) -> None:
         # pure=False: the same chunk sent again after a failure is run again, not looked up
-        future = client.submit(run_chunk, active.chunk(), pure=False)
-        running[future] = active
+        future = client.submit(run_chunks, _task(gang), pure=False)
+        running[future] = gang
         futures.add(future)
 
     while queue and len(running) < slots():
         submit(queue.pop(0))
     for future in futures:
-        active = running.pop(future)
+        gang = running.pop(future)
         if future.status == "error":
             exc = future.exception()
             if isinstance(exc, D4sumoError):
                 raise exc
-            _check_failures(active, f"{type(exc).__name__}: {exc}")
-            submit(active)
+            for active in gang:
+                _check_failures(active, f"{type(exc).__name__}: {exc}")
+            submit(gang)
             continue
         result = future.result()
         future.release()
-        if not _accept(active, result, store_results):
-            submit(active)
+        gang = _accept_gang(gang, result, store_results)
+        if gang:
+            submit(gang)
         while queue and len(running) < slots():
             submit(queue.pop(0))

@@ -334,3 +334,29 @@ def test_a_campaign_whose_sumo_model_draws_random_numbers_is_the_same_batched_or
     campaign = Campaign(config=EpisodeConfig(controller=ControllerConfig("sumo:EIDM"), setpoint_m=4.0), optimizer="random",
                         samples=6, seed=1)
     assert full_signature(run_campaign(campaign, batch=6)) == full_signature(run_campaign(campaign, batch=1))
+
+
+def test_campaigns_stepped_together_store_the_samples_each_gives_alone():
+    """Issue 13: a sweep steps several campaigns at once, their episodes side by side in one SUMO
+    (other setpoints, speeds, starts, attacks and optimisers; the paper's one-point BO among them)."""
+    from d4sumo.campaign import CampaignRunner, Evaluator, step_together
+    from d4sumo.config import EpisodeConfig
+
+    campaigns = [
+        Campaign(config=EpisodeConfig(setpoint_m=4.0, speed_mps=20.0), optimizer="bo", optimizer_options={"batch_size": 1, "initial_points": 4}, samples=9, seed=1),
+        Campaign(config=EpisodeConfig(setpoint_m=9.0, speed_mps=30.0, start="steady"), optimizer="bo", optimizer_options={"batch_size": 1, "initial_points": 4}, samples=9, seed=2),
+        Campaign(config=EpisodeConfig(setpoint_m=6.0, start="steady"), attack="persistent", optimizer="ce", optimizer_options={"batch_size": 4}, samples=9),
+        Campaign(config=EpisodeConfig(followers=4), optimizer="random", samples=9),  # another key: its own SUMO
+    ]
+    alone = [full_signature(run_campaign(c, batch=1)) for c in campaigns]
+    for batch in (3, 64):
+        runners = [CampaignRunner(c, Evaluator(c), batch=batch) for c in campaigns]
+        heard = {id(r): [] for r in runners}
+        together = {id(r): [] for r in runners}
+        while any(r.done < r.campaign.samples for r in runners):
+            going = [r for r in runners if r.done < r.campaign.samples]
+            for r, results in zip(going, step_together(going, batch, lambda r, s: heard[id(r)].append(s.index))):
+                together[id(r)] += results
+        for r, expected in zip(runners, alone):
+            assert full_signature(campaign_module.CampaignSummary(None, together[id(r)])) == expected
+            assert sorted(heard[id(r)]) == list(range(9))

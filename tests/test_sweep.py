@@ -233,11 +233,11 @@ def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
 
     seen = []
 
-    def fake_step(self):
+    def fake_pending(self):
         seen.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
         raise StopIteration
 
-    monkeypatch.setattr(sweep_module.CampaignRunner, "step", fake_step)
+    monkeypatch.setattr(sweep_module.CampaignRunner, "pending", fake_pending)
     campaign = Sweep.load(write(tmp_path, TINY)).campaigns[0]
     with pytest.raises(StopIteration):
         sweep_module.run_chunk(sweep_module.Chunk(campaign, network_source("highway_4lane"), (), None))
