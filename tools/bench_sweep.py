@@ -1,11 +1,15 @@
 """Sweep throughput against worker count and batch size, measured in one run: the same sweeps into
 fresh databases.
 
-Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
+Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32] [--baseline]
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 64
+       python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --baseline   # against d4sumo 0.2's engine
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
 Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
-checks that every run stored the same samples (the result depends on neither).
+checks that every run stored the same samples (the result depends on neither). ``--baseline`` first
+runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO on scikit-optimize's GP: `--batch 1
+--set search.bo.gp_version=1`) with the largest worker count, and prints the speed-up of every run
+over it (its samples differ where BO's GP does, so it is left out of the check).
 """
 
 from __future__ import annotations
@@ -44,26 +48,40 @@ def main() -> None:
     parser.add_argument("--batch", type=int, nargs="+", default=[DEFAULT_BATCH])
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="change a fixed value of every sweep (TOML value), e.g. search.bo.batch_size=5")
+    parser.add_argument("--baseline", action="store_true", help="first run the sweeps as d4sumo 0.2 did, and compare")
     args = parser.parse_args()
     overrides = {k: tomllib.loads(f"v = {v}")["v"] for k, v in (item.split("=", 1) for item in args.set)}
     sweeps = [load(path, overrides) for path in args.sweeps]
     print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))
     times, results = {}, {}
     runs = [(n, b) for n in args.workers for b in args.batch]
+    before = (max(args.workers), "0.2")  # one episode per SUMO, scikit-optimize's GP
+
+    def timed(run, sweeps, tmp):
+        n, b = run
+        t0 = time.perf_counter()
+        samples = successes = 0
+        signatures = []
+        for i, sweep in enumerate(sweeps):
+            db = Path(tmp) / f"w{n}-b{b}-{i}.sqlite"
+            result = run_sweep(sweep, db, workers=n, batch=1 if b == "0.2" else b)
+            samples += result.samples
+            successes += result.successes
+            signatures.append(signature(db))
+        times[run] = time.perf_counter() - t0
+        label = "as d4sumo 0.2 (batch 1, scikit-optimize's GP)" if b == "0.2" else f"batch {b:>2}"
+        print(f"  {n} worker(s), {label}: {times[run]:6.1f} s  ({samples / times[run]:.0f} samples/s, {successes} successes)",
+              flush=True)
+        return signatures
+
     with tempfile.TemporaryDirectory() as tmp:
-        for n, b in runs:
-            t0 = time.perf_counter()
-            samples = successes = 0
-            signatures = []
-            for i, sweep in enumerate(sweeps):
-                db = Path(tmp) / f"w{n}-b{b}-{i}.sqlite"
-                result = run_sweep(sweep, db, workers=n, batch=b)
-                samples += result.samples
-                successes += result.successes
-                signatures.append(signature(db))
-            times[n, b] = time.perf_counter() - t0
-            results[n, b] = signatures
-            print(f"  {n} worker(s), batch {b:>2}: {times[n, b]:6.1f} s  ({samples / times[n, b]:.0f} samples/s, {successes} successes)")
+        if args.baseline:
+            timed(before, [load(path, {**overrides, "search.bo.gp_version": 1}) for path in args.sweeps], tmp)
+        for run in runs:
+            results[run] = timed(run, sweeps, tmp)
+    if args.baseline:
+        for run in runs:
+            print(f"  speed-up of {run[0]} worker(s), batch {run[1]} over d4sumo 0.2's engine: {times[before] / times[run]:.2f}x")
     base = runs[0]
     for run in runs[1:]:
         print(f"  speed-up of {run[0]} worker(s), batch {run[1]} over {base[0]} worker(s), batch {base[1]}: {times[base] / times[run]:.2f}x")
