@@ -174,11 +174,16 @@ def claim(store: Store, sweep: Sweep) -> None:
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
             hint = "Use another --db, or the sweep file that wrote it"
-            for optimizer, earlier in ((o, e) for o, es in EARLIER_OPTIONS.items() for e in es):
-                if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.as_run_before(optimizer, earlier).fingerprint():
-                    table = ", ".join(f"`{k} = {v}`" for k, v in earlier.items())
-                    hint = (f"It was run by an earlier d4sumo: set {table} in the sweep file's [search.{optimizer}] "
-                            "table to go on with it, or use another --db")
+            names = list(EARLIER_OPTIONS)
+            # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
+            for choice in itertools.product(*[(None, *EARLIER_OPTIONS[o]) for o in names]):
+                changed = [(o, e) for o, e in zip(names, choice) if e is not None]
+                before = sweep
+                for optimizer, earlier in changed:
+                    before = before.as_run_before(optimizer, earlier)
+                if changed and theirs["name"] == sweep.name and theirs["fingerprint"] == before.fingerprint():
+                    tables = "; ".join(", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed)
+                    hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
                     break
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "

@@ -121,7 +121,7 @@ def test_optimizer_options_are_checked_and_defaults_filled():
     from d4sumo.optimizers import resolve_options
 
     assert resolve_options("ce", {"batch_size": np.int64(20)}) == {"batch_size": 20, "elite_fraction": 0.2, "smoothing": 0.7,
-                                                                   "min_std_fraction": 0.02}
+                                                                   "min_std_fraction": 0.02, "noise_fraction": 0.1}
     with pytest.raises(ConfigError, match="search.ce.batchsize"):
         resolve_options("ce", {"batchsize": 20})
     with pytest.raises(ConfigError, match="search.bo.xi"):
@@ -142,6 +142,36 @@ def test_cross_entropy_keeps_its_distribution_on_a_plateau():
     for _ in range(100):
         ce.tell(ce.ask(), -3.0)  # every no-crash episode of a one-sided spec scores alike
     assert np.array_equal(ce.mean, start_mean) and np.array_equal(ce.std, start_std)
+
+
+def test_cross_entropy_does_not_collapse_on_a_plateau_of_nearly_equal_scores():
+    """Issue 13: in 40 dimensions ce's elite of two points per batch, picked by scores that differ only
+    by noise, shrank its spread to the floor within 300 samples (below random search's rate of
+    falsification on tools/bench_arch.py); the noise it adds at each refit keeps it searching."""
+    lower, upper = np.zeros(40), np.ones(40)
+
+    def spread(options):
+        ce = CrossEntropy(lower, upper, 300, np.random.default_rng(0), **options)
+        noise = np.random.default_rng(1)
+        for _ in range(300):
+            ce.tell(ce.ask(), -1.0 + 1e-9 * noise.standard_normal())
+        return ce.std
+
+    assert np.all(spread({"noise_fraction": 0.0}) <= 0.05)  # as d4sumo 0.4 ran it: collapsed to 2-5% of the range
+    assert np.all(spread({}) >= 0.1)  # never narrower than the noise it adds
+
+
+def test_a_ce_campaign_an_earlier_version_stored_keeps_its_identity_and_replays_without_noise():
+    from d4sumo.campaign import Campaign
+    from d4sumo.store import campaign_key
+
+    new = Campaign(optimizer="ce")
+    assert new.definition()["optimizer_options"]["noise_fraction"] == 0.1
+    old = new.definition()
+    del old["optimizer_options"]["noise_fraction"]  # d4sumo 0.4 and before had no such option
+    stored = Campaign.from_definition(old)
+    assert dict(stored.optimizer_options)["noise_fraction"] == 0.0
+    assert campaign_key(stored.definition()) == campaign_key(old)
 
 
 def test_cross_entropy_counts_every_tie_at_the_elite_threshold():

@@ -426,17 +426,22 @@ def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
         assert outcomes(tmp_path / f"b{batch}.sqlite") == outcomes(tmp_path / "whole.sqlite")
 
 
-@pytest.mark.parametrize("earlier", ["gp_version = 1", "gp_version = 1\nbatch_size = 1"])
+@pytest.mark.parametrize("earlier", [
+    {"ce": "noise_fraction = 0.0"},  # 0.4
+    {"bo": "gp_version = 1", "ce": "noise_fraction = 0.0"},  # 0.3
+    {"bo": "gp_version = 1\nbatch_size = 1", "ce": "noise_fraction = 0.0"},  # 0.2
+])
 def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):
-    """A sweep database d4sumo 0.2 or 0.3 wrote has another grid (bo's options then), and the refusal
-    says which options give it back."""
+    """A sweep database an earlier d4sumo wrote has another grid (bo's and ce's options then), and the
+    refusal says which options give it back."""
     text = TINY.replace('optimizer = ["random"]', 'optimizer = ["bo", "ce"]')
-    before = Sweep.load(write(tmp_path, text + f"\n[search.bo]\n{earlier}\n", "before.toml"))
+    tables = "".join(f"\n[search.{o}]\n{lines}\n" for o, lines in earlier.items())
+    before = Sweep.load(write(tmp_path, text + tables, "before.toml"))
     now = Sweep.load(write(tmp_path, text, "now.toml"))
     assert before.fingerprint() != now.fingerprint()
-    table = ", ".join(f"`{line}`" for line in earlier.split("\n"))
+    said = "; ".join(", ".join(f"`{line}`" for line in lines.split("\n")) + f" in [search.{o}]" for o, lines in earlier.items())
     with Store(tmp_path / "r.sqlite") as store:
         store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
-        with pytest.raises(StoreError, match=f"set {re.escape(table)} in the sweep file's \\[search.bo\\] table"):
+        with pytest.raises(StoreError, match=f"set {re.escape(said)} of the sweep file"):
             claim(store, now)
         claim(store, before)  # the sweep file with it goes on

@@ -6,8 +6,9 @@
 - ``random``: uniform samples in the box.
 - ``halton``: a scrambled Halton sequence (low discrepancy), scaled to the box.
 - ``ce``: cross-entropy: sample a batch from independent truncated normals, keep the elite quantile
-  (ties included), refit mean and standard deviation with smoothing; a batch that is all one plateau
-  leaves the distribution as it was.
+  (ties included), refit mean and standard deviation with smoothing, widened by a little noise so that
+  a plateau of nearly equal scores does not collapse it; a batch that is all one plateau leaves the
+  distribution as it was. ``noise_fraction = 0`` is ce as d4sumo 0.4 and before ran it.
 - ``ce-bucket``: VerifAI's cross-entropy over buckets, the sampler the paper ran, for comparison.
 - ``cmaes``: CMA-ES (pycma) with restarts and a growing population (IPOP).
 - ``bo``: Bayesian optimisation: a Gaussian process (Matern 5/2 with a length scale per dimension,
@@ -59,12 +60,13 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: definition leaves such an option out at that value, and a stored definition without it gets it back,
 #: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
 #: ran scikit-optimize's GP)
-OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1}}
+OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1}, "ce": {"noise_fraction": 0.0}}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
 #: (bo in 0.3: scikit-optimize's GP; in 0.2 also one point per score)
-EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"gp_version": 1}, {"gp_version": 1, "batch_size": 1})}
+EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"gp_version": 1}, {"gp_version": 1, "batch_size": 1}),
+                                                            "ce": ({"noise_fraction": 0.0},)}
 
 
 def as_set_flags(name: str, options: dict) -> str:
