@@ -219,7 +219,7 @@ def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
                 known.update(a.option_strings)
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     in_readme = set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", readme))
-    not_d4sumo = {"--nthreads", "--port", "--runs"}  # the dask scheduler's and worker's; tools/paper_page.py's
+    not_d4sumo = {"--nthreads", "--port", "--runs", "--baseline"}  # the dask scheduler's and worker's; tools/paper_page.py's, bench_sweep.py's
     assert in_readme - known - not_d4sumo == set()
     main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",

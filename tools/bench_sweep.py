@@ -7,8 +7,8 @@ Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
 Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither). ``--baseline`` first
-runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO on scikit-optimize's GP: `--batch 1
---set search.bo.gp_version=1`) with the largest worker count, and prints the speed-up of every run
+runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO on scikit-optimize's GP, ce without noise:
+`--batch 1 --set search.bo.gp_version=1 --set search.ce.noise_fraction=0`) with the largest worker count, and prints the speed-up of every run
 over it (its samples differ where BO's GP does, so it is left out of the check).
 """
 
@@ -69,14 +69,15 @@ def main() -> None:
             successes += result.successes
             signatures.append(signature(db))
         times[run] = time.perf_counter() - t0
-        label = "as d4sumo 0.2 (batch 1, scikit-optimize's GP)" if b == "0.2" else f"batch {b:>2}"
+        label = "as d4sumo 0.2 (batch 1, scikit-optimize's GP, ce without noise)" if b == "0.2" else f"batch {b:>2}"
         print(f"  {n} worker(s), {label}: {times[run]:6.1f} s  ({samples / times[run]:.0f} samples/s, {successes} successes)",
               flush=True)
         return signatures
 
     with tempfile.TemporaryDirectory() as tmp:
         if args.baseline:
-            timed(before, [load(path, {**overrides, "search.bo.gp_version": 1}) for path in args.sweeps], tmp)
+            as_before = {**overrides, "search.bo.gp_version": 1, "search.ce.noise_fraction": 0.0}
+            timed(before, [load(path, as_before) for path in args.sweeps], tmp)
         for run in runs:
             results[run] = timed(run, sweeps, tmp)
     if args.baseline:
