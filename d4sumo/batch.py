@@ -1,7 +1,8 @@
-"""Many episodes of one configuration advanced together, one numpy operation per law: pure code, no SUMO.
+"""Many episodes advanced together, one numpy operation per law: pure code, no SUMO.
 
 An optimiser that proposes several attacks at once (a cross-entropy generation, a CMA-ES population,
-a batch of random points) has them played side by side: `simulation.simulate_batch` moves the
+a batch of random points), or several campaigns of a sweep stepped together, have them played side
+by side (their configurations may differ in setpoint, target speed and start: `batch_key`): `simulation.simulate_batch` moves the
 platoons in one SUMO instance, each on its own copy of the road, and `PlatoonBatch.advance` commands
 every car of every episode in one step. The laws run over arrays (`control.ARRAY_KERNELS`), each
 element with exactly the arithmetic of the scalar controller, so an episode played in a batch is bit

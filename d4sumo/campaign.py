@@ -277,11 +277,12 @@ def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], 
                 simulate_batch(configs, plans, road=road, on_episode=done)
             except _CallerError:
                 raise
-            except Exception as exc:  # SUMO failed: every sample not yet finished is errored
+            except Exception as exc:  # SUMO failed: the samples not yet finished play alone, as they would have
+                log.warning("SUMO failed in a batch of %d episodes (%s); its unfinished ones play one at a time", len(plans), exc)
                 for s in playing:
                     if results[s] is None:
                         ev, index, x = samples[s]
-                        finish(s, ev._failed(index, x, exc, (time.perf_counter() - t0) / len(samples)))
+                        finish(s, ev(index, x))
     except _CallerError as exc:  # the caller's own exception, as it raised it
         raise exc.__cause__ from None
     out, s = [], 0

@@ -156,11 +156,12 @@ class Sweep:
 # --- running ---------------------------------------------------------------------------------
 #
 # The client (the process that runs `d4sumo sweep`) is the only process that opens the database.
-# Workers, local processes or Dask workers, run a campaign a chunk of samples at a time: a chunk
-# task carries the campaign, its road's XML and the optimiser's state, and returns the chunk's
-# samples and the new state. The client stores each chunk in one transaction and sends the next
-# chunk. A worker that dies loses only its unfinished chunk, which the client sends again; workers
-# need nothing but the installed package.
+# Workers, local processes or Dask workers, run campaigns a chunk of samples at a time, up to
+# GANG_SIZE campaigns in one task whose episodes share SUMO instances: a task carries, per campaign,
+# the campaign, its road's XML and the optimiser's state, and returns each one's chunk of samples and
+# new state. The client stores each chunk in one transaction and sends the next task. A worker that
+# dies loses only its unfinished task, which the client sends again (split in two, so that a campaign
+# that kills its worker every time is found alone); workers need nothing but the installed package.
 
 def claim(store: Store, sweep: Sweep) -> None:
     """Mark the database as this sweep's, refusing one written by anything else."""
@@ -237,11 +238,6 @@ def _evaluator(chunk: Chunk) -> Evaluator:
             _EVALUATORS.clear()
         evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network), network=chunk.network)
     return evaluator
-
-
-def run_chunk(chunk: Chunk) -> tuple[list[SampleResult], tuple]:
-    """Worker task: the next samples of a campaign (at least one), and the optimiser's state after them."""
-    return run_chunks((chunk,))[0]
 
 
 def run_chunks(chunks: tuple[Chunk, ...]) -> list[tuple[list[SampleResult], tuple]]:
@@ -413,37 +409,62 @@ def _run_inline(todo: list[_Active], store_results) -> None:
 
 def _run_local(todo: list[_Active], store_results, workers: int) -> None:
     """Chunks on local worker processes (spawned clean: libsumo keeps one simulation per process).
-    Campaigns run a few tasks at a time, so an interrupted sweep leaves few of them half done."""
+    Campaigns run a few tasks at a time, so an interrupted sweep leaves few of them half done.
+
+    A worker that dies breaks the whole pool, and every task in flight fails with it: which one killed
+    it is unknown. Those tasks are suspects and run again one at a time, alone in the pool, until each
+    has either finished (cleared) or died alone (`_after_failure`: a gang splits, a single campaign
+    counts a failure)."""
     queue = _gangs(todo, workers)
+    suspects: list[list[_Active]] = []
     running: dict[Future, list[_Active]] = {}
     pool = _new_pool(workers)
     try:
-        while queue or running:
-            while queue and len(running) < workers + 1:
-                gang = queue.pop(0)
-                running[pool.submit(run_chunks, _task(gang))] = gang
+        while queue or running or suspects:
+            if suspects:
+                if not running:
+                    running[pool.submit(run_chunks, _task(suspects[0]))] = suspects[0]
+            else:
+                while queue and len(running) < workers + 1:
+                    gang = queue.pop(0)
+                    running[pool.submit(run_chunks, _task(gang))] = gang
             finished, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
             for future in finished:
                 gang = running.pop(future)
+                alone = bool(suspects) and gang is suspects[0]  # it ran by itself
                 try:
                     chunk_results = future.result()
                 except BrokenProcessPool:
-                    # a worker died (killed, out of memory): its chunk and the others in flight run again
-                    for active in gang:
-                        _check_failures(active, "its worker process died")
-                    for other in running.values():
-                        queue.insert(0, other)
-                    queue.insert(0, gang)
+                    # a worker died (killed, out of memory): the tasks in flight run again
+                    if alone:
+                        suspects[:1] = _after_failure(gang, "its worker process died")
+                    else:
+                        suspects[:0] = [gang, *running.values()]
                     running.clear()
                     _kill_pool(pool)
                     pool = _new_pool(workers)
                     break
+                if alone:
+                    suspects.pop(0)
                 gang = _accept_gang(gang, chunk_results, store_results)
-                if gang:
+                if gang and alone:
+                    queue.insert(0, gang)
+                elif gang:
                     gang = _share(gang, queue, len(running) + 1, workers)
                     running[pool.submit(run_chunks, _task(gang))] = gang
     finally:
         _kill_pool(pool)
+
+
+def _after_failure(gang: list[_Active], why: str) -> list[list[_Active]]:
+    """A task that failed runs again: a gang of several campaigns as two halves (the samples do not
+    depend on the grouping, and a campaign that fails every time is found alone after a few
+    failures), a single campaign as it was, until it has failed MAX_TASK_FAILURES times."""
+    if len(gang) > 1:
+        log.warning("a task of %d campaigns failed (%s); it runs again as two", len(gang), why)
+        return [gang[:len(gang) // 2], gang[len(gang) // 2:]]
+    _check_failures(gang[0], why)
+    return [gang]
 
 
 def _check_failures(active: _Active, why: str) -> None:
@@ -555,9 +576,8 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
             exc = future.exception()
             if isinstance(exc, D4sumoError):
                 raise exc
-            for active in gang:
-                _check_failures(active, f"{type(exc).__name__}: {exc}")
-            submit(gang)
+            for part in _after_failure(gang, f"{type(exc).__name__}: {exc}"):
+                submit(part)
             continue
         result = future.result()
         future.release()

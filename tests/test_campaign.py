@@ -91,7 +91,9 @@ def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goe
     assert summary.count("error") == 1
 
 
-def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_are_errored(tmp_path, monkeypatch):
+def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_play_alone(tmp_path, monkeypatch):
+    """Regression: a SUMO failure errored every unfinished episode of the batch (in a sweep, of up to 32
+    campaigns), where alone only the failing one would be: the results depended on the grouping."""
     real = campaign_module.simulate_batch
     batches = []
 
@@ -113,8 +115,8 @@ def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_are
         rows = store.samples()
     assert batches == [4, 2]
     assert sorted(r.index for r in rows) == list(range(6))
-    assert [r.outcome == "error" for r in sorted(rows, key=lambda r: r.index)[:4]].count(True) == 2
-    assert summary.count("error") == 2 and all("test" in r.error for r in rows if r.outcome == "error")
+    assert summary.count("error") == 0
+    assert full_signature(summary) == full_signature(run_campaign(SMALL.replace(optimizer="random", samples=6), batch=1))
 
 
 def test_robustness_positive_exactly_for_successes_with_the_papers_psi():

@@ -228,15 +228,18 @@ def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("earlier", [{"gp_version": 1}, {"gp_version": 1, "batch_size": 1}])
-def test_falsify_says_how_to_go_on_with_a_bo_campaign_an_earlier_version_ran(tmp_path, capsys, earlier):
-    """d4sumo 0.2 ran bo one point per score with scikit-optimize's GP, 0.3 five at a time with it."""
+@pytest.mark.parametrize("optimizer, earlier", [("bo", {"gp_version": 1}), ("bo", {"gp_version": 1, "batch_size": 1}),
+                                                ("ce", {"noise_fraction": 0.0})])
+def test_falsify_says_how_to_go_on_with_a_campaign_an_earlier_version_ran(tmp_path, capsys, optimizer, earlier):
+    """d4sumo 0.2 ran bo one point per score with scikit-optimize's GP, 0.3 five at a time with it; 0.4
+    ran ce without noise."""
     db = str(tmp_path / "r.sqlite")
-    flags = [a for k, v in earlier.items() for a in ("--set", f"search.bo.{k}={v}")]
-    assert main(["falsify", "--samples", "2", *flags, "--db", db, "--quiet", "--json"]) == 0
+    flags = [a for k, v in earlier.items() for a in ("--set", f"search.{optimizer}.{k}={v}")]
+    run = ["falsify", "--optimizer", optimizer, "--db", db, "--quiet", "--json"]
+    assert main([*run, "--samples", "2", *flags]) == 0
     capsys.readouterr()
-    assert main(["falsify", "--samples", "3", "--db", db, "--quiet", "--json"]) == 0
+    assert main([*run, "--samples", "3"]) == 0
     err = capsys.readouterr().err
-    assert " ".join(f"--set search.bo.{k}={v}" for k, v in earlier.items()) in err and err.count("\n") == 1
-    assert main(["falsify", "--samples", "3", *flags, "--db", db, "--quiet", "--json"]) == 0
+    assert " ".join(f"--set search.{optimizer}.{k}={v}" for k, v in earlier.items()) in err and err.count("\n") == 1
+    assert main([*run, "--samples", "3", *flags]) == 0
     assert capsys.readouterr().err == ""  # it went on with it

@@ -413,16 +413,25 @@ def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, nam
 
 
 
-@pytest.mark.parametrize("controller", ["switching", "sumo:ACC"])
-def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alone(road, controller):
+MIXED_CASES = {  # what the batch's configurations share; each varies setpoint and, where allowed, speed and start
+    "switching": ({}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "sumo-ACC": ({"controller": ControllerConfig("sumo:ACC")}, (25.0,), ("rest", "steady")),
+    "cutin": ({"maneuver": "cutin", "lane_change_s": 0.0}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "cutout": ({"maneuver": "cutout", "obstacle_distance_m": 60.0, "obstacle_speed_mps": 5.0}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "warmup-mixed": ({"controller": (ControllerConfig("sumo:ACC"), ControllerConfig("timegap", where="controller.v2"),
+                                     ControllerConfig("switching", where="controller.v3"))}, (25.0,), ("warmup",)),
+}
+
+
+@pytest.mark.parametrize("case", MIXED_CASES)
+def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alone(road, case):
     """Issue 13: a sweep's campaigns of other setpoints, target speeds and starts share one SUMO
     (SUMO's models keep one target speed: it is their vehicle type's)."""
     from conftest import assert_same_episode, random_plans
     from d4sumo.simulation import simulate_batch
 
-    c = ControllerConfig(controller)
-    speeds = (20.0, 25.0, 30.0) if controller == "switching" else (25.0,)
-    configs = [EpisodeConfig(setpoint_m=s, speed_mps=speeds[i % len(speeds)], start=("rest", "steady")[i % 2], controller=c)
+    shared, speeds, starts = MIXED_CASES[case]
+    configs = [EpisodeConfig(setpoint_m=s, speed_mps=speeds[i % len(speeds)], start=starts[i % len(starts)], **shared)
                for i, s in enumerate((3.0, 7.0, 12.0, 5.0, 9.0, 4.0, 15.0, 6.0))]
     plans = [random_plans(config, 1, seed=i)[0] for i, config in enumerate(configs)]
     heard = {}

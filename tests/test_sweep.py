@@ -240,7 +240,7 @@ def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
     monkeypatch.setattr(sweep_module.CampaignRunner, "pending", fake_pending)
     campaign = Sweep.load(write(tmp_path, TINY)).campaigns[0]
     with pytest.raises(StopIteration):
-        sweep_module.run_chunk(sweep_module.Chunk(campaign, network_source("highway_4lane"), (), None))
+        sweep_module.run_chunks((sweep_module.Chunk(campaign, network_source("highway_4lane"), (), None),))
     assert seen and all(n == 1 for n in seen)
 
 
@@ -445,3 +445,43 @@ def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(
         with pytest.raises(StoreError, match=f"set {re.escape(said)} of the sweep file"):
             claim(store, now)
         claim(store, before)  # the sweep file with it goes on
+
+
+class KillsItsWorkerAt9m:
+    """The paper's controller, except that at a setpoint of 9 m it kills the worker process it runs in."""
+
+    from d4sumo.control import SwitchingParams as Params
+
+    def __init__(self, params, *, setpoint_m, **kwargs):
+        import multiprocessing
+
+        from d4sumo.control import SwitchingController
+
+        self.inner = SwitchingController(params, setpoint_m=setpoint_m, **kwargs)
+        self.kill = setpoint_m == 9.0 and multiprocessing.parent_process() is not None
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if self.kill:
+            os._exit(1)
+        return self.inner.command(gap_m, speed_mps, lead_speed_mps)
+
+
+@pytest.mark.sumo
+def test_a_campaign_that_kills_its_worker_is_found_alone_and_its_gang_goes_on(tmp_path):
+    """Regression: a worker's death counted a failure against every campaign of its task (up to 32),
+    and the sweep stopped naming whichever reached three first. The task now runs again in halves, so
+    only the campaign that kills its worker fails three times and is named; the others store their samples."""
+    from d4sumo.errors import D4sumoError
+
+    grid = "[grid]\nsetpoint_m = [" + ", ".join(f"{s:.1f}" for s in range(3, 19)) + "]\n"  # 16 campaigns: tasks of 4
+    text = TINY.replace("[grid]\nsetpoint_m = [5.0, 7.0]\n", grid).replace('start = ["rest", "steady"]', 'start = ["rest"]')
+    path = write(tmp_path, text + f'\n[controller]\nclass = "{__name__}:KillsItsWorkerAt9m"\n')
+    db = tmp_path / "r.sqlite"
+    with pytest.raises(D4sumoError, match=r"campaign (\d+) failed 3 times \(its worker process died\)") as raised:
+        run_sweep(Sweep.load(path), db, workers=2)
+    named = int(re.search(r"campaign (\d+)", str(raised.value)).group(1))
+    with Store(db, create=False) as store:
+        setpoints = {c.id: c.definition["config"]["scenario"]["setpoint_m"] for c in store.campaigns()}
+        counts = {cid: store.count_samples(cid) for cid in setpoints}
+    assert setpoints[named] == 9.0 and counts[named] == 0
+    assert sum(counts.values()) >= 6 * 4  # the 9 m campaign's gang-mates were not held up by it

@@ -7,9 +7,10 @@ Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
 Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither). ``--baseline`` first
-runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO on scikit-optimize's GP, ce without noise:
-`--batch 1 --set search.bo.gp_version=1 --set search.ce.noise_fraction=0`) with the largest worker count, and prints the speed-up of every run
-over it (its samples differ where BO's GP does, so it is left out of the check).
+runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO one point per score on scikit-optimize's GP,
+ce without noise: `--batch 1 --set search.bo.gp_version=1 --set search.bo.batch_size=1 --set
+search.ce.noise_fraction=0`) with the largest worker count, and prints the speed-up of every run over it
+(its samples differ where bo's GP and ce's noise do, so it is left out of the check).
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         if args.baseline:
-            as_before = {**overrides, "search.bo.gp_version": 1, "search.ce.noise_fraction": 0.0}
+            as_before = {**overrides, "search.bo.gp_version": 1, "search.bo.batch_size": 1, "search.ce.noise_fraction": 0.0}
             timed(before, [load(path, as_before) for path in args.sweeps], tmp)
         for run in runs:
             results[run] = timed(run, sweeps, tmp)
