@@ -455,11 +455,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
                            progress=progress, batch=args.batch)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         if bar is not None:
             bar.close()
         print(f"d4sumo: sweep interrupted; every sample it finished is in {args.db}: run the same command to resume",
               file=sys.stderr)
+        exc.said = True  # main need not say it again
         raise
     except BaseException:
         if bar is not None:
@@ -679,7 +680,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 141
     except KeyboardInterrupt as exc:
-        if not isinstance(exc, Terminated):
+        if not isinstance(exc, Terminated) and not getattr(exc, "said", False):
             print("d4sumo: interrupted", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130
 

@@ -193,7 +193,8 @@ def claim(store: Store, sweep: Sweep) -> None:
     else:
         others = store.campaigns()
         if others:
-            raise StoreError(f"{store.path}: holds {len(others)} campaigns not run by this sweep; nothing was changed. Use another --db")
+            held = f"{len(others)} campaign{'s' if len(others) != 1 else ''}"
+            raise StoreError(f"{store.path}: holds {held} not run by this sweep; nothing was changed. Use another --db")
         store.set_meta("sweep", json.dumps(mine))
 
 
