@@ -16,9 +16,10 @@ campaign stores a sample, and counts the samples where any of these disagree:
   precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
   coordinate) is negative (beyond that precision) before the stored collision time, nor is the
   collision pair's FCD gap positive at it;
-- the episode played in a batch (beside --batch - 1 other random attacks of its configuration, in one
-  SUMO, on a random copy of the road) is bit for bit the episode played alone: every signal, the
-  collision record, the minimum gaps.
+- the episode played in a batch (beside --batch - 1 other random attacks, half of them of its
+  configuration, half of other campaigns' that may share its SUMO: other setpoints, target speeds and
+  starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
+  signal, the collision record, the minimum gaps.
 
 Usage: python tools/check_invariants.py [N] [--seed S] [--batch K]. Prints the counts; exits 1 if any is
 non-zero.
@@ -27,6 +28,7 @@ non-zero.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import tempfile
 import time
@@ -37,12 +39,13 @@ import numpy as np
 from sumolib.xml import parse_fast_nested
 
 from d4sumo.attacks import FAMILIES
+from d4sumo.batch import batch_key
 from d4sumo.campaign import Campaign, Evaluator
 from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.errors import ConfigError
-from d4sumo.maneuvers import maneuver_of, occupied_lanes
+from d4sumo.maneuvers import attack_plan, maneuver_of, occupied_lanes
 from d4sumo.scenarios import build_road
-from d4sumo.simulation import simulate, simulate_batch
+from d4sumo.simulation import check_road, simulate, simulate_batch
 from d4sumo.spec import psi_robustness
 from d4sumo.store import Store
 
@@ -160,14 +163,34 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     return broken
 
 
+def partner_config(config: EpisodeConfig, rng: np.random.Generator, road) -> EpisodeConfig:
+    """Another campaign's configuration that may share the episode's SUMO (`batch.batch_key`): another
+    setpoint and, where allowed, target speed and start; the episode's own where the draw is refused."""
+    changes: dict = {"setpoint_m": float(rng.choice([3.0, 5.5, 7.0, 9.25, 12.0]))}
+    if not config.sumo_driven:
+        changes["speed_mps"] = float(rng.choice([20.0, 25.0, 30.0]))
+    if config.start != "warmup":
+        changes["start"] = str(rng.choice(["rest", "steady"]))
+    try:
+        other = dataclasses.replace(config, **changes)
+        check_road(other, road)
+    except ConfigError:
+        return config
+    return other if batch_key(other) == batch_key(config) else config
+
+
 def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, partners: int,
                   rng: np.random.Generator, road) -> str | None:
-    """Play the episode beside ``partners`` random others in one SUMO; what differs from it alone, if anything."""
+    """Play the episode beside ``partners`` random others in one SUMO, half of them of other campaigns'
+    configurations (`partner_config`); what differs from it alone, if anything."""
     f = evaluator.family
     slot = int(rng.integers(0, partners + 1))  # on any copy of the road
+    configs = [partner_config(campaign.config, rng, road) if i % 2 else campaign.config for i in range(partners)]
     xs = [f.lower + rng.random(f.dimension) * (f.upper - f.lower) for _ in range(partners)]
-    plans = [evaluator.plan(x) for x in [*xs[:slot], params, *xs[slot:]]]
-    batched = simulate_batch(campaign.config, plans)[slot]
+    plans = [attack_plan(f, x, c) for x, c in zip(xs, configs)]
+    plans.insert(slot, evaluator.plan(params))
+    configs.insert(slot, campaign.config)
+    batched = simulate_batch(configs, plans)[slot]
     try:
         alone = simulate(campaign.config, plans[slot], road=road)
     except Exception as exc:
