@@ -49,21 +49,29 @@ def batch_key(config: EpisodeConfig) -> str:
 _PER_EPISODE = ("setpoint_m", "speed_mps", "start")
 
 
+def episode_configs(config: EpisodeConfig | Sequence[EpisodeConfig], count: int) -> list[EpisodeConfig]:
+    """One configuration per episode of a batch of ``count``: ``config`` for all, or the sequence
+    given, checked to be one per episode and to share one `batch_key`."""
+    configs = [config] * count if isinstance(config, EpisodeConfig) else list(config)
+    if len(configs) != count:
+        raise ValueError(f"{len(configs)} configurations for {count} episodes")
+    distinct = {id(c): c for c in configs}
+    if len(distinct) > 1 and len({batch_key(c) for c in distinct.values()}) > 1:
+        raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
+    return configs
+
+
 class PlatoonBatch:
     """M platoons, each playing its own attack signal (row of ``attacks_u``): of one configuration, or
     of one per episode (``config`` a sequence, all with one `batch_key`)."""
 
     def __init__(self, config: EpisodeConfig | Sequence[EpisodeConfig], attacks_u: np.ndarray, attacker_max_speed_mps: float):
         attacks_u = np.asarray(attacks_u, dtype=float)
-        configs = [config] * attacks_u.shape[0] if isinstance(config, EpisodeConfig) else list(config)
+        configs = episode_configs(config, attacks_u.shape[0])
         config = configs[0]
         if attacks_u.ndim != 2 or attacks_u.shape[1] != config.steps:
             raise ValueError(f"attack signals have shape {attacks_u.shape}, expected (episodes, {config.steps})")
-        if len(configs) != attacks_u.shape[0]:
-            raise ValueError(f"{len(configs)} configurations for {attacks_u.shape[0]} attack signals")
         distinct = {id(c): c for c in configs}
-        if len(distinct) > 1 and len({batch_key(c) for c in distinct.values()}) > 1:
-            raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
         self.config = config  # what every episode shares
         self.configs = configs
         self.maneuver = maneuver_of(config)
@@ -76,13 +84,13 @@ class PlatoonBatch:
         rows_followers = {k: (self.followers if c is config else followers_of(c)) for k, c in distinct.items()}
         episode_followers = [rows_followers[id(c)] for c in configs]
         gains = cruise_params(config)
-        speed = per_row([c.speed_mps for c in configs], (m,))
-        self.attacker_cruise = CruiseArray(gains, speed, dt, (m,))
+        speeds = [c.speed_mps for c in configs]  # the target speed of each episode
+        self.attacker_cruise = CruiseArray(gains, per_row(speeds, (m,)), dt, (m,))
         self._command = CommandArray(vehicle)
         self._attacking = np.zeros(m, dtype=bool)
         others = list(range(n, len(self.ids)))
         self._others = np.array(others, dtype=int)
-        self._lead = (CruiseArray(gains, per_row([c.speed_mps for c in configs], (m, len(others))), dt, (m, len(others)))
+        self._lead = (CruiseArray(gains, per_row(speeds, (m, len(others))), dt, (m, len(others)))
                       if self.maneuver.other_cruises else None)
         python = [i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         self.commanded = (0, *python, *others)

@@ -171,6 +171,7 @@ class Evaluator:
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None
         self._shares_sumo = shares_sumo(campaign.config)
+        self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
@@ -419,7 +420,7 @@ def step_together(runners: Sequence[CampaignRunner], batch: int = DEFAULT_BATCH,
     groups: dict[tuple, list[tuple[CampaignRunner, int, list[np.ndarray]]]] = {}
     for runner in runners:
         for first, xs in runner.pending():
-            key = (batch_key(runner.campaign.config), runner.evaluate.network)
+            key = (runner.evaluate.batch_key, runner.evaluate.network)
             groups.setdefault(key, []).append((runner, first, xs))
     played: dict[int, dict[int, SampleResult]] = {id(r): {} for r in runners}
     for members in groups.values():

@@ -26,7 +26,7 @@ import numpy as np
 from .config import ControllerConfig, EpisodeConfig
 from .errors import ConfigError, SumoError
 from .maneuvers import CAR_WIDTH_M, AttackPlan, check_road_lanes, maneuver_of, occupied_lanes
-from .batch import PlatoonBatch, batch_key, collided
+from .batch import PlatoonBatch, collided, episode_configs
 from .platoon import Platoon, SumoFollower, collisions_at, followers_of, road_needed_m
 from .scenarios import MAX_COPIES, Road, batch_road, build_road, default_cache_dir, sumo_binary
 from .trace import Episode
@@ -393,13 +393,9 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
         return []
     if len(plans) > MAX_COPIES:
         raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
-    configs = [config] * len(plans) if isinstance(config, EpisodeConfig) else list(config)
-    if len(configs) != len(plans):
-        raise ValueError(f"{len(configs)} configurations for {len(plans)} plans")
+    configs = episode_configs(config, len(plans))
     config = configs[0]
     distinct = list({id(c): c for c in configs}.values())
-    if len(distinct) > 1 and len({batch_key(c) for c in distinct}) > 1:
-        raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
     if not shares_sumo(config):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:

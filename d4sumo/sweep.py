@@ -386,9 +386,14 @@ def _gangs(todo: list[_Active], workers: int) -> list[list[_Active]]:
 def _share(gang: list[_Active], queue: list, busy: int, slots: int) -> list[_Active]:
     """Near the sweep's end, when a worker would idle, the gang goes on as two tasks: its half."""
     if not queue and busy < slots and len(gang) > 1:
-        queue.append(gang[len(gang) // 2:])
-        return gang[:len(gang) // 2]
+        first, second = _halves(gang)
+        queue.append(second)
+        return first
     return gang
+
+
+def _halves(gang: list[_Active]) -> list[list[_Active]]:
+    return [gang[:len(gang) // 2], gang[len(gang) // 2:]]
 
 
 def _task(gang: list[_Active]) -> tuple[Chunk, ...]:
@@ -463,7 +468,7 @@ def _after_failure(gang: list[_Active], why: str) -> list[list[_Active]]:
     failures), a single campaign as it was, until it has failed MAX_TASK_FAILURES times."""
     if len(gang) > 1:
         log.warning("a task of %d campaigns failed (%s); it runs again as two", len(gang), why)
-        return [gang[:len(gang) // 2], gang[len(gang) // 2:]]
+        return _halves(gang)
     _check_failures(gang[0], why)
     return [gang]
 
