@@ -54,24 +54,51 @@ def _save(fig, path: str | Path) -> Path:
 
 
 def read_fcd(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
-    """SUMO FCD as {vehicle id: {time, pos, speed, acceleration, lane}}.
+    """SUMO FCD as {vehicle id: {time, pos, speed, acceleration, lane}}; ``pos`` is the position along
+    the route, ``lane`` the lane the car drives in.
 
     parse_fast_nested matches attributes in the order SUMO writes them (id x y angle type speed pos
-    lane slope acceleration); an FCD without lanes reads as all in one lane "".
+    lane slope acceleration odometer); an FCD without lanes reads as all in one lane "". On a route of
+    many edges SUMO's lane position starts again at 0 on each edge: the position along the route is
+    then where the car started plus its odometer, and a lane is named by its index across the road
+    (a junction's internal lane counts as the lane the car came from).
     """
     from sumolib.xml import parse_fast_nested
 
     rows: dict[str, list[tuple]] = {}
-    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "speed", "pos", "lane", "acceleration"]):
-        rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), v.lane))
+    attributes = ["id", "speed", "pos", "lane", "acceleration", "odometer"]
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", attributes):
+        rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), v.lane,
+                                          float(v.odometer)))
+    if not rows:  # written before d4sumo asked SUMO for the odometer: a road of one edge
+        for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", attributes[:-1]):
+            rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), v.lane,
+                                              np.nan))
     if not rows:
         for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "speed", "pos", "acceleration"]):
-            rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), ""))
+            rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), "",
+                                              np.nan))
+    edges = {lane.rpartition("_")[0] for r in rows.values() for *_, lane, _ in r if lane and not lane.startswith(":")}
+    many_edges = len(edges) > 1
     out = {}
     for vid in sorted(rows, key=_vehicle_order):
-        time, pos, speed, accel, lane = zip(*rows[vid])
-        out[vid] = {"time": np.array(time), "pos": np.array(pos), "speed": np.array(speed),
+        time, pos, speed, accel, lane, odometer = zip(*rows[vid])
+        pos = np.array(pos)
+        if many_edges:
+            pos = pos[0] + np.array(odometer)  # every car starts on the route's first edge
+            lane = _lane_indices(lane)
+        out[vid] = {"time": np.array(time), "pos": pos, "speed": np.array(speed),
                     "acceleration": np.array(accel), "lane": np.array(lane, dtype=str)}
+    return out
+
+
+def _lane_indices(lane_ids: Sequence[str]) -> list[str]:
+    """Lane ids as their index across the road; a junction's internal lane as the lane before it."""
+    out, last = [], ""
+    for lane in lane_ids:
+        if not lane.startswith(":"):
+            last = lane.rpartition("_")[2]
+        out.append(last)
     return out
 
 
@@ -104,7 +131,7 @@ def wrap_title(title: str, width: int = 100) -> str:
 
 def _lane_title(lane: str) -> str:
     edge, _, index = lane.rpartition("_")
-    return f"lane {index} ({lane})" if index.isdigit() else f"lane {lane}"
+    return f"lane {index} ({lane})" if edge and index.isdigit() else f"lane {lane}"
 
 
 def _runs(inside: np.ndarray) -> list[tuple[int, int]]:

@@ -42,6 +42,12 @@ class Road:
     lanes: int
     lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
     copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
+    first_edge_m: float = float("inf")  # the first edge's length: every car starts on it
+
+    @property
+    def one_edge(self) -> bool:
+        """Whether the route is one edge: a car's lane position is then its position along the route."""
+        return len(self.route_edges) == 1
 
     def route(self, copy: int = 0) -> tuple[str, ...]:
         """The edges of one copy of the road."""
@@ -162,6 +168,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         speed_limit_mps=info["speed_limit_mps"],
         lanes=info["lanes"],
         lane_width_m=info["lane_width_m"],
+        first_edge_m=info["first_edge_m"],
     )
 
 
@@ -241,7 +248,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "lane_width_m" in info else None
+    return info if isinstance(info, dict) and "first_edge_m" in info else None
 
 
 def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> None:
@@ -278,13 +285,40 @@ def _describe(net_file: Path) -> dict:
         if len(nxt) > 1 or nxt[0] in chain:
             raise ConfigError("scenario.network", net_file.name, "a straight chain of edges without branches")
         chain.append(nxt[0])
+    lanes = _through_lanes(chain)
+    if lanes == 0:
+        raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+                          f"a road whose rightmost lane (the platoon's, lane 0) leads on through every junction; "
+                          f"lane 0 of {_lane_end(chain)} ends there")
     return {
         "route_edges": [e.getID() for e in chain],
         "length_m": sum(e.getLength() for e in chain),
         "speed_limit_mps": min(e.getSpeed() for e in chain),
-        "lanes": min(e.getLaneNumber() for e in chain),
+        "lanes": lanes,
         "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
+        "first_edge_m": chain[0].getLength(),
     }
+
+
+def _leads_on(edge, lane: int, to) -> bool:
+    """Whether lane ``lane`` of ``edge`` connects to the lane of the same index of the next edge ``to``."""
+    return any(c.getTo() == to and c.getToLane().getIndex() == lane for c in edge.getLanes()[lane].getOutgoing())
+
+
+def _through_lanes(chain) -> int:
+    """How many lanes, from the rightmost (0) up, lead on along the whole chain with the same index.
+
+    Only these can hold a platoon (and a lane change between them): a car in a lane that ends at a
+    junction (a lane drop) stops there, which is no collision of the followers' doing."""
+    lanes = min(e.getLaneNumber() for e in chain)
+    for edge, to in zip(chain, chain[1:]):
+        lanes = next((i for i in range(lanes) if not _leads_on(edge, i, to)), lanes)
+    return lanes
+
+
+def _lane_end(chain) -> str:
+    """The first edge whose lane 0 does not lead on."""
+    return next(edge.getID() for edge, to in zip(chain, chain[1:]) if not _leads_on(edge, 0, to))
 
 
 def _write_atomic(path: Path, text: str) -> None:

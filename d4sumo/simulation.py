@@ -39,6 +39,9 @@ ATTACKER_VTYPE_ID = "d4attacker"
 SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
 LANE_CHANGE_MODE_OFF = 0  # no lane change of SUMO's own; a TraCI request is carried out without regard to others
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
+#: SUMO's default FCD attributes and the odometer, from which a position along a route of many edges
+#: comes (a lane position starts again at 0 on each edge)
+FCD_ATTRIBUTES = "x,y,angle,type,speed,pos,lane,slope,acceleration,odometer"
 
 
 def check_road(config: EpisodeConfig, road: Road) -> None:
@@ -46,6 +49,13 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
     check_road_lanes(config, road.name, road.lanes)
     if config.speed_mps > road.speed_limit_mps + 1e-9:
         raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
+    start = max(car.position_m for car in maneuver_of(config).cars())
+    if start > road.first_edge_m:
+        raise ConfigError(
+            "scenario.network",
+            road.name,
+            f"a road whose first edge holds the platoon's start ({start:.1f} m; the first edge is {road.first_edge_m:g} m)",
+        )
     needed = road_needed_m(config, road.speed_limit_mps)
     if needed > road.length_m:
         raise ConfigError(
@@ -173,7 +183,8 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     if config.maneuver_class.lateral and config.lane_change_s > 0:  # the attacker moves across over this time
         cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
-        cmd += ["--fcd-output", str(fcd_path), "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
+        cmd += ["--fcd-output", str(fcd_path), "--fcd-output.attributes", FCD_ATTRIBUTES,
+                "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
         cmd += ["--start", "true", "--quit-on-end", "false", "--delay", "50"]
     return cmd
@@ -281,10 +292,27 @@ def simulation_step(api):
     return (lambda: raw(0.0)) if raw else api.simulationStep
 
 
+def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> Callable[[str], float]:
+    """A reader of each car's position along its route [m], its front bumper.
+
+    On a road of one edge that is SUMO's lane position. On a route of many edges the lane position
+    starts again at 0 on each edge (and on each junction's internal lane), so the position is where the
+    car was inserted plus SUMO's odometer, the distance it has driven since, across edges and
+    junctions. Call it right after the cars are inserted (t = 0, odometer 0).
+    """
+    get_position = vehicle_call(api, "getLanePosition")
+    if road.one_edge:
+        return get_position
+    departed = {vid: get_position(vid) for vid in vehicle_ids}  # every car starts on the route's first edge
+    get_distance = vehicle_call(api, "getDistance")
+    return lambda vid: departed[vid] + get_distance(vid)
+
+
 def _run(api, config: EpisodeConfig, platoon: Platoon, road: Road, lane_change_step: int | None) -> Episode:
     ids = config.vehicle_ids
     commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
-    get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
+    get_speed, set_speed = (vehicle_call(api, f) for f in ("getSpeed", "setSpeed"))
+    get_position = route_position(api, road, ids)
     step = simulation_step(api)
     advance = platoon.advance
     maneuver = platoon.maneuver
@@ -434,7 +462,8 @@ def _run_batch(api, config: EpisodeConfig, batch: PlatoonBatch, road: Road, plat
                lane_change_steps: list[int | None], on_episode) -> list:
     m, n, dt = batch.size, len(config.vehicle_ids), config.step_s
     vehicle = api.vehicle
-    get_position, get_speed, set_speed = (vehicle_call(api, f) for f in ("getLanePosition", "getSpeed", "setSpeed"))
+    get_speed, set_speed = (vehicle_call(api, f) for f in ("getSpeed", "setSpeed"))
+    get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
     sumo_step = simulation_step(api)
     commanded_ids = [[ids[i] for i in batch.commanded] for ids in platoons]
     maneuver = batch.maneuver

@@ -134,6 +134,32 @@ def test_read_fcd_reads_lanes_in_sumo_attribute_order(tmp_path):
     assert figures.read_fcd(without_lanes)["v0"]["pos"].tolist() == [49.0, 49.1]
 
 
+MANY_EDGES_FCD = """<?xml version="1.0" encoding="UTF-8"?>
+<fcd-export>
+    <timestep time="0.00">
+        <vehicle id="v0" x="1999.0" y="-1.6" angle="90.0" type="d4car" speed="20.0" pos="1999.000000" lane="e1_1" slope="0.0" acceleration="0.0" odometer="0.000000"/>
+    </timestep>
+    <timestep time="0.05">
+        <vehicle id="v0" x="2000.0" y="-1.6" angle="90.0" type="d4car" speed="20.0" pos="0.050000" lane=":b_0_1" slope="0.0" acceleration="0.0" odometer="1.000000"/>
+    </timestep>
+    <timestep time="0.10">
+        <vehicle id="v0" x="2001.0" y="-1.6" angle="90.0" type="d4car" speed="20.0" pos="0.950000" lane="e2_1" slope="0.0" acceleration="0.0" odometer="2.000000"/>
+    </timestep>
+</fcd-export>
+"""
+
+
+def test_read_fcd_gives_positions_along_a_route_of_many_edges_and_lanes_by_index(tmp_path):
+    """A lane position starts again at 0 on each edge and junction: the position along the route is
+    the start plus SUMO's odometer; a junction's internal lane is the lane the car came from."""
+    path = tmp_path / "fcd.xml"
+    path.write_text(MANY_EDGES_FCD)
+    fcd = figures.read_fcd(path)
+    assert fcd["v0"]["pos"].tolist() == [1999.0, 2000.0, 2001.0]
+    assert fcd["v0"]["lane"].tolist() == ["1", "1", "1"]
+    assert figures.lanes(fcd) == ["1"]
+
+
 # --- heatmaps -----------------------------------------------------------------------------------------
 
 

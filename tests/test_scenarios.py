@@ -47,3 +47,24 @@ def test_an_unknown_variant_lists_the_known_ones():
 def test_a_missing_netconvert_is_a_clear_error(tmp_path):
     with pytest.raises(SumoError, match="netconvert"):
         build_road("highway_4lane", cache_dir=tmp_path, netconvert=str(tmp_path / "netconvert"))
+
+
+def _road_folder(folder, edges: str, nodes: str = '<node id="a" x="0" y="0"/><node id="b" x="2000" y="0"/>'
+                                                 '<node id="c" x="5000" y="0"/>'):
+    folder.mkdir()
+    (folder / "road.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
+    (folder / "road.edg.xml").write_text(f"<edges>{edges}</edges>")
+    return folder
+
+
+def test_a_road_of_several_edges_counts_only_the_lanes_that_lead_on_through_every_junction(tmp_path):
+    """A lane that ends at a junction would stop the cars in it: a lane drop on the left leaves three
+    lanes for maneuvers, one on the right (the platoon's lane 0) is refused."""
+    left = _road_folder(tmp_path / "left", '<edge id="e" from="a" to="c" numLanes="4" speed="40">'
+                                           '<split pos="2000" lanes="0 1 2"/></edge>', '<node id="a" x="0" y="0"/><node id="c" x="5000" y="0"/>')
+    road = build_road(str(left), cache_dir=tmp_path / "cache")
+    assert (road.route_edges, road.lanes, road.first_edge_m) == (("e", "e.2000"), 3, pytest.approx(2000.0, abs=5))
+    right = _road_folder(tmp_path / "right", '<edge id="e1" from="a" to="b" numLanes="2" speed="40"/>'
+                                             '<edge id="e2" from="b" to="c" numLanes="1" speed="40"/>')
+    with pytest.raises(ConfigError, match="rightmost lane .* leads on through every junction; lane 0 of e1 ends there"):
+        build_road(str(right), cache_dir=tmp_path / "cache")

@@ -3,18 +3,22 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.campaign import Campaign, Evaluator
+from d4sumo import figures
+from d4sumo.attacks import make_attack
+from d4sumo.campaign import Campaign, Evaluator, run_campaign
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.control import SwitchingController, register_controller
 from d4sumo.errors import ConfigError
 from d4sumo.platoon import integrate
-from d4sumo.maneuvers import AttackPlan
+from d4sumo.maneuvers import AttackPlan, attack_plan, maneuver_of
+from d4sumo.scenarios import build_road
 from d4sumo.simulation import simulate
 from d4sumo.spec import Specification
 
@@ -440,3 +444,93 @@ def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alon
     for config, plan, result in zip(configs, plans, batched):
         assert_same_episode(result, simulate(config, plan, road=road))
     assert len({tuple(e.min_gaps_m().values()) for e in batched}) == len(plans)  # not one episode eight times
+
+
+# --- roads of several edges: positions along the route, not the lane -----------------------------
+
+ROADS = Path(__file__).resolve().parent.parent / "examples" / "roads"
+
+
+def short_edges_road(folder: Path) -> Path:
+    """A four-lane road of three edges, the first two short, so that every episode crosses two joins."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "road.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0" type="priority"/><node id="b" x="120" y="0" type="priority"/>'
+        '<node id="c" x="320" y="0" type="priority"/><node id="d" x="5000" y="0" type="priority"/></nodes>')
+    (folder / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="4" speed="40"/>'
+        '<edge id="e2" from="b" to="c" numLanes="4" speed="40"/>'
+        '<edge id="e3" from="c" to="d" numLanes="4" speed="40"/></edges>')
+    return folder
+
+
+def test_a_two_edge_road_has_no_collision_at_its_join_and_moves_the_cars_as_commanded(tmp_path):
+    """Positions once came from the lane position, which starts again at 0 on the second edge: this
+    episode was an attacker crash 1,864 m long that SUMO's FCD did not show."""
+    config = EpisodeConfig(network=str(ROADS / "two_edges"), start="steady", speed_mps=30.0, duration_s=90.0)
+    u = make_attack("knots", horizon_s=24.0).signal([0.2, -0.5, 0.3, -0.8, 0.5], np.arange(config.steps) * config.step_s)
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, u, fcd_path=fcd)
+    assert episode.outcome == "no_crash" and not episode.collisions
+    assert min(episode.min_gaps_m().values()) > 0
+    x0 = episode.trace["pos_v0"]
+    assert x0[0] < 2000.0 < x0[-1] and np.all(np.diff(x0) >= 0)  # across the join, never back
+    # the SUMO-free reference on a straight road of no edges: the same motion to rounding
+    reference = integrate(config, u, 40.0)
+    for name in episode.trace.names:
+        assert np.allclose(episode.trace[name], reference.trace[name], atol=1e-6), name
+    # SUMO's FCD, read as positions along the route (start plus odometer)
+    traces = figures.read_fcd(fcd)
+    for vid in config.vehicle_ids:
+        assert np.max(np.abs(traces[vid]["pos"] - episode.trace[f"pos_{vid}"])) < 1.1e-6
+    assert set(figures.lanes(traces)) == {"0"}  # one lane across both edges: one panel
+
+
+def test_every_collision_of_a_campaign_on_a_three_edge_road_is_in_sumos_fcd(tmp_path):
+    network = short_edges_road(tmp_path / "three")
+    config = EpisodeConfig(network=str(network), start="steady", speed_mps=30.0, setpoint_m=4.0)
+    campaign = Campaign(config=config, attack="persistent", optimizer="random", samples=24, seed=3)
+    summary = run_campaign(campaign)
+    collided = [s for s in summary.samples if s.collision is not None]
+    assert len(collided) >= 5
+    evaluator = Evaluator(campaign)
+    fcd = tmp_path / "fcd.xml"
+    for s in collided:
+        again = evaluator(s.index, np.array(s.params), fcd_path=fcd)
+        assert (again.outcome, again.collision) == (s.outcome, s.collision)
+        traces = figures.read_fcd(fcd)
+        lead, follower = s.collision["pair"].split("-")
+        gaps = traces[lead]["pos"] - config.vehicle.length_m - traces[follower]["pos"]
+        assert gaps[-1] < 0 and np.all(gaps[:-1] > -2.5e-6), s.index  # overlapping first at the end
+        assert traces[follower]["time"][-1] == pytest.approx(s.collision["time_s"])
+        assert traces[follower]["pos"][-1] == pytest.approx(s.collision["position_m"], abs=1e-5)
+    # past both joins, where lane positions start again at 0
+    assert sum(s.collision["position_m"] > 320.0 for s in collided) >= 3
+
+
+def test_a_platoon_that_starts_beyond_the_first_edge_is_refused(tmp_path):
+    network = tmp_path / "short_first"
+    network.mkdir()
+    (network / "road.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="30" y="0"/><node id="c" x="5000" y="0"/></nodes>')
+    (network / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="1" speed="40"/><edge id="e2" from="b" to="c" numLanes="1" speed="40"/></edges>')
+    with pytest.raises(ConfigError, match=r"first edge holds the platoon's start \(49\.0 m; the first edge is 30"):
+        simulate(EpisodeConfig(network=str(network)), np.zeros(EpisodeConfig().steps))
+
+
+@pytest.mark.parametrize("road_name, maneuver", [("three_edges", {}), ("curved", {}),
+                                                 ("lane_drop", {"maneuver": "cutin", "cutin_follower": 2})])
+def test_a_batch_on_a_road_of_several_edges_is_bit_for_bit_each_episode_alone(road_name, maneuver):
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.simulation import simulate_batch
+
+    config = EpisodeConfig(network=str(ROADS / road_name), start="steady", speed_mps=30.0, followers=4,
+                           duration_s=90.0, setpoint_m=12.0, controller=[ControllerConfig("switching"), ControllerConfig("sumo:ACC")] * 2, **maneuver)
+    box = maneuver_of(config).family(make_attack("knots"))
+    steady = (box.lower + box.upper) / 2  # knots of 0: the attacker holds its speed (a lane change halfway)
+    plans = [*random_plans(config, 6, seed=5), attack_plan(box, steady, config), attack_plan(box, steady, config)]
+    batched = simulate_batch(config, plans)
+    for plan, result in zip(plans, batched):
+        assert_same_episode(result, simulate(config, plan))
+    assert sum(r.trace["pos_v1"][-1] > build_road(config.network).first_edge_m for r in batched) >= 2  # past a join
