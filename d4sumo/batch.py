@@ -22,7 +22,7 @@ import numpy as np
 from .config import EpisodeConfig
 from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl, per_row
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import (Platoon, PythonFollower, assemble_trace, checked_command, collisions_at, cruise_params,
+from .platoon import (Platoon, PythonFollower, assemble_trace, checked_command, cruise_params,
                       followers_of)
 from .trace import Collision, Episode
 
@@ -257,65 +257,3 @@ def _index(positions: list[int]) -> slice | np.ndarray:
 def collided(gap: np.ndarray) -> np.ndarray:
     """Which episodes (rows of the M x n gaps of `PlatoonBatch.leaders`) have a bumper overlap."""
     return (gap < 0.0).any(axis=1)
-
-
-def integrate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], attacks_u: np.ndarray,
-                    attacker_max_speed_mps: float = float("inf"), *, detach_at_step: int | None = None) -> list[Episode | Exception]:
-    """`platoon.integrate` for many attacks at once (of one configuration, or of one each): ballistic
-    positions, no SUMO, the paper's maneuver; from step ``detach_at_step`` on, each episode left goes
-    on alone (`PlatoonBatch.detach`). For physics tests of the array laws against the scalar ones."""
-    from .maneuvers import initial_state
-
-    batch = PlatoonBatch(config, attacks_u, attacker_max_speed_mps)
-    config = batch.config
-    m, dt, ids = batch.size, config.step_s, config.vehicle_ids
-    rows_x = np.zeros((config.steps + 1, m, len(ids)))
-    rows_v = np.zeros_like(rows_x)
-    for e, c in enumerate(batch.configs):
-        rows_x[0, e], rows_v[0, e] = initial_state(c)
-    active = np.ones(m, dtype=bool)
-    alone: dict[int, Platoon] = {}
-    ended: dict[int, Episode | Exception] = {}
-    lead, gap = batch.leaders(rows_x[0], None)
-    for k in range(config.steps):
-        if k == detach_at_step:
-            for e in np.flatnonzero(active).tolist():
-                alone[e] = batch.detach(e, k)
-                active[e] = False
-        new_speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
-        for e, platoon in list(alone.items()):
-            try:
-                new_speeds[e] = platoon.advance(k, rows_x[k, e].tolist(), rows_v[k, e].tolist(), batch.maneuver.pairs(rows_x[k, e].tolist()))
-            except Exception as exc:  # a user's controller: as alone, the episode ends with it
-                ended[e] = exc
-                del alone[e]
-        rows_x[k + 1] = rows_x[k] + 0.5 * (rows_v[k] + new_speeds) * dt
-        rows_v[k + 1] = new_speeds
-        lead, gap = batch.leaders(rows_x[k + 1], None)
-        for e in np.flatnonzero(active).tolist():
-            if e in batch.failed:
-                ended[e] = batch.failed[e]
-                active[e] = False
-        for e in np.flatnonzero(collided(gap)).tolist():
-            if e in ended:
-                continue
-            x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
-            ended[e] = _ended(batch, alone, e, k + 1, rows_x, rows_v, collisions_at((k + 1) * dt, batch.maneuver.pairs(x), x, v, ids))
-            active[e] = False
-        if len(ended) == m:
-            break
-    for e in range(m):
-        if e not in ended:
-            ended[e] = _ended(batch, alone, e, config.steps, rows_x, rows_v, ())
-    return [ended[e] for e in range(m)]
-
-
-def _ended(batch: PlatoonBatch, alone: dict, e: int, steps: int, rows_x, rows_v, collisions) -> Episode | Exception:
-    x, v = rows_x[:steps + 1, e], rows_v[:steps + 1, e]
-    if e in batch.bad_modes:
-        alone.pop(e, None)
-        return batch.bad_modes[e]
-    if e in alone:
-        trace, min_gaps = alone.pop(e).trace(np.arange(steps + 1) * batch.config.step_s, x, v)
-        return Episode(trace, collisions, min_gaps)
-    return batch.episode(e, steps, x, v, collisions)

@@ -5,8 +5,8 @@ controller whose command goes through the car's actuator; a `SumoFollower` is dr
 car-following models, which the co-simulation only senses. `Platoon.advance` takes the sensed state
 (positions and speeds, front to back) and returns the speed at the end of the step of each car Python
 commands: the attacker plays its attack signal (or cruises where the signal is NaN) and each Python
-follower runs its controller. The SUMO co-simulation calls it each step; `integrate` runs it with
-SUMO's ballistic position update for SUMO-free physics tests (Python followers only).
+follower runs its controller. The step loop (`engine.loop.play`) calls it each step, in SUMO or in the
+SUMO-free ballistic world (`engine.ballistic.integrate`, for physics tests).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ import numpy as np
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
-from .errors import ConfigError, D4sumoError
+from .errors import D4sumoError
 from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
-from .trace import Collision, Episode, Trace
+from .trace import Collision, Trace
 
 
 class ControllerError(D4sumoError, ValueError):
@@ -284,32 +284,3 @@ def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:
     if rows.shape[0] < n_samples:
         rows = np.vstack([rows, np.repeat(rows[-1:], n_samples - rows.shape[0], axis=0)])
     return rows[:n_samples]
-
-
-def integrate(config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float = float("inf")) -> Episode:
-    """Run the platoon without SUMO: ballistic positions (mean of old and new speed, as SUMO's
-    --step-method.ballistic), stopping at the first bumper overlap. For physics tests and checks of
-    the paper's maneuver (lane changes need SUMO)."""
-    if config.sumo_driven:
-        raise ConfigError("controller.class", config.system_label, "Python controllers only: this runs without SUMO")
-    if config.maneuver_class.lateral:
-        raise ConfigError("scenario.maneuver", config.maneuver, "inlane: lane changes need SUMO")
-    platoon = Platoon(config, attack_u, attacker_max_speed_mps)
-    positions, speeds = initial_state(config)
-    dt, ids, pairs_at = config.step_s, config.vehicle_ids, platoon.maneuver.pairs
-    rows_x, rows_v = [positions], [speeds]
-    collisions: tuple[Collision, ...] = ()
-    pairs = pairs_at(positions)
-    for k in range(config.steps):
-        new_speeds = platoon.advance(k, positions, speeds, pairs)
-        positions = [x + 0.5 * (v + w) * dt for x, v, w in zip(positions, speeds, new_speeds)]
-        speeds = new_speeds
-        rows_x.append(positions)
-        rows_v.append(speeds)
-        pairs = pairs_at(positions)
-        collisions = collisions_at((k + 1) * dt, pairs, positions, speeds, ids)
-        if collisions:
-            break
-    times = np.arange(len(rows_x)) * dt
-    trace, min_gaps = platoon.trace(times, np.array(rows_x), np.array(rows_v))
-    return Episode(trace, tuple(collisions), min_gaps)

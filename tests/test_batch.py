@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import assert_same_episode, random_plans
 
-from d4sumo.batch import integrate_batch
+from d4sumo.engine.ballistic import integrate, integrate_batch
 from d4sumo.config import ControllerConfig, EpisodeConfig
-from d4sumo.platoon import ControllerError, integrate
+from d4sumo.platoon import ControllerError
 
 
 def attacks(config: EpisodeConfig, count: int, seed: int = 0, family: str = "knots") -> np.ndarray:

@@ -180,7 +180,7 @@ def test_the_time_gap_controller_keeps_its_desired_gap_at_steady_state(time_gap_
     import numpy as np
 
     from d4sumo.config import EpisodeConfig
-    from d4sumo.platoon import integrate
+    from d4sumo.engine.ballistic import integrate
 
     config = EpisodeConfig(controller=ControllerConfig("timegap", (("time_gap_s", time_gap_s),)), duration_s=120.0)
     episode = integrate(config, np.full(config.steps, np.nan))  # the attacker only cruises

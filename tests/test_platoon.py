@@ -11,7 +11,8 @@ from d4sumo.attacks import attack_signal, make_attack
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.control import MODE_ACC, CruiseControl, SwitchingParams, acceleration_to_command, register_controller
 from d4sumo.maneuvers import Maneuver
-from d4sumo.platoon import ControllerError, Platoon, collisions_at, initial_state, integrate
+from d4sumo.engine.ballistic import integrate
+from d4sumo.platoon import ControllerError, Platoon, collisions_at, initial_state
 
 ALTERNATING = [1, -1, 1, -1, 1, -1, 1, -1, 1]
 

@@ -16,7 +16,7 @@ from d4sumo.campaign import Campaign, Evaluator, run_campaign
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.control import SwitchingController, register_controller
 from d4sumo.errors import ConfigError
-from d4sumo.platoon import integrate
+from d4sumo.engine.ballistic import integrate
 from d4sumo.maneuvers import AttackPlan, attack_plan, maneuver_of
 from d4sumo.scenarios import build_road
 from d4sumo.simulation import simulate
@@ -220,13 +220,13 @@ def test_sumo_models_cannot_run_without_sumo():
 
 
 def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatch, road):
-    from d4sumo import simulation
+    from d4sumo.engine import sumo
     from d4sumo.errors import SumoError
 
     (tmp_path / "d4sumo").mkdir()
     (tmp_path / "d4sumo" / "vtypes").write_text("a file where the folder should be")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    monkeypatch.setattr(simulation, "_CHECKED", {})
+    monkeypatch.setattr(sumo, "_CHECKED", {})
     config = EpisodeConfig(controller=ControllerConfig("sumo:IDM", (("tau", 0.77),)))
     with pytest.raises(SumoError, match="cannot write SUMO's vehicle types"):
         simulate(config, np.full(config.steps, np.nan), road=road)

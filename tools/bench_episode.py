@@ -20,7 +20,8 @@ import numpy as np
 
 from d4sumo.config import ControllerConfig, EpisodeConfig
 from d4sumo.scenarios import build_road
-from d4sumo.simulation import check_episode, load_platoon, simulate, sumo_command
+from d4sumo.engine.sumo import load_platoon, sumo_command
+from d4sumo.simulation import check_episode, simulate
 
 
 def bare(config: EpisodeConfig, road) -> float:

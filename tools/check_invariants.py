@@ -224,7 +224,7 @@ def main(argv=None) -> int:
     parser.add_argument("n", type=int, nargs="?", default=2000, help="episodes [2000]")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch", type=int, default=8,
-                        help="play each episode also in a batch of K (more than simulation.DETACH_AT, so that the "
+                        help="play each episode also in a batch of K (more than engine.loop.DETACH_AT, so that the "
                              "arrays command it) [8]; 0: not")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
