@@ -143,10 +143,26 @@ class Table:
     header: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
 
-    def to_text(self) -> str:
+    def to_text(self, width: int = 100) -> str:
+        """The table as text, its lines at most ``width`` characters where the columns allow: a table
+        wider than that (a sweep of many systems) goes on in blocks of columns, each led by the first."""
         widths = [max(len(str(x)) for x in col) for col in zip(self.header, *self.rows)]
-        line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
-        return "\n".join([self.title, line(self.header), *(line(r) for r in self.rows)])
+        blocks: list[list[int]] = [[]]
+        used = widths[0]
+        for i in range(1, len(widths)):
+            if blocks[-1] and used + 2 + widths[i] > width:
+                blocks.append([])
+                used = widths[0]
+            blocks[-1].append(i)
+            used += 2 + widths[i]
+        out = []
+        for b, columns in enumerate(blocks):
+            shown = [0, *columns]
+            line = lambda cells: "  ".join(  # noqa: E731
+                str(cells[i]).rjust(widths[i]) if i else str(cells[i]).ljust(widths[i]) for i in shown).rstrip()
+            title = self.title if b == 0 else f"{self.title} (continued, {b + 1} of {len(blocks)})"
+            out.append("\n".join([title, line(self.header), *(line(r) for r in self.rows)]))
+        return "\n\n".join(out)
 
 
 def table_success_statistics(records: Sequence[Record]) -> Table:
@@ -185,7 +201,8 @@ def table_attacker_crashes(records: Sequence[Record]) -> Table:
 
 
 def table_by_speed(records: Sequence[Record]) -> Table:
-    """The paper's Table 3: successes per optimiser and start mode, split by target speed."""
+    """The paper's Table 3: successes per optimiser and start mode, split by target speed; with several
+    speeds, each with its share of the row's successes (how they split by speed, not a success rate)."""
     speeds = sorted({r.speed_mps for r in records})
     rows = []
     for key, rs in runs(records, "attack", "optimizer", "start")[1].items():
@@ -193,9 +210,12 @@ def table_by_speed(records: Sequence[Record]) -> Table:
         cells = [run_label(key), str(len(wins))]
         for v in speeds:
             n = sum(1 for r in wins if r.speed_mps == v)
-            cells.append(f"{n} ({100 * n / len(wins):.1f}%)" if wins else "0")
+            cells.append(f"{n} ({100 * n / len(wins):.1f}%)" if wins and len(speeds) > 1 else str(n))
         rows.append(tuple(cells))
-    return Table("Table 3: successes by target speed", ("attack", "successes", *[f"{v:g} m/s" for v in speeds]), tuple(rows))
+    title = "Table 3: successes by target speed"
+    if len(speeds) > 1:
+        title += " (in brackets: the share of the row's successes at that speed)"
+    return Table(title, ("attack", "successes", *[f"{v:g} m/s" for v in speeds]), tuple(rows))
 
 
 def table_systems(records: Sequence[Record]) -> Table:

@@ -7,6 +7,7 @@ Every error a user can cause ends as one line `d4sumo: error: ...` and exit code
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import os
@@ -297,23 +298,29 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     check_batch(args.batch)
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
-    with Store(args.db) as store, tqdm(total=campaign.samples, desc=f"{campaign.attack}/{campaign.optimizer}", unit="sample",
-                                      disable=args.quiet, file=sys.stderr, dynamic_ncols=True) as bar:
+    with Store(args.db) as store, contextlib.ExitStack() as stack:
+        known = store.find_campaign(campaign.definition())
+        stored = 0 if known is None else sum(s.index < campaign.samples for s in store.iter_samples(known))
+        if known is not None and not args.quiet:
+            print(f"d4sumo: campaign {known} in {args.db}: " + (
+                f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
+                if stored >= campaign.samples else f"{stored} of {campaign.samples} samples stored already: resuming"),
+                file=sys.stderr)
+        # the bar counts what this run plays; the stored samples are where it starts
+        bar = stack.enter_context(tqdm(total=campaign.samples, initial=stored, desc=f"{campaign.attack}/{campaign.optimizer}",
+                                       unit="sample", disable=args.quiet or stored >= campaign.samples, file=sys.stderr,
+                                       dynamic_ncols=True))
+        told = [0]
 
         def progress(r) -> None:
             counts[r.outcome] += 1
             if r.robustness is not None and (best[0] is None or r.robustness > best[0]):
                 best[0] = r.robustness
-            bar.update(1)
+            told[0] += 1
+            if told[0] > stored:  # the stored samples come first, told to the optimiser again
+                bar.update(1)
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
-        known = store.find_campaign(campaign.definition())
-        if known is not None and not args.quiet:
-            stored = min(store.count_samples(known), campaign.samples)
-            bar.write(f"d4sumo: campaign {known} in {args.db}: " + (
-                f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
-                if stored >= campaign.samples else f"{stored} of {campaign.samples} samples stored already: resuming"),
-                file=sys.stderr)
         if known is None:
             for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
                 before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
@@ -321,7 +328,14 @@ def cmd_falsify(args: argparse.Namespace) -> int:
                     bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
                               f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)
                     break
-        summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
+        try:
+            summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
+        except KeyboardInterrupt as exc:
+            bar.close()
+            print(f"d4sumo: campaign interrupted; every sample it finished is in {args.db}: run the same command to resume",
+                  file=sys.stderr)
+            exc.said = True  # main need not say it again
+            raise
     top = summary.best
     result = {
         "db": str(args.db),
@@ -378,6 +392,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _pair_order(pair: str) -> tuple:
+    """Pairs front to back as the cars are named (v0-v1 before v1-v2 before v10-v11), others after."""
+    cars = pair.split("-")
+    return tuple((0, int(c[1:]), "") if c[1:].isdigit() and c[0] == "v" else (1, 0, c) for c in cars)
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     import csv
 
@@ -395,9 +415,11 @@ def cmd_export(args: argparse.Namespace) -> int:
         for cid, c in campaigns.items():
             names[cid] = Campaign.from_definition(c.definition, where=str(args.db)).family().names
             columns += [n for n in names[cid] if n not in columns]
+        # every pair of cars that followed each other in some sample: its minimum bumper gap
+        pairs = sorted({p for s in store.iter_samples(args.campaign) for p in s.min_gaps}, key=_pair_order)
         header = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "maneuver", "system",
                   "attack", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m", "speed_diff_kmh", "wall_s",
-                  "error"] + columns
+                  "error"] + [f"min_gap_{p}_m" for p in pairs] + columns
         out_path = check_output_file("--out", args.out)
         tmp = out_path.with_name(f".{out_path.name}.part") if out_path else None
         out = open(tmp, "w", newline="") if tmp else sys.stdout
@@ -412,7 +434,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                 writer.writerow([s.id, s.campaign_id, s.index, sc["network"], sc["followers"], sc["setpoint_m"], sc["speed_mps"],
                                  sc["start"], sc.get("maneuver", "inlane"), systems[s.campaign_id], d["attack"]["family"], d["optimizer"], d["seed"], s.robustness, s.outcome, s.pair,
                                  s.time_s, s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
-                                + [params.get(n, "") for n in columns])
+                                + [s.min_gaps.get(p, "") for p in pairs] + [params.get(n, "") for n in columns])
                 rows += 1
             if tmp:
                 out.close()

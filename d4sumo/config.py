@@ -132,7 +132,7 @@ class EpisodeConfig:
         fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
         fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
         fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
-        if not _on_grid(self.warmup_s, self.step_s):
+        if self.start == "warmup" and not _on_grid(self.warmup_s, self.step_s):  # read only with a warm-up
             raise ConfigError("scenario.warmup_s", self.warmup_s, f"a whole number of steps of {self.step_s:g} s")
         if not isinstance(self.vehicle, VehicleParams):
             raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
@@ -159,7 +159,8 @@ class EpisodeConfig:
                                         f"(a follower: 1 for v1 .. {self.followers} for v{self.followers})"))
         fix("cutin_offset_m", check_number("scenario.cutin_offset_m", self.cutin_offset_m, -500.0, 500.0, "metres"))
         fix("lane_change_s", check_number("scenario.lane_change_s", self.lane_change_s, 0.0, 20.0, "seconds"))
-        if not _on_grid(self.lane_change_s, self.step_s):  # SUMO rounds it to whole steps, silently
+        # SUMO rounds it to whole steps, silently; only a maneuver that changes lanes reads it
+        if MANEUVER_CLASSES[self.maneuver].lateral and not _on_grid(self.lane_change_s, self.step_s):
             raise ConfigError("scenario.lane_change_s", self.lane_change_s, f"a whole number of steps of {self.step_s:g} s")
         fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 5000.0,
                                                 "metres", low_open=True))

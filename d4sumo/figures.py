@@ -315,13 +315,13 @@ def text_colour(background) -> str:
     return "black" if contrast_ratio(background, (0, 0, 0)) >= contrast_ratio(background, (1, 1, 1)) else "white"
 
 
-def heatmap_panels(records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
-    """One panel per attack, optimiser and start mode (and system under test, when there are several):
-    the groups a reader compares."""
+def heatmap_panels(records: Sequence[Record]) -> list[tuple[str | tuple[str, str], list[Record]]]:
+    """One panel per attack, optimiser and start mode: the groups a reader compares. With several
+    systems under test a panel's name is (system, "attack, OPTIMISER, start ..."): a row per system."""
     fields, groups = runs(records, "attack", "optimizer", "start")
     system = fields[0] == "system"
-    return [((f"{key[0]}: " if system else "") + f"{key[-3]}, {key[-2].upper()}, start {key[-1]}", rs)
-            for key, rs in groups.items()]
+    return [((key[0], f"{key[-3]}, {key[-2].upper()}, start {key[-1]}") if system
+             else f"{key[-3]}, {key[-2].upper()}, start {key[-1]}", rs) for key, rs in groups.items()]
 
 
 def heatmap_columns(records: Sequence[Record]) -> int:
@@ -334,11 +334,31 @@ def heatmap_columns(records: Sequence[Record]) -> int:
     return 4
 
 
-def heatmaps_figure(panels: Sequence[tuple[str, Sequence[Record]]], title: str, *, columns: int = 4):
-    """Successes over setpoint x target speed, one panel per (title, records), all on the same axes
+#: a title's characters per inch of panel at 9 pt (DejaVu Sans averages about 0.55 em a character)
+TITLE_CHARS_PER_IN = 72.0 / (0.55 * 9)
+
+
+def _layout(panels: Sequence[tuple], columns: int) -> tuple[list[tuple[int, int]], list[str], list[str]]:
+    """Where each panel goes (row, column), each row's label and each column's title: a grid of
+    systems (rows) x runs (columns) when names are (system, run) pairs, else the panels in reading
+    order, ``columns`` a row, each titled by its name."""
+    names = [name for name, _ in panels]
+    if names and all(isinstance(name, tuple) for name in names):
+        rows = list(dict.fromkeys(name[0] for name in names))
+        cols = list(dict.fromkeys(name[1] for name in names))
+        return [(rows.index(r), cols.index(c)) for r, c in names], rows, cols
+    return [(i // columns, i % columns) for i in range(len(names))], [], [str(name) for name in names]
+
+
+def heatmaps_figure(panels: Sequence[tuple[str | tuple[str, str], Sequence[Record]]], title: str, *, columns: int = 4):
+    """Successes over setpoint x target speed, one panel per (name, records), all on the same axes
     and one colour range (0 to the most of any panel) so that panels compare like with like; cells
     with no samples are left grey. When every cell ran the same number of samples the colour is the
-    count of successes, as in the paper; else it is their share of the cell's samples."""
+    count of successes, as in the paper; else it is their share of the cell's samples. Names that are
+    (system, run) pairs lay the panels out as a grid: a row per system, labelled once at its left, a
+    column per run, titled once at the top; titles wrap to their panel's width."""
+    import textwrap
+
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
@@ -365,36 +385,54 @@ def heatmaps_figure(panels: Sequence[tuple[str, Sequence[Record]]], title: str, 
         norm = Normalize(0, max(1.0, max(float(v.max()) for v in values)))
         note, label = "cells: successes/samples; cells ran different numbers of samples", "successful attacks [% of samples]"
     cmap = colormaps[SUCCESS_CMAP].with_extremes(bad="0.88")
-    columns = max(1, min(columns, len(panels)))
-    rows = math.ceil(len(panels) / columns)
+    places, row_labels, column_titles = _layout(panels, max(1, min(columns, len(panels))))
+    rows, columns = max(r for r, _ in places) + 1, max(c for _, c in places) + 1
     cell_w, cell_h = (0.75, 0.36) if same_budget else (1.05, 0.36)
-    fig = _figure(figsize=(max(5.0, 2.3 + columns * (0.9 + cell_w * len(speeds))),
-                           max(2.8, 0.8 + rows * (0.9 + cell_h * len(setpoints)))))
+    panel_w = max(1.9, 0.9 + cell_w * len(speeds))  # room for a title of two short lines
+    width = int(panel_w * TITLE_CHARS_PER_IN)
+    titles = [textwrap.fill(t, width, break_long_words=False) for t in column_titles]
+    labels = [textwrap.fill(t, 24, break_long_words=False) for t in row_labels]
+    title_h = 0.16 * max((t.count("\n") + 1 for t in titles), default=1)
+    label_w = 1.6 if labels else 0.0
+    panel_h = 0.55 + cell_h * len(setpoints) + (0.0 if labels else title_h)
+    fig = _figure(figsize=(max(5.0, 1.4 + label_w + columns * panel_w), max(2.8, 0.9 + title_h + rows * panel_h)))
     axes = fig.subplots(rows, columns, sharex=True, sharey=True, squeeze=False)
     fontsize = 9 if same_budget else 8
-    for ax, (name, _), (wins, samples), value in zip(axes.ravel(), panels, grids, values):
+    used = set(places)
+    for (row, col), (wins, samples), value, index in zip(places, grids, values, range(len(places))):
+        ax = axes[row, col]
         ax.imshow(np.ma.masked_where(samples == 0, value), cmap=cmap, norm=norm, aspect="auto", origin="lower")
         for i in range(len(setpoints)):
             for j in range(len(speeds)):
                 if samples[i, j]:
                     text = str(wins[i, j]) if same_budget else f"{wins[i, j]}/{samples[i, j]}"
                     ax.text(j, i, text, ha="center", va="center", fontsize=fontsize, color=text_colour(cmap(norm(value[i, j]))))
-        ax.set_title(name, fontsize=9)
+        if not labels:
+            ax.set_title(titles[index], fontsize=9)
         ax.set_xticks(range(len(speeds)), [f"{v:g}" for v in speeds])
         ax.set_yticks(range(len(setpoints)), [f"{d:g}" for d in setpoints])
-    for index, ax in enumerate(axes.ravel()):
-        if index >= len(panels):
-            ax.set_visible(False)
-        elif index + columns >= len(panels):  # the lowest panel of its column
-            ax.xaxis.set_tick_params(labelbottom=True)
-            ax.set_xlabel("target speed [m/s]")
-    for ax in axes[:, 0]:
-        ax.set_ylabel("setpoint [m]")
-    bar = fig.colorbar(ScalarMappable(norm, cmap), ax=axes.ravel().tolist(), label=label)
+    if labels:  # a grid: each run's title once, over its column; each system's name once, left of its row
+        for col, t in enumerate(titles):
+            axes[0, col].set_title(t, fontsize=9)
+        for row, t in enumerate(labels):  # read across, beside the row's setpoints
+            axes[row, 0].set_ylabel(t, fontsize=8, rotation=0, ha="right", va="center", labelpad=6)
+        fig.supylabel("setpoint [m]", fontsize=10)
+    else:
+        for ax in axes[:, 0]:
+            ax.set_ylabel("setpoint [m]")
+    for row in range(rows):
+        for col in range(columns):
+            ax = axes[row, col]
+            if (row, col) not in used:
+                ax.set_visible(False)
+            elif not any((r, col) in used for r in range(row + 1, rows)):  # the lowest panel of its column
+                ax.xaxis.set_tick_params(labelbottom=True)
+                ax.set_xlabel("target speed [m/s]")
+    bar = fig.colorbar(ScalarMappable(norm, cmap), ax=axes.ravel().tolist(), label=label, shrink=min(1.0, 6.0 / rows + 0.2))
     if same_budget:
         bar.locator = MaxNLocator(integer=True)  # counts
         bar.update_ticks()
-    fig.suptitle(f"{title} ({note})", fontsize=10)
+    fig.suptitle(textwrap.fill(f"{title} ({note})", int(fig.get_figwidth() * 72 / (0.55 * 10))), fontsize=10)
     return fig
 
 

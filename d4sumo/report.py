@@ -164,7 +164,8 @@ def build_report(
     step("heatmaps")
     panels = figures.heatmap_panels(records)
     parts.append("<h2>Successful attacks over setpoint and target speed</h2>"
-                 f"<p>One panel per attack, optimiser and start mode ({count_noun(len(panels), 'panel')}), "
+                 f"<p>One panel per attack, optimiser and start mode ({count_noun(len(panels), 'panel')}"
+                 f"{'; a row per system under test' if panels and isinstance(panels[0][0], tuple) else ''}), "
                  "all on one colour range; grey cells were not run.</p>")
     figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
                      columns=figures.heatmap_columns(records))

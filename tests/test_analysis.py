@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -276,3 +277,36 @@ def test_near_copies_of_one_attack_count_once():
     assert distinct_count(same, lower, upper) == 1
     assert distinct_count(same + [[0.5, 0.75]], lower, upper) == 2  # 0.25 away in one parameter: another attack
     assert distinct_count([], lower, upper) == 0
+
+
+def _sample(i, **changes):
+    r = Record("db", i, 0, "n", 3, 7.0, 25.0, "rest", "knots", "bo", 0, 6.0, (0.0,) * 9, 0.1, "success",
+               "v1-v2", 20.0, 100.0, 10.0)
+    return dataclasses.replace(r, **changes)
+
+
+def test_the_tables_of_a_sweep_of_many_systems_fit_in_100_characters_a_line():
+    """tables.txt had lines of about 600 characters for the systems sweep: wide tables go on in blocks."""
+    systems = [f"sumo:ACC(tau={t}, speedControlGainSpeed={g})" for t in (0.5, 1.0, 1.5, 2.0) for g in (0.5, 1.0, 1.5)]
+    records = [_sample(i, system=system, optimizer=optimizer, setpoint_m=d, outcome=outcome)
+               for i, (system, optimizer, d, outcome) in enumerate(itertools.product(
+                   systems, ("bo", "ce"), (3.0, 5.0, 7.0, 9.0, 11.0, 13.0), ("success", "attacker_crash", "no_crash")))]
+    t2 = table_attacker_crashes(records)
+    assert len(t2.header) == 25
+    text = t2.to_text()
+    assert max(len(line) for line in text.splitlines()) <= 100
+    blocks = text.split("\n\n")
+    assert len(blocks) > 1 and blocks[1].startswith("Table 2: attacker crashes / no-crash samples per setpoint (continued, 2 of")
+    for column in t2.header[1:]:  # every run's column is in one block, each block led by the setpoints
+        assert sum(column in block.splitlines()[1] for block in blocks) == 1
+    assert all(block.splitlines()[2].startswith("3 m") for block in blocks)
+
+
+def test_table_3_gives_shares_of_a_rows_successes_only_across_several_speeds():
+    one_speed = [_sample(i, outcome="success" if i % 2 else "no_crash") for i in range(10)]
+    t3 = table_by_speed(one_speed)
+    assert t3.rows == (("knots bo rest", "5", "5"),) and "share" not in t3.title  # once "5 (100.0%)"
+    two = one_speed + [_sample(10 + i, speed_mps=30.0) for i in range(15)]
+    t3 = table_by_speed(two)
+    assert t3.rows == (("knots bo rest", "20", "5 (25.0%)", "15 (75.0%)"),)
+    assert "the share of the row's successes" in t3.title

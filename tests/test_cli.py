@@ -129,6 +129,14 @@ def test_falsify_then_export_and_replay_a_stored_sample(tmp_path, capsys):
     assert main(["export", str(db), "--out", str(csv_path)]) == 0
     lines = csv_path.read_text().splitlines()
     assert len(lines) == 7 and lines[0].startswith("sample_id,campaign_id,index,network") and lines[0].endswith(",m8")
+    import csv
+
+    rows = list(csv.DictReader(lines))
+    assert "min_gap_v0-v1_m,min_gap_v1-v2_m,min_gap_v2-v3_m,m0" in lines[0]
+    for row in rows:  # the minimum gaps agree with the outcome
+        gaps = [float(row[f"min_gap_v{i}-v{i + 1}_m"]) for i in range(3)]
+        expected = "attacker_crash" if gaps[0] < 0 else "success" if min(gaps[1:]) < 0 else "no_crash"
+        assert row["outcome"] == expected
 
     fcd = tmp_path / "best.xml"
     assert main(["replay", str(db), str(best), "--fcd", str(fcd), "--json"]) == 0
@@ -243,3 +251,46 @@ def test_falsify_says_how_to_go_on_with_a_campaign_an_earlier_version_ran(tmp_pa
     assert " ".join(f"--set search.{optimizer}.{k}={v}" for k, v in earlier.items()) in err and err.count("\n") == 1
     assert main([*run, "--samples", "3", *flags]) == 0
     assert capsys.readouterr().err == ""  # it went on with it
+
+
+@pytest.mark.sumo
+def test_a_resumed_campaigns_progress_bar_starts_at_what_is_stored_and_a_complete_one_shows_none(tmp_path, capsys):
+    db = str(tmp_path / "r.sqlite")
+    falsify = ["falsify", "--optimizer", "random", "--seed", "2", "--db", db]
+    assert main([*falsify, "--samples", "3"]) == 0
+    capsys.readouterr()
+    assert main([*falsify, "--samples", "3"]) == 0
+    err = capsys.readouterr().err
+    assert "all 3 samples stored already, nothing to run" in err and "sample/s" not in err and "0/3" not in err
+    assert main([*falsify, "--samples", "5"]) == 0
+    err = capsys.readouterr().err
+    assert "3 of 5 samples stored already: resuming" in err and "3/5" in err and "5/5" in err
+    assert "0/5" not in err and "1/5" not in err
+
+
+@pytest.mark.sumo
+def test_ctrl_c_in_falsify_says_where_the_samples_are_and_how_to_resume(tmp_path):
+    import os
+    import signal
+    import sqlite3
+    import time
+
+    db = tmp_path / "r.sqlite"
+    cmd = [sys.executable, "-m", "d4sumo.cli", "falsify", "--optimizer", "random", "--samples", "5000", "--db", str(db)]
+    restore = lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)  # noqa: E731 (a background shell ignores SIGINT)
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=restore)
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        try:
+            if sqlite3.connect(f"file:{db}?mode=ro", uri=True).execute("SELECT COUNT(*) FROM sample").fetchone()[0] >= 70:
+                break
+        except sqlite3.Error:
+            pass
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+    proc.wait(timeout=20)
+    err = proc.stderr.read().decode()
+    assert proc.returncode == 130 and "Traceback" not in err
+    assert f"campaign interrupted; every sample it finished is in {db}: run the same command to resume" in err
+    assert err.count("interrupted") == 1

@@ -50,3 +50,14 @@ def test_unknown_keys_are_refused():
 def test_warmup_must_be_a_whole_number_of_steps():
     with pytest.raises(ConfigError, match="scenario.warmup_s"):
         EpisodeConfig(start="warmup", warmup_s=15.02)
+
+
+def test_a_step_is_checked_only_against_the_times_the_episode_reads():
+    """`--step 0.03` once blamed scenario.lane_change_s (2 s, 66.7 steps) on an episode without a lane
+    change; the warm-up's length is read only with a warm-up."""
+    assert EpisodeConfig(step_s=0.03).steps == 2000
+    assert EpisodeConfig(step_s=0.07, warmup_s=15.0).start == "rest"
+    with pytest.raises(ConfigError, match=r"scenario.lane_change_s: got 2.0; allowed: a whole number of steps of 0.03 s"):
+        EpisodeConfig(step_s=0.03, maneuver="cutin")
+    with pytest.raises(ConfigError, match="scenario.warmup_s"):
+        EpisodeConfig(step_s=0.07, start="warmup", warmup_s=15.0)

@@ -204,6 +204,57 @@ def test_heatmap_cells_with_different_budgets_show_successes_of_samples():
     assert image.get_clim() == (0.0, 50.0)  # coloured by share: 2 of 4 is more than 1 of 10
 
 
+def _texts_apart_and_inside(fig) -> None:
+    """No two titles or axis labels overprint each other, and every one is inside the figure."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    whole = fig.bbox
+    boxes = []
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        for text in (ax.title, ax.yaxis.label, ax.xaxis.label):
+            if text.get_text():
+                box = text.get_window_extent(renderer)
+                assert whole.x0 - 1 <= box.x0 and box.x1 <= whole.x1 + 1 and whole.y0 - 1 <= box.y0 and box.y1 <= whole.y1 + 1, text.get_text()
+                boxes.append((text.get_text(), box))
+    for i, (a, box_a) in enumerate(boxes):
+        for b, box_b in boxes[i + 1:]:
+            assert not box_a.overlaps(box_b), (a, b)
+
+
+def test_heatmaps_of_many_systems_are_a_grid_with_each_name_once_and_nothing_overprinted():
+    """The systems sweep's report had 48 panels whose titles (system: run) overprinted each other."""
+    systems = [f"sumo:ACC(tau={t}, speedControlGainSpeed={g})" for t in (0.5, 1.0, 1.5, 2.0) for g in (0.5, 1.0, 1.5)]
+    rs = [_record(i, system=system, start=start, optimizer=optimizer, setpoint_m=d, speed_mps=v,
+                  outcome="success" if i % 3 == 0 else "no_crash")
+          for i, (system, start, optimizer, d, v) in enumerate(
+              itertools.product(systems, ("rest", "steady"), ("bo", "ce"), (3.0, 7.0, 11.0), (20.0, 30.0)))]
+    panels = figures.heatmap_panels(rs)
+    assert len(panels) == 48 and panels[0][0] == (systems[0], "knots, BO, start rest")
+    fig = figures.heatmaps_figure(panels, "successes", columns=figures.heatmap_columns(rs))
+    visible = [ax for ax in fig.axes if ax.images]
+    assert len(visible) == 48
+    titles = [ax.get_title() for ax in visible if ax.get_title()]
+    assert [t.replace("\n", " ") for t in titles] == ["knots, BO, start rest", "knots, BO, start steady",
+                                                      "knots, CE, start rest", "knots, CE, start steady"]
+    labels = " ".join(ax.get_ylabel().replace("\n", " ") for ax in visible)
+    assert all(labels.count(system) == 1 for system in systems) and fig.get_supylabel() == "setpoint [m]"
+    _texts_apart_and_inside(fig)
+
+
+def test_a_heatmap_of_one_cell_keeps_its_title_inside_its_panel():
+    rs = [_record(i, attack="intermittent", optimizer="ce-bucket", start="warmup", system="sumo:ACC(tau=0.5)")
+          for i in range(5)] + [_record(i, attack="intermittent", optimizer="ce-bucket", start="warmup") for i in range(5)]
+    for records in (rs, rs[5:]):
+        fig = figures.heatmaps_figure(figures.heatmap_panels(records), "Successful attacks over setpoint and target speed")
+        _texts_apart_and_inside(fig)
+        for ax in fig.axes:
+            if ax.images and ax.get_title():
+                box = ax.title.get_window_extent(fig.canvas.get_renderer())
+                assert box.width <= ax.get_window_extent().width + 1
+
+
 @pytest.mark.parametrize("background", [(0, 0, 0), (1, 1, 1), (0.27, 0.0, 0.33), (0.99, 0.9, 0.14), (0.13, 0.57, 0.55)])
 def test_text_colour_reads_on_any_cell(background):
     assert figures.contrast_ratio(background, figures.text_colour(background)) >= 4.5
