@@ -13,9 +13,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .config import EpisodeConfig
+from .control import names_only
 from .errors import ConfigError
 from .maneuvers import MANEUVERS, lane_change_steps
-from .store import Store
 
 #: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart
 MANEUVER_SETTINGS = tuple(dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"))
@@ -72,37 +72,38 @@ class Record:
                 self.system, self.maneuver, self.maneuver_settings, self.attack, self.optimizer)
 
 
-def attack_start_s(scenario: dict) -> float:
-    """When the attack starts in a stored scenario: after the warm-up drive, else at once."""
-    return float(scenario.get("warmup_s", 15.0)) if scenario.get("start") == "warmup" else 0.0
-
-
 def system_label(config: dict) -> str:
-    """The system under test of a stored campaign config, as EpisodeConfig.system_label names it."""
-    try:
+    """The system under test of a stored campaign config, as EpisodeConfig.system_label names it (a
+    user's controller by its name: nothing is imported)."""
+    with names_only():
         return EpisodeConfig.from_dict(config).system_label
-    except ConfigError:  # a user's controller not importable here: its class names still tell it
-        controller = config.get("controller", {})
-        tables = controller if isinstance(controller, list) else [controller]
-        return " / ".join(str(t.get("class", "switching")) if isinstance(t, dict) else str(t) for t in tables)
 
 
 def load_records(paths: Sequence[str | Path]) -> list[Record]:
+    """Every stored sample of the databases with its campaign's settings, read through the one reader of
+    stored campaigns (`Campaign.from_definition`: its defaults, nothing imported)."""
+    from .campaign import Campaign, open_store
+
     records: list[Record] = []
     for path in paths:
-        with Store(path, create=False) as store:
-            campaigns = {c.id: c.definition for c in store.campaigns()}
-            systems = {cid: system_label(d["config"]) for cid, d in campaigns.items()}
+        with open_store(path, create=False) as store:
+            campaigns = {c.id: Campaign.from_definition(c.definition, where=f"{path}: campaign {c.id}")
+                         for c in store.campaigns()}
+            rows = {}
+            for cid, c in campaigns.items():
+                cfg = c.config
+                start_s = cfg.warmup_s if cfg.start == "warmup" else 0.0
+                settings = ", ".join(f"{k}={v}" for k, v in cfg.to_dict()["scenario"].items() if k in MANEUVER_SETTINGS)
+                rows[cid] = (cfg.network, cfg.followers, cfg.setpoint_m, cfg.speed_mps, cfg.start, c.attack, c.optimizer,
+                             c.seed, c.delta_s if c.attack in ("knots", "spline") else None, start_s, cfg.system_label,
+                             cfg.maneuver, settings, cfg.step_s, start_s + cfg.duration_s)
             for s in store.iter_samples():
-                d = campaigns[s.campaign_id]
-                sc = d["config"]["scenario"]
+                (network, followers, setpoint, speed, start, attack, optimizer, seed, delta_s, start_s, system, maneuver,
+                 settings, step_s, end_s) = rows[s.campaign_id]
                 records.append(Record(
-                    str(path), s.id, s.campaign_id, sc["network"], sc["followers"], float(sc["setpoint_m"]),
-                    float(sc["speed_mps"]), sc["start"], d["attack"]["family"], d["optimizer"], d["seed"],
-                    d["attack"].get("delta_s"), s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m,
-                    s.speed_diff_kmh, attack_start_s(sc), systems[s.campaign_id], sc.get("maneuver", "inlane"),
-                    ", ".join(f"{k}={v}" for k, v in sc.items() if k in MANEUVER_SETTINGS),
-                    float(sc.get("step_s", 0.05)), attack_start_s(sc) + float(sc.get("duration_s", 60.0)),
+                    str(path), s.id, s.campaign_id, network, followers, setpoint, speed, start, attack, optimizer, seed,
+                    delta_s, s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m, s.speed_diff_kmh,
+                    start_s, system, maneuver, settings, step_s, end_s,
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")

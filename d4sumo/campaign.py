@@ -23,7 +23,8 @@ import numpy as np
 from .attacks import AttackFamily, make_attack
 from .batch import DEFAULT_BATCH, batch_key
 from .config import EpisodeConfig
-from .errors import ConfigError, SumoError, check_int, check_number
+from .control import ControllerImportError, names_only, user_module
+from .errors import ConfigError, D4sumoError, SumoError, check_int, check_number
 from .maneuvers import AttackPlan, attack_plan, maneuver_of
 from .optimizers import OPTIMIZERS, OPTIONS_SINCE, make_optimizer, resolve_options, stored_options
 from .scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
@@ -34,6 +35,7 @@ from .store import DefinitionError, Store, StoreError
 log = logging.getLogger(__name__)
 
 MAX_SAMPLES = 100_000
+_ANNOUNCED: set[str] = set()  # users' controller modules this process said it imports
 
 
 @dataclass(frozen=True)
@@ -102,8 +104,26 @@ class Campaign:
         }
 
     @classmethod
-    def from_definition(cls, definition: dict[str, Any], samples: int = 100, where: str = "the database") -> "Campaign":
-        """The campaign a stored definition describes; a damaged one is a StoreError naming ``where``."""
+    def from_definition(cls, definition: dict[str, Any], samples: int = 100, where: str = "the database", *,
+                        imports: bool = False) -> "Campaign":
+        """The campaign a stored definition describes, with its defaults for what earlier versions did not
+        store (the one reader of stored campaigns); a damaged one is a `DefinitionError` naming ``where``.
+
+        A user's follower controller is a name only (its module is not imported: reading a database
+        runs no code) unless ``imports``, for a campaign about to be simulated; then a module that does
+        not import here is a ConfigError saying how to make it importable, not damage."""
+        with names_only():
+            named = cls._from_definition(definition, samples, where)
+        if not imports or not named.user_modules:
+            return named
+        for module in named.user_modules:
+            if module not in _ANNOUNCED:  # once a process: a report replays many samples
+                _ANNOUNCED.add(module)
+                log.warning("importing %s (a follower controller of %s) to simulate it", module, where)
+        return cls._from_definition(definition, samples, where)
+
+    @classmethod
+    def _from_definition(cls, definition: dict[str, Any], samples: int, where: str) -> "Campaign":
         try:
             attack = definition["attack"]
             return cls(
@@ -120,15 +140,33 @@ class Campaign:
                                          **definition.get("optimizer_options", {})}.items()),
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),
             )
+        except ControllerImportError as exc:  # not damage: the database is fine, this machine lacks the module
+            raise D4sumoError(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None
         except ConfigError as exc:
             raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})", exc.field) from None
         except (KeyError, TypeError, AttributeError) as exc:
             raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})") from None
 
+    @property
+    def user_modules(self) -> list[str]:
+        """The modules of users' follower controllers this campaign imports to be simulated."""
+        return sorted({m for c in self.config.controllers if (m := user_module(c.cls))})
+
     def replace(self, **changes: Any) -> "Campaign":
         if "optimizer" in changes and "optimizer_options" not in changes:  # another optimiser: its own defaults
             changes["optimizer_options"] = ()
         return dataclasses.replace(self, **changes)
+
+
+def check_definition(definition: dict[str, Any], where: str) -> None:
+    """A stored definition describes a valid campaign (every value checked, nothing imported), else a
+    `DefinitionError` naming ``where``: the check a `Store` is given."""
+    Campaign.from_definition(definition, where=where)
+
+
+def open_store(path: str | Path, *, create: bool = True) -> Store:
+    """A results database whose campaign definitions are checked as campaigns (`check_definition`)."""
+    return Store(path, create=create, check_definition=check_definition)
 
 
 @dataclass(frozen=True)

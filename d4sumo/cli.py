@@ -288,9 +288,8 @@ def _print_summary(s: dict, road_name: str) -> None:
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .campaign import Evaluator, run_campaign
+    from .campaign import Evaluator, open_store, run_campaign
     from .inputs import campaign_of
-    from .store import Store
 
     doc, _ = document(args)
     campaign = campaign_of(doc)
@@ -298,7 +297,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     check_batch(args.batch)
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
-    with Store(args.db) as store, contextlib.ExitStack() as stack:
+    with open_store(args.db) as store, contextlib.ExitStack() as stack:
         known = store.find_campaign(campaign.definition())
         stored = 0 if known is None else sum(s.index < campaign.samples for s in store.iter_samples(known))
         if known is not None and not args.quiet:
@@ -366,15 +365,15 @@ def cmd_falsify(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from .campaign import Campaign, Evaluator
+    from .campaign import Campaign, Evaluator, open_store
     from .simulation import simulate
-    from .store import Store
 
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
-    with Store(args.db, create=False) as store:
+    with open_store(args.db, create=False) as store:
         row = store.sample(args.sample)
-        campaign = Campaign.from_definition(store.campaign(row.campaign_id).definition, where=str(args.db))
+        campaign = Campaign.from_definition(store.campaign(row.campaign_id).definition,
+                                            where=f"{args.db}: campaign {row.campaign_id}", imports=True)
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
     evaluator = Evaluator(campaign)
@@ -402,10 +401,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     import csv
 
     from .analysis import system_label
-    from .campaign import Campaign
-    from .store import Store
+    from .campaign import Campaign, open_store
 
-    with Store(args.db, create=False) as store:
+    with open_store(args.db, create=False) as store:
         campaigns = {c.id: c for c in store.campaigns()}
         if args.campaign is not None and args.campaign not in campaigns:
             raise ConfigError("--campaign", args.campaign, f"a campaign id of {args.db}: {', '.join(map(str, campaigns)) or 'none'}")
@@ -499,8 +497,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from .campaign import open_store
     from .report import build_report
-    from .store import Store
 
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")
@@ -509,7 +507,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if not 0 <= args.severe <= 100:
         raise ConfigError("--severe", args.severe, "a whole number in [0, 100]")
     for db in args.db:  # every database readable and sound before any output
-        with Store(db, create=False) as store:
+        with open_store(db, create=False) as store:
             store.campaigns()
             for _ in store.iter_samples():
                 pass

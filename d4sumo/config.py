@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 from . import carfollowing
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES
-from .control import VehicleParams, build_params, resolve_controller
+from .control import ControllerImportError, NotImported, VehicleParams, build_params, resolve_controller, user_module
 from .errors import ConfigError, check_int, check_number
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
@@ -51,8 +51,11 @@ class ControllerConfig:
         try:
             controller = resolve_controller(self.cls)
             resolved = build_params(controller, dict(self.params))  # validates every value
+        except NotImported:  # read by name only: its parameters as given
+            object.__setattr__(self, "params", tuple(self.params))
+            return
         except ConfigError as exc:  # name the follower of a mixed platoon: controller.v2.acc_kp
-            if self.where == "controller" or not exc.field.startswith("controller"):
+            if self.where == "controller" or not exc.field.startswith("controller") or isinstance(exc, ControllerImportError):
                 raise
             raise ConfigError(self.where + exc.field.removeprefix("controller"), exc.given, exc.allowed) from None
         object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
@@ -76,11 +79,10 @@ class ControllerConfig:
         """A short name for reports: the class and the parameters that differ from its defaults."""
         if self.sumo_model:
             defaults = dict(carfollowing.check_params(self.cls, {}))
-        else:
-            try:
-                defaults = dataclasses.asdict(self.controller_class().Params())
-            except (ConfigError, TypeError):
-                defaults = {}
+        elif user_module(self.cls) is None:
+            defaults = dataclasses.asdict(self.controller_class().Params())
+        else:  # a user's class is not imported for a name: every parameter is shown
+            defaults = {}
         changed = [f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.params if defaults.get(k) != v]
         return self.cls + (f"({', '.join(changed)})" if changed else "")
 

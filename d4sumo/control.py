@@ -11,9 +11,13 @@ protocol. (Followers driven by SUMO's own car-following models are named "sumo:M
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import importlib
 import math
+import os
+import sys
 from dataclasses import dataclass
 from typing import Any, Mapping, Protocol
 
@@ -269,8 +273,44 @@ def registered_controllers() -> tuple[str, ...]:
     return tuple(sorted(_REGISTRY))
 
 
+#: Whether a user's controller module may be imported here. Reading a results database someone sent
+#: must never run code: its readers name controllers without importing them (`names_only`).
+_IMPORTS = contextvars.ContextVar("d4sumo_controller_imports", default=True)
+
+
+class NotImported(ConfigError):
+    """A user's controller named where nothing may be imported (`names_only`)."""
+
+
+class ControllerImportError(ConfigError):
+    """A user's controller class that does not import here: says how to make it importable."""
+
+    def __init__(self, name: str, reason: Exception):
+        module = name.partition(":")[0]
+        self.hint = (f"{module} did not import here ({reason}): run from the folder that holds "
+                     f"{module.replace('.', '/')}.py, or put its folder on PYTHONPATH")
+        super().__init__("controller.class", name, f"an importable 'package.module:ClassName'; {self.hint}")
+
+
+@contextlib.contextmanager
+def names_only():
+    """Within it, a user's controller ("package.module:ClassName") is a name: nothing is imported, its
+    parameters are taken as stored, unchecked."""
+    token = _IMPORTS.set(False)
+    try:
+        yield
+    finally:
+        _IMPORTS.reset(token)
+
+
+def user_module(name: str) -> str | None:
+    """The module a controller name imports: None for a registered controller or a SUMO model."""
+    return name.partition(":")[0] if name not in _REGISTRY and ":" in name and not name.startswith("sumo:") else None
+
+
 def resolve_controller(name: str) -> type:
-    """A registered name, or "package.module:ClassName" for a user's own controller class.
+    """A registered name, or "package.module:ClassName" for a user's own controller class, found as
+    Python's ``-m`` would: installed, on PYTHONPATH, or in the current folder.
 
     (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
     if name in _REGISTRY:
@@ -278,11 +318,16 @@ def resolve_controller(name: str) -> type:
     allowed = f"one of {', '.join(registered_controllers())}, a SUMO model as 'sumo:MODEL' or 'package.module:ClassName'"
     if ":" not in name:
         raise ConfigError("controller.class", name, allowed)
+    if not _IMPORTS.get():
+        raise NotImported("controller.class", name, "a controller read by its name only (nothing is imported here)")
     module_name, _, attr = name.partition(":")
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:  # the `d4sumo` script does not see the current folder
+        sys.path.append(cwd)
     try:
         cls = getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError, ValueError) as exc:
-        raise ConfigError("controller.class", name, f"{allowed} (import failed: {exc})") from None
+        raise ControllerImportError(name, exc) from None
     if not isinstance(getattr(cls, "Params", None), type) or not callable(getattr(cls, "command", None)):
         raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
     return cls

@@ -27,10 +27,10 @@ from .analysis import (
     table_success_statistics,
     table_systems,
 )
-from .campaign import Campaign, Evaluator
+from .campaign import Campaign, Evaluator, open_store
 from .errors import ConfigError
 from .simulation import simulate
-from .store import Store, collision_dict
+from .store import collision_dict
 
 log = logging.getLogger(__name__)
 
@@ -40,9 +40,9 @@ SEVERITY = "largest speed difference between the colliding cars at the first col
 
 def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
     """Re-simulate a stored sample into an FCD file; returns the parsed FCD."""
-    with Store(record.db, create=False) as store:
+    with open_store(record.db, create=False) as store:
         definition = store.campaign(record.campaign_id).definition
-    campaign = Campaign.from_definition(definition)
+    campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
     evaluator = Evaluator(campaign)
     simulate(campaign.config, evaluator.plan(record.params), road=evaluator.road, fcd_path=fcd_path)
     return figures.read_fcd(fcd_path)

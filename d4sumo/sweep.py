@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .batch import batch_key
-from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, step_together, stored_results
+from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, open_store, step_together, stored_results
 from .config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
@@ -316,7 +316,7 @@ def run_sweep(
     with contextlib.ExitStack() as stack:
         # the cluster first: an unreachable scheduler leaves no database behind
         client = stack.enter_context(_dask_client(dask_address, dask_timeout_s, workers)) if dask_address else None
-        store = stack.enter_context(Store(db_path))
+        store = stack.enter_context(open_store(db_path))
         claim(store, sweep)
         todo: list[_Active] = []
         for c in sweep.campaigns:

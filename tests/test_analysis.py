@@ -10,7 +10,6 @@ import pytest
 
 from d4sumo.analysis import (
     Record,
-    attack_start_s,
     cluster_knots,
     count_noun,
     elbow,
@@ -24,6 +23,7 @@ from d4sumo.analysis import (
     table_success_statistics,
 )
 from d4sumo.attacks import make_attack
+from d4sumo.config import EpisodeConfig
 
 
 @pytest.mark.sumo
@@ -69,11 +69,18 @@ def _record(params, time_s=10.0, **changes):
 # --- time from the attack's start, Table 1 ----------------------------------------------------------
 
 
-def test_attack_start_comes_from_the_stored_scenario():
-    assert attack_start_s({"start": "rest"}) == 0.0
-    assert attack_start_s({"start": "steady", "warmup_s": 20.0}) == 0.0  # no warm-up: attack at once
-    assert attack_start_s({"start": "warmup", "warmup_s": 10.0}) == 10.0
-    assert attack_start_s({"start": "warmup"}) == 15.0  # the default warm-up when the key is absent
+def test_records_read_stored_campaigns_through_the_one_reader_with_its_defaults(tmp_path):
+    """A warm-up campaign stored without warmup_s (an earlier version's) starts its attack at the
+    default 15 s, from EpisodeConfig's defaults, not from a copy of them here."""
+    from d4sumo.campaign import Campaign, open_store
+
+    definition = Campaign(config=EpisodeConfig(start="warmup", warmup_s=15.0, step_s=0.1)).definition()
+    del definition["config"]["scenario"]["warmup_s"]
+    with open_store(tmp_path / "r.sqlite") as store:
+        cid = store.open_campaign(definition, 1)
+        store.add_sample(cid, 0, (0.0,) * 9, -1.0, "no_crash", None, {"v0-v1": 7.0}, 0.1, None)
+    (record,) = load_records([tmp_path / "r.sqlite"])
+    assert (record.attack_start_s, record.end_s, record.step_s, record.start) == (15.0, 75.0, 0.1, "warmup")
 
 
 def test_the_lane_change_is_marked_only_when_it_began_before_the_episode_ended():
@@ -266,7 +273,8 @@ def test_tables_split_by_system_when_several_were_attacked():
     assert len(most_severe(paper + acc, 3)) == 1  # one configuration with successes
     assert system_label({"controller": [{"class": "sumo:ACC", "tau": 0.5}, {"class": "switching"}, "sumo:IDM"]}) \
         == "sumo:ACC(tau=0.5) / switching / sumo:IDM"
-    assert system_label({"controller": {"class": "nowhere.module:Ctl", "gain": 1}}) == "nowhere.module:Ctl"
+    # a user's controller by its name and parameters: nothing imported
+    assert system_label({"controller": {"class": "nowhere.module:Ctl", "gain": 1}}) == "nowhere.module:Ctl(gain=1)"
 
 
 def test_near_copies_of_one_attack_count_once():

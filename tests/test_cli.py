@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -294,3 +295,61 @@ def test_ctrl_c_in_falsify_says_where_the_samples_are_and_how_to_resume(tmp_path
     assert proc.returncode == 130 and "Traceback" not in err
     assert f"campaign interrupted; every sample it finished is in {db}: run the same command to resume" in err
     assert err.count("interrupted") == 1
+
+
+MYCTL = '''
+import pathlib
+pathlib.Path("imported.marker").write_text("myctl ran")
+
+from dataclasses import dataclass
+
+from d4sumo.control import SwitchingController, SwitchingParams
+
+
+class Gentle(SwitchingController):
+    """A user's controller: the paper's, with its own parameter table."""
+
+    @dataclass(frozen=True)
+    class Params(SwitchingParams):
+        gentle: float = 1.0
+'''
+
+
+@pytest.mark.sumo
+def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_imports_nothing(tmp_path):
+    """A module beside the user (python -m's rule) is a controller; reading a database that names one
+    (export, the tables) never imports it; replaying says it imports it, and without it says how to
+    make it importable, not "damaged"."""
+    (tmp_path / "myctl.py").write_text(MYCTL)
+    marker = tmp_path / "imported.marker"
+
+    script = Path(sys.executable).parent / "d4sumo"  # the installed command: its sys.path lacks the current folder
+    assert script.is_file()
+
+    def d4sumo(*argv, cwd=tmp_path):
+        return subprocess.run([str(script), *argv], cwd=cwd, capture_output=True, text=True, timeout=120)
+
+    done = d4sumo("falsify", "--controller", "myctl:Gentle", "--optimizer", "random", "--samples", "3", "--db", "r.sqlite",
+                  "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert marker.is_file()
+    marker.unlink()
+    exported = d4sumo("export", "r.sqlite")
+    assert exported.returncode == 0 and "myctl:Gentle(" in exported.stdout.splitlines()[1]
+    from d4sumo.analysis import load_records
+
+    records = load_records([tmp_path / "r.sqlite"])
+    assert len(records) == 3 and records[0].system.startswith("myctl:Gentle(")
+    assert not marker.exists(), "reading a database imported the controller it names"
+    replayed = d4sumo("replay", "r.sqlite", "1")
+    assert replayed.returncode == 0, replayed.stderr
+    assert "importing myctl (a follower controller of r.sqlite: campaign 1) to simulate it" in replayed.stderr
+    assert marker.is_file()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    refused = d4sumo("replay", str(tmp_path / "r.sqlite"), "1", cwd=elsewhere)
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr and "damaged" not in refused.stderr
+    assert refused.stderr.count("\n") == 2  # the import note, and one line of why
+    assert ("its follower controller myctl:Gentle cannot be simulated here: myctl did not import here "
+            "(No module named 'myctl'): run from the folder that holds myctl.py, or put its folder on PYTHONPATH"
+            in refused.stderr)

@@ -24,14 +24,14 @@ from pathlib import Path
 from d4sumo.batch import DEFAULT_BATCH
 from d4sumo.config import read_toml
 from d4sumo.inputs import with_overrides
-from d4sumo.store import Store
+from d4sumo.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 
 HERE = Path(__file__).resolve().parent.parent
 
 
 def signature(db: Path) -> list:
-    with Store(db, create=False) as store:
+    with open_store(db, create=False) as store:
         keys = {c.id: c.key for c in store.campaigns()}
         return sorted((keys[s.campaign_id], s.index, s.params, s.robustness) for s in store.samples())
 

@@ -42,7 +42,7 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.attacks import FAMILIES
 from d4sumo.batch import batch_key
-from d4sumo.campaign import Campaign, Evaluator
+from d4sumo.campaign import Campaign, Evaluator, open_store
 from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.errors import ConfigError
 from d4sumo.maneuvers import attack_plan, maneuver_of, occupied_lanes
@@ -234,7 +234,7 @@ def main(argv=None) -> int:
     examples: dict[str, str] = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        store = Store(Path(tmp) / "invariants.sqlite")
+        store = open_store(Path(tmp) / "invariants.sqlite")
         fcd = Path(tmp) / "fcd.xml"
         for index in range(args.n):
             campaign, params = random_episode(rng)

@@ -31,7 +31,7 @@ from d4sumo.config import read_toml
 from d4sumo.inputs import with_overrides
 from d4sumo.figures import heatmap_columns, heatmap_panels, heatmaps
 from d4sumo.report import describe, plot_sample
-from d4sumo.store import Store
+from d4sumo.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -64,7 +64,7 @@ def run_all(folder: Path, workers: int) -> dict[str, float | None]:
         db = folder / f"{name}.sqlite"
         before = 0
         if db.exists():
-            with Store(db, create=False) as store:
+            with open_store(db, create=False) as store:
                 before = sum(store.count_samples(c.id) for c in store.campaigns())
         started = time.perf_counter()
         result = run_sweep(sweep_of(name), db, workers=workers)
