@@ -15,7 +15,7 @@ import numpy as np
 from .config import EpisodeConfig
 from .control import names_only
 from .errors import ConfigError
-from .maneuvers import MANEUVERS, lane_change_steps
+from .maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
 
 #: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart
 MANEUVER_SETTINGS = tuple(dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"))
@@ -50,6 +50,7 @@ class Record:
     maneuver_settings: str = ""  # its settings ("cutin_follower=2, cutin_offset_m=0.0, lane_change_s=2.0")
     step_s: float = 0.05
     end_s: float = 60.0  # when the episode ends without a collision (warm-up included)
+    param_names: tuple[str, ...] = ()  # the attack parameters' names, as the family (and maneuver) name them
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -60,9 +61,10 @@ class Record:
     def lane_change_at_s(self) -> float | None:
         """When the attacker began its lane change, in simulation time (None: the paper's maneuver, or an
         episode that ended before the change began)."""
-        if self.maneuver == "inlane":
+        if LANE_CHANGE_PARAMETER not in self.param_names:
             return None
-        at = self.attack_start_s + lane_change_steps(self.params[-1], self.step_s) * self.step_s  # as played
+        t_lc_s = self.params[self.param_names.index(LANE_CHANGE_PARAMETER)]
+        at = self.attack_start_s + lane_change_steps(t_lc_s, self.step_s) * self.step_s  # as played
         return None if at >= (self.end_s if self.time_s is None else self.time_s) else at
 
     @property
@@ -95,15 +97,15 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                 start_s = cfg.warmup_s if cfg.start == "warmup" else 0.0
                 settings = ", ".join(f"{k}={v}" for k, v in cfg.to_dict()["scenario"].items() if k in MANEUVER_SETTINGS)
                 rows[cid] = (cfg.network, cfg.followers, cfg.setpoint_m, cfg.speed_mps, cfg.start, c.attack, c.optimizer,
-                             c.seed, c.delta_s if c.attack in ("knots", "spline") else None, start_s, cfg.system_label,
-                             cfg.maneuver, settings, cfg.step_s, start_s + cfg.duration_s)
+                             c.seed, dict(c.attack_options).get("delta_s"), start_s, cfg.system_label,
+                             cfg.maneuver, settings, cfg.step_s, start_s + cfg.duration_s, c.family().names)
             for s in store.iter_samples():
                 (network, followers, setpoint, speed, start, attack, optimizer, seed, delta_s, start_s, system, maneuver,
-                 settings, step_s, end_s) = rows[s.campaign_id]
+                 settings, step_s, end_s, names) = rows[s.campaign_id]
                 records.append(Record(
                     str(path), s.id, s.campaign_id, network, followers, setpoint, speed, start, attack, optimizer, seed,
                     delta_s, s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m, s.speed_diff_kmh,
-                    start_s, system, maneuver, settings, step_s, end_s,
+                    start_s, system, maneuver, settings, step_s, end_s, names,
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
@@ -27,10 +27,18 @@ class Parameter:
 
 
 class AttackFamily:
-    """A parametric family of attack signals over a box of parameters."""
+    """A parametric family of attack signals over a box of parameters.
+
+    A family owns its name, its box (``parameters``) and its options (``OPTIONS``: name -> (default,
+    low, high, unit), given in a config's ``[attack]`` table and stored resolved in each campaign's
+    definition). A new family is a new class here and one line in `FAMILY_CLASSES`."""
 
     name: str = ""
     parameters: tuple[Parameter, ...] = ()
+    OPTIONS: dict[str, tuple[float, float, float, str]] = {}
+
+    def __init__(self, **options: float):
+        self.options = resolve_attack_options(self.name, options)
 
     @property
     def dimension(self) -> int:
@@ -64,6 +72,10 @@ class AttackFamily:
 
     def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+    def lane_change_s(self, params: Sequence[float]) -> float | None:
+        """When the attacker begins a lane change (seconds from the attack's start), if it makes one."""
+        return None
 
     def describe(self) -> dict:
         return {"family": self.name, "parameters": [p.__dict__ for p in self.parameters]}
@@ -147,57 +159,84 @@ class Sine(AttackFamily):
 
 
 class Knots(AttackFamily):
-    """The nonparametric attack: one command every ``delta_s`` up to ``horizon_s``, interpolated.
-
-    ``pchip`` (default) is monotone between knots and never overshoots [-1, 1]; ``spline`` is the
-    authors' cubic spline with the overshoot clipped, kept for comparison. After the horizon the
-    last knot's value is held.
+    """The nonparametric attack: one command every ``delta_s`` up to ``horizon_s``, joined by PCHIP
+    (monotone between knots, never overshooting [-1, 1]). After the horizon the last knot's value is held.
     """
 
     name = "knots"
-    INTERPOLATIONS = ("pchip", "spline")
+    OPTIONS = {"delta_s": (6.0, 0.05, 600.0, "seconds"), "horizon_s": (48.0, 0.05, 3600.0, "seconds")}
 
-    def __init__(self, delta_s: float = 6.0, horizon_s: float = 48.0, interpolation: str = "pchip"):
-        delta_s = check_number("attack.delta_s", delta_s, 0.05, 600.0, "seconds")
-        horizon_s = check_number("attack.horizon_s", horizon_s, delta_s, 3600.0, f"seconds (at least delta_s = {delta_s:g})")
+    def __init__(self, **options: float):
+        super().__init__(**options)
+        delta_s, horizon_s = self.options["delta_s"], self.options["horizon_s"]
+        if horizon_s < delta_s:
+            raise ConfigError("attack.horizon_s", horizon_s, f"a number in [{delta_s:g}, 3600] seconds (at least delta_s = {delta_s:g})")
         count = horizon_s / delta_s
         if abs(count - round(count)) > 1e-9:
             raise ConfigError("attack.horizon_s", horizon_s, f"a whole multiple of delta_s={delta_s:g} s")
-        if interpolation not in self.INTERPOLATIONS:
-            raise ConfigError("attack.interpolation", interpolation, f"one of {', '.join(self.INTERPOLATIONS)}")
-        self.delta_s = float(delta_s)
-        self.horizon_s = float(horizon_s)
-        self.interpolation = interpolation
-        self.name = "knots" if interpolation == "pchip" else "spline"
+        self.delta_s, self.horizon_s = delta_s, horizon_s
         self.knot_times_s = np.arange(int(round(count)) + 1) * self.delta_s
         self.parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(self.knot_times_s.size))
 
     def _signal(self, x, t):
         tk = self.knot_times_s
         tc = np.clip(t, tk[0], tk[-1])  # hold the last value after the horizon
-        if self.interpolation == "pchip":
-            return PchipInterpolator(tk, x)(tc)
-        return CubicSpline(tk, x)(tc)
+        return PchipInterpolator(tk, x)(tc)
 
     def describe(self) -> dict:
-        d = super().describe()
-        d.update(delta_s=self.delta_s, horizon_s=self.horizon_s, interpolation=self.interpolation)
-        return d
+        return {**super().describe(), **self.options}
 
 
-FAMILIES = ("constant", "persistent", "intermittent", "sine", "knots", "spline")
+class Spline(Knots):
+    """The knots joined as the authors' code joins them: a cubic spline, its overshoot clipped to
+    [-1, 1]; kept for comparison."""
+
+    name = "spline"
+
+    def _signal(self, x, t):
+        tk = self.knot_times_s
+        return CubicSpline(tk, x)(np.clip(t, tk[0], tk[-1]))
 
 
-def make_attack(name: str, *, delta_s: float = 6.0, horizon_s: float = 48.0) -> AttackFamily:
-    """An attack family by name; ``spline`` is ``knots`` with the authors' cubic spline."""
-    if name == "knots":
-        return Knots(delta_s, horizon_s, "pchip")
-    if name == "spline":
-        return Knots(delta_s, horizon_s, "spline")
-    simple = {"constant": Constant, "persistent": Persistent, "intermittent": Intermittent, "sine": Sine}
-    if name not in simple:
+#: every attack family by name; a new family is a class above and a line here
+FAMILY_CLASSES: dict[str, type[AttackFamily]] = {
+    "constant": Constant,
+    "persistent": Persistent,
+    "intermittent": Intermittent,
+    "sine": Sine,
+    "knots": Knots,
+    "spline": Spline,
+}
+FAMILIES = tuple(FAMILY_CLASSES)
+#: every family's options: the keys an [attack] table may hold besides family and params
+ATTACK_OPTIONS = tuple(dict.fromkeys(k for cls in FAMILY_CLASSES.values() for k in cls.OPTIONS))
+
+
+def _family_class(name: str) -> type[AttackFamily]:
+    if name not in FAMILY_CLASSES:
         raise ConfigError("attack", name, f"one of {', '.join(FAMILIES)}")
-    return simple[name]()
+    return FAMILY_CLASSES[name]
+
+
+def resolve_attack_options(name: str, options: Mapping[str, object] | None) -> dict[str, float]:
+    """Every option of family ``name``, defaults filled in, each value checked. ``options`` may hold
+    other families' options too (one [attack] table for a sweep of several families): each is
+    checked by the family that reads it, and left out here."""
+    options = dict(options or {})
+    for key, value in options.items():
+        owners = [cls for cls in FAMILY_CLASSES.values() if key in cls.OPTIONS]
+        if not owners:
+            raise ConfigError(f"attack.{key}", value, f"an option of an attack family: {', '.join(ATTACK_OPTIONS)}")
+        _, low, high, unit = owners[0].OPTIONS[key]
+        check_number(f"attack.{key}", value, low, high, unit)
+    return {key: check_number(f"attack.{key}", options.get(key, default), low, high, unit)
+            for key, (default, low, high, unit) in _family_class(name).OPTIONS.items()}
+
+
+def make_attack(name: str, options: Mapping[str, object] | None = None, **more: object) -> AttackFamily:
+    """An attack family by name, with its options (a mapping, or keywords: ``delta_s=4``); options of
+    other families are checked and left out."""
+    return _family_class(name)(**resolve_attack_options(name, {**dict(options or {}), **more}))
 
 
 def attack_signal(family: AttackFamily | None, params: Sequence[float] | None, *, steps: int, step_s: float,

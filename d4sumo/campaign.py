@@ -20,7 +20,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .attacks import AttackFamily, make_attack
+from .attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from .batch import DEFAULT_BATCH, batch_key
 from .config import EpisodeConfig
 from .control import ControllerImportError, names_only, user_module
@@ -47,8 +47,7 @@ class Campaign:
     seed: int = 0
     d_safe_m: float = 0.0
     formula: str | None = None
-    delta_s: float = 6.0  # knot spacing (knots/spline)
-    horizon_s: float = 48.0  # last knot (knots/spline)
+    attack_options: tuple[tuple[str, float], ...] = ()  # the attack family's options (knots: delta_s, horizon_s), resolved
     optimizer_options: tuple[tuple[str, Any], ...] = ()  # the [search.<optimizer>] table, resolved
     #: score the specification from the attack's start (after a warm-up); campaigns stored before this
     #: existed scored the whole episode, and keep doing so
@@ -58,9 +57,11 @@ class Campaign:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
         if not isinstance(self.config, EpisodeConfig):
             raise ConfigError("config", self.config, "an EpisodeConfig")
-        fix("delta_s", check_number("attack.delta_s", self.delta_s, 0.05, 600.0, "seconds"))
-        fix("horizon_s", check_number("attack.horizon_s", self.horizon_s, 0.05, 3600.0, "seconds"))
-        self.family()  # validates attack, delta_s, horizon_s
+        if not isinstance(self.attack, str) or self.attack not in FAMILIES:
+            raise ConfigError("attack.family", self.attack, f"one of {', '.join(FAMILIES)}")
+        attack_options = dict(self.attack_options) if not isinstance(self.attack_options, dict) else self.attack_options
+        fix("attack_options", tuple(resolve_attack_options(self.attack, attack_options).items()))
+        self.family()  # validates the options together (knots: a horizon of whole steps of delta_s)
         if self.optimizer not in OPTIMIZERS:
             raise ConfigError("search.optimizer", self.optimizer, f"one of {', '.join(OPTIMIZERS)}")
         fix("samples", check_int("search.samples", self.samples, 1, MAX_SAMPLES))
@@ -79,7 +80,7 @@ class Campaign:
 
     def family(self) -> AttackFamily:
         """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes."""
-        return maneuver_of(self.config).family(make_attack(self.attack, delta_s=self.delta_s, horizon_s=self.horizon_s))
+        return maneuver_of(self.config).family(make_attack(self.attack, dict(self.attack_options)))
 
     def specification(self) -> Specification:
         c = self.config
@@ -89,9 +90,7 @@ class Campaign:
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""
-        attack: dict[str, Any] = {"family": self.attack}
-        if self.attack in ("knots", "spline"):
-            attack.update(delta_s=self.delta_s, horizon_s=self.horizon_s)
+        attack: dict[str, Any] = {"family": self.attack, **dict(self.attack_options)}
         return {
             "config": self.config.to_dict(),
             "attack": attack,
@@ -134,8 +133,7 @@ class Campaign:
                 seed=definition["seed"],
                 d_safe_m=definition["spec"]["d_safe_m"],
                 formula=definition["spec"]["formula"],
-                delta_s=attack.get("delta_s", 6.0),
-                horizon_s=attack.get("horizon_s", 48.0),
+                attack_options=tuple((k, v) for k, v in attack.items() if k != "family"),
                 optimizer_options=tuple({**OPTIONS_SINCE.get(definition["optimizer"], {}),
                                          **definition.get("optimizer_options", {})}.items()),
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),

@@ -8,7 +8,7 @@ A document is the tables of a config file:
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
     [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
-    [attack]     family, params (simulate only), delta_s, horizon_s
+    [attack]     family, params (simulate only), and the families' options (knots: delta_s, horizon_s)
     [spec]       d_safe_m, formula
     [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
 
@@ -25,10 +25,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .attacks import FAMILIES, AttackFamily, make_attack
+from .attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from .campaign import Campaign
 from .config import EpisodeConfig, VehicleParams, read_toml
-from .errors import ConfigError, check_number, is_number
+from .errors import ConfigError, is_number
 from .maneuvers import maneuver_of
 from .optimizers import OPTIMIZERS, resolve_options
 
@@ -37,11 +37,10 @@ SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.nam
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "scenario": SCENARIO_KEYS,
     "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
-    "attack": ("family", "params", "delta_s", "horizon_s"),
+    "attack": ("family", "params", *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
 }
-DEFAULTS = {"attack.delta_s": 6.0, "attack.horizon_s": 48.0}
 
 
 def read_document(path, field: str = "--config", extra_keys: tuple[str, ...] = ()) -> dict:
@@ -118,7 +117,7 @@ def _follower_key(controllers: list, dotted: str, value: Any) -> list:
 
 def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
     table, _, key = dotted.partition(".")
-    return doc.get(table, {}).get(key, DEFAULTS.get(dotted, default))
+    return doc.get(table, {}).get(key, default)
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
@@ -129,7 +128,12 @@ def _family(doc: Mapping[str, Any], choices=FAMILIES) -> AttackFamily:
     name = _get(doc, "attack.family", "knots")
     if not isinstance(name, str) or name not in choices:
         raise ConfigError("attack.family", _short(name), f"one of {', '.join(choices)}")
-    return make_attack(name, delta_s=_get(doc, "attack.delta_s"), horizon_s=_get(doc, "attack.horizon_s"))
+    return make_attack(name, _attack_options(doc))
+
+
+def _attack_options(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The [attack] table's family options (every family's: each family reads its own)."""
+    return {k: v for k, v in doc.get("attack", {}).items() if k in ATTACK_OPTIONS}
 
 
 def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
@@ -141,9 +145,7 @@ def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
 def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
     """The one attack an episode plays: (family, parameter vector), or (None, None) for no attack."""
     attack = doc.get("attack", {})
-    for key, low, high in (("delta_s", 0.05, 600.0), ("horizon_s", 0.05, 3600.0)):
-        if key in attack:
-            check_number(f"attack.{key}", attack[key], low, high, "seconds")
+    resolve_attack_options("constant", _attack_options(doc))  # every option given is checked, read or not
     if "family" not in attack:
         if "params" in attack:
             raise ConfigError("attack.params", _short(attack["params"]), "parameters with an attack family (--attack or [attack] family)")
@@ -178,8 +180,7 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         seed=_get(doc, "search.seed", 0),
         d_safe_m=_get(doc, "spec.d_safe_m", 0.0),
         formula=_get(doc, "spec.formula"),
-        delta_s=_get(doc, "attack.delta_s"),
-        horizon_s=_get(doc, "attack.horizon_s"),
+        attack_options=tuple(family.options.items()),
         optimizer_options=tuple(options.items()),
     )
 

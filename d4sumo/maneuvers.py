@@ -199,17 +199,28 @@ def maneuver_of(config: "EpisodeConfig") -> Maneuver:
     return MANEUVERS[config.maneuver](config)
 
 
+#: the attack parameter of a lane-changing maneuver: when the attacker begins its lane change (seconds
+#: from the attack's start)
+LANE_CHANGE_PARAMETER = "t_lc_s"
+
+
 class LaneChangeAttack(AttackFamily):
-    """A longitudinal attack family plus the time of the attacker's lane change, ``t_lc_s`` (seconds
-    from the attack's start, the box's last parameter). Its name stays the longitudinal family's."""
+    """A longitudinal attack family plus the time of the attacker's lane change, `LANE_CHANGE_PARAMETER`
+    (found in the box by its name). Its name and options stay the longitudinal family's."""
 
     def __init__(self, longitudinal: AttackFamily, window_s: float):
         self.longitudinal = longitudinal
         self.name = longitudinal.name
-        self.parameters = (*longitudinal.parameters, Parameter("t_lc_s", 0.0, float(window_s), "s"))
+        self.options = longitudinal.options
+        self.parameters = (*longitudinal.parameters, Parameter(LANE_CHANGE_PARAMETER, 0.0, float(window_s), "s"))
+        self._lane_change = self.names.index(LANE_CHANGE_PARAMETER)
+        self._signal_index = [i for i in range(self.dimension) if i != self._lane_change]
 
     def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return self.longitudinal._signal(x[:-1], t)
+        return self.longitudinal._signal(x[self._signal_index], t)
+
+    def lane_change_s(self, params) -> float:
+        return float(self.check(params)[self._lane_change])
 
     def describe(self) -> dict:
         d = self.longitudinal.describe()
@@ -232,9 +243,10 @@ def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") ->
     from .attacks import attack_signal
 
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
-    if not isinstance(family, LaneChangeAttack):
+    t_lc_s = family.lane_change_s(params) if family is not None else None
+    if t_lc_s is None:
         return AttackPlan(u)
-    step = config.attack_start_step + lane_change_steps(float(family.check(params)[-1]), config.step_s)
+    step = config.attack_start_step + lane_change_steps(t_lc_s, config.step_s)
     return AttackPlan(u, step if step < config.steps else None)
 
 

@@ -61,8 +61,9 @@ def test_success_grid_and_most_severe(small_db):
 
 
 def _record(params, time_s=10.0, **changes):
+    names = tuple(f"m{i}" for i in range(9)) + (("t_lc_s",) if len(params) == 10 else ())  # a lane change time: by name
     r = Record("db", 0, 0, "n", 3, 7.0, 25.0, "rest", "knots", "bo", 0, 6.0, tuple(params), 0.1, "success",
-               "v1-v2", time_s, 100.0, 10.0)
+               "v1-v2", time_s, 100.0, 10.0, param_names=names[:len(params)])
     return dataclasses.replace(r, **changes)
 
 

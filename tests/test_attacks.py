@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d4sumo.attacks import FAMILIES, Intermittent, Knots, make_attack
+from d4sumo.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, make_attack
 from d4sumo.errors import ConfigError
 
 TIMES = np.arange(1200) * 0.05
@@ -29,7 +29,7 @@ def test_every_point_of_the_box_is_a_valid_attack(name):
 
 def test_pchip_knots_never_overshoot_while_the_cubic_spline_would():
     rng = np.random.default_rng(3)
-    pchip, spline = Knots(), Knots(interpolation="spline")
+    pchip, spline = Knots(), Spline()
     overshoots = 0
     for x in rng.choice([-1.0, 1.0], size=(50, pchip.dimension)):
         u = pchip.signal(x, TIMES)
@@ -90,7 +90,22 @@ def test_unknown_family_lists_the_allowed_ones():
         make_attack("zigzag")
 
 
-@pytest.mark.parametrize("kwargs", [dict(delta_s=0.0), dict(horizon_s=47.0), dict(interpolation="linear")])
-def test_bad_knot_settings(kwargs):
-    with pytest.raises(ConfigError):
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(delta_s=0.0), r"attack.delta_s: got 0.0; allowed: a number in \[0.05, 600\] seconds"),
+    (dict(horizon_s=47.0), "attack.horizon_s: got 47.0; allowed: a whole multiple of delta_s=6 s"),
+    (dict(interpolation="linear"), "attack.interpolation: got 'linear'; allowed: an option of an attack family: delta_s, horizon_s"),
+])
+def test_bad_knot_settings(kwargs, message):
+    with pytest.raises(ConfigError, match=message):
         Knots(**kwargs)
+
+
+def test_a_family_owns_its_options_and_leaves_other_families_options_out():
+    """One [attack] table serves a sweep of several families: each reads its own options."""
+    assert make_attack("knots", {"delta_s": 4, "horizon_s": 8}).options == {"delta_s": 4.0, "horizon_s": 8.0}
+    assert make_attack("knots", delta_s=4, horizon_s=8).names == ("m0", "m1", "m2")
+    assert make_attack("spline").options == {"delta_s": 6.0, "horizon_s": 48.0}
+    assert make_attack("persistent", {"delta_s": 4}).options == {}
+    with pytest.raises(ConfigError, match="attack.delta_s: got -1"):  # checked even where not read
+        make_attack("persistent", {"delta_s": -1})
+    assert set(FAMILY_CLASSES) == set(FAMILIES) and all(FAMILY_CLASSES[n].name == n for n in FAMILIES)

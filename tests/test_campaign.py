@@ -129,10 +129,10 @@ def test_robustness_positive_exactly_for_successes_with_the_papers_psi():
     "changes, field",
     [
         (dict(optimizer="annealing"), "search.optimizer"),
-        (dict(attack="zigzag"), "attack"),
+        (dict(attack="zigzag"), "attack.family"),
         (dict(samples=0), "search.samples"),
         (dict(seed=-1), "search.seed"),
-        (dict(delta_s=5.0), "attack.horizon_s"),
+        (dict(attack_options={"delta_s": 5.0}), "attack.horizon_s"),
     ],
 )
 def test_bad_campaigns_name_the_field(changes, field):
@@ -186,8 +186,8 @@ def test_numpy_scalars_are_accepted_and_7_and_7_0_are_the_same_campaign():
     from d4sumo.store import campaign_key
 
     a = Campaign(config=EpisodeConfig(setpoint_m=7, followers=np.int64(3), speed_mps=np.float32(25.0)), samples=np.int64(5),
-                 seed=np.int32(1), delta_s=np.float64(6))
-    b = Campaign(config=EpisodeConfig(setpoint_m=7.0, followers=3, speed_mps=25.0), samples=5, seed=1, delta_s=6.0)
+                 seed=np.int32(1), attack_options={"delta_s": np.float64(6)})
+    b = Campaign(config=EpisodeConfig(setpoint_m=7.0, followers=3, speed_mps=25.0), samples=5, seed=1, attack_options={"delta_s": 6})
     assert campaign_key(a.definition()) == campaign_key(b.definition())
     assert type(a.config.setpoint_m) is float and type(a.seed) is int
 
