@@ -511,6 +511,10 @@ def cmd_report(args: argparse.Namespace) -> int:
             store.campaigns()
             for _ in store.iter_samples():
                 pass
+    try:  # a folder that can be made here (/proc's parent exists, yet nothing can be made in it)
+        (args.out / "fcd").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out", str(args.out), f"a folder that can be created and written ({exc.strerror})") from None
     steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
     with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
         def progress(what: str) -> None:

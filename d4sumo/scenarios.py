@@ -264,8 +264,27 @@ def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> 
         raise SumoError(f"netconvert could not run ({binary}): {exc}") from None
     if result.returncode != 0:
         os.unlink(tmp)
-        raise SumoError(f"netconvert failed on {name}: {(result.stderr or result.stdout).strip()[-500:]}")
+        names = {str(nodes): "the node file", str(edges): "the edge file"}
+        raise ConfigError("scenario.network", name, f"node and edge XML that netconvert builds into a road "
+                                                    f"(netconvert: {_netconvert_errors(result.stderr or result.stdout, names)})")
     os.replace(tmp, out)
+
+
+def _netconvert_errors(text: str, files: dict[str, str]) -> str:
+    """netconvert's errors in one line: each error with where it is ("In file ..., At line/column a/b"),
+    its temporary files named as the user knows them, without "Quitting (on error)"."""
+    errors: list[str] = []
+    for line in text.splitlines():
+        line = line.strip()
+        if line.startswith("Error:"):
+            errors.append(line.removeprefix("Error:").strip().rstrip("."))
+        elif line.startswith("In file") and errors:
+            path = line.removeprefix("In file").strip().strip("'")
+            errors[-1] += f" in {files.get(path, Path(path).name)}"
+        elif line.startswith("At line/column") and errors:
+            at = line.removeprefix("At line/column").strip().rstrip(".").split("/")
+            errors[-1] += f", line {at[0]}, column {at[1]}" if len(at) == 2 else f", at {'/'.join(at)}"
+    return "; ".join(errors) or text.strip().splitlines()[-1] if text.strip() else "no message"
 
 
 def _describe(net_file: Path) -> dict:

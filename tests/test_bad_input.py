@@ -188,6 +188,7 @@ def readers(db, tmp):
     ["plot", "heatmap", "{db}", "--out", "{tmp}/f.png", "--setpoint", "99"], ["plot", "heatmap", "{db}", "--out", "{tmp}/f.xyz"],
     ["replay", "{db}", "1", "--fcd", "{tmp}/absent/f.xml"], ["report", "{db}", "--out", "{tmp}/absent/deep/report"],
     ["report", "{tmp}/missing.sqlite"], ["export", "{tmp}"],
+    ["report", "{db}", "--out", "/proc/d4sumo_report"],  # its parent exists, yet nothing can be made there: once a traceback
 ], ids=lambda a: " ".join(a))
 def test_reading_commands_refuse_bad_flags_and_change_nothing(good_db, tmp_path, argv, capsys):
     before = good_db.read_bytes()
@@ -269,3 +270,19 @@ def test_an_fcd_file_cut_short_is_an_error(tmp_path):
         check_fcd_written(fcd)
     fcd.write_text('<fcd-export>\n</fcd-export>\n')
     check_fcd_written(fcd)
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("nodes, edges, expected", [
+    ("garbage <<<", "", "netconvert: invalid document structure in the node file, line"),
+    ("", "", "netconvert: "),
+    ('<nodes><node id="a" x="0" y="0"/></nodes>', "<edges></edges>", "netconvert: No edges loaded"),
+])
+def test_a_road_netconvert_cannot_build_is_one_line_naming_the_network(tmp_path, capsys, nodes, edges, expected):
+    """netconvert's own five lines ("Quitting (on error).") once reached the user."""
+    (tmp_path / "road.nod.xml").write_text(nodes)
+    (tmp_path / "road.edg.xml").write_text(edges)
+    assert main(["simulate", "--network", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("d4sumo: error: --network (scenario.network): got '") and err.count("\n") == 1, err
+    assert expected in err and "Quitting" not in err and "/tmp" not in err.split("allowed:")[1]
