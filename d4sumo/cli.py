@@ -21,12 +21,12 @@ from typing import Any, Sequence
 
 
 from . import __version__
-from .attacks import FAMILIES
-from .config import MANEUVERS, START_MODES, EpisodeConfig
+from .model.attacks import FAMILIES
+from .model.config import MANEUVERS, START_MODES, EpisodeConfig
 from .errors import ConfigError, D4sumoError, check_number
-from .batch import DEFAULT_BATCH
-from .optimizers import EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
-from .scenarios import MAX_COPIES
+from .model.batch import DEFAULT_BATCH
+from .search.optimizers import EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
+from .engine.scenarios import MAX_COPIES
 
 EXIT_USAGE = 2
 
@@ -154,7 +154,7 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
 
 def episode_plan(family, params, config: EpisodeConfig):
     """The attacker's command at every step's start (NaN, cruise, before the attack or with none) and its lane change."""
-    from .maneuvers import attack_plan
+    from .model.maneuvers import attack_plan
 
     return attack_plan(family, params, config)
 
@@ -199,7 +199,7 @@ def check_fcd_written(path: Path | None) -> None:
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
-    from .scenarios import SCENARIOS_DIR, build_road, list_scenarios
+    from .engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
 
     names = list_scenarios()
     if not names:
@@ -213,9 +213,9 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .inputs import attack_of, episode_config
-    from .scenarios import build_road
-    from .simulation import simulate
-    from .spec import Specification
+    from .engine.scenarios import build_road
+    from .engine.simulation import simulate
+    from .search.spec import Specification
 
     doc, _ = document(args)
     config = episode_config(doc)
@@ -288,7 +288,7 @@ def _print_summary(s: dict, road_name: str) -> None:
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .campaign import Evaluator, open_store, run_campaign
+    from .search.campaign import Evaluator, open_store, run_campaign
     from .inputs import campaign_of
 
     doc, _ = document(args)
@@ -365,8 +365,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from .campaign import Campaign, Evaluator, open_store
-    from .simulation import simulate
+    from .search.campaign import Campaign, Evaluator, open_store
+    from .engine.simulation import simulate
 
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
@@ -400,8 +400,8 @@ def _pair_order(pair: str) -> tuple:
 def cmd_export(args: argparse.Namespace) -> int:
     import csv
 
-    from .analysis import system_label
-    from .campaign import Campaign, open_store
+    from .results.analysis import system_label
+    from .search.campaign import Campaign, open_store
 
     with open_store(args.db, create=False) as store:
         campaigns = {c.id: c for c in store.campaigns()}
@@ -497,8 +497,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .campaign import open_store
-    from .report import build_report
+    from .search.campaign import open_store
+    from .results.report import build_report
 
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")
@@ -529,7 +529,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from .report import plot_figure
+    from .results.report import plot_figure
 
     print(plot_figure(args.db, args.kind, args.out, sample=args.sample, fcd_path=check_output_file("--fcd", args.fcd),
                       attack=args.attack, optimizer=args.optimizer, start=args.start, setpoint_m=args.setpoint,

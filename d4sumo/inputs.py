@@ -25,12 +25,12 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from .campaign import Campaign
-from .config import EpisodeConfig, VehicleParams, read_toml
+from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
+from .search.campaign import Campaign
+from .model.config import EpisodeConfig, VehicleParams, read_toml
 from .errors import ConfigError, is_number
-from .maneuvers import maneuver_of
-from .optimizers import OPTIMIZERS, resolve_options
+from .model.maneuvers import maneuver_of
+from .search.optimizers import OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
 SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "controller"))

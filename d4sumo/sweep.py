@@ -42,16 +42,16 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
 
-from .batch import batch_key
-from .campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, open_store, step_together, stored_results
-from .config import read_toml
+from .model.batch import batch_key
+from .search.campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, open_store, step_together, stored_results
+from .model.config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError
-from .maneuvers import MANEUVERS
-from .optimizers import EARLIER_OPTIONS
-from .scenarios import NetworkSource, build_road, network_source
-from .simulation import check_episode
-from .store import Store, StoreError, campaign_key
+from .model.maneuvers import MANEUVERS
+from .search.optimizers import EARLIER_OPTIONS
+from .engine.scenarios import NetworkSource, build_road, network_source
+from .engine.simulation import check_episode
+from .search.store import Store, StoreError, campaign_key
 
 log = logging.getLogger(__name__)
 

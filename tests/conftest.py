@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d4sumo.attacks import make_attack
-from d4sumo.config import EpisodeConfig
+from d4sumo.model.attacks import make_attack
+from d4sumo.model.config import EpisodeConfig
 
 #: Knots found by search that make v3 hit v2 from rest at the default setpoint (attacker untouched).
 SUCCESS_KNOTS = [0.46, -0.65, 0.73, 0.08, -0.4, -0.15, -0.94, -0.75, 0.34]
@@ -20,7 +20,7 @@ def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
 
 def random_plans(config: EpisodeConfig, count: int, seed: int = 0, family: str = "knots"):
     """Attack plans drawn uniformly from the campaign's box (a lane change time too, for a lateral maneuver)."""
-    from d4sumo.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.maneuvers import attack_plan, maneuver_of
 
     box = maneuver_of(config).family(make_attack(family))
     rng = np.random.default_rng(seed)
@@ -40,7 +40,7 @@ def assert_same_episode(batched, alone) -> None:
 
 @pytest.fixture(scope="session")
 def road():
-    from d4sumo.scenarios import build_road
+    from d4sumo.engine.scenarios import build_road
 
     return build_road("highway_4lane")
 

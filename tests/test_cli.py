@@ -104,7 +104,7 @@ def test_malformed_toml_is_one_clear_line(tmp_path, capsys):
 
 
 def test_a_missing_sumo_binary_is_one_clear_line(tmp_path, monkeypatch, capsys):
-    import d4sumo.scenarios as scenarios
+    import d4sumo.engine.scenarios as scenarios
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # nothing cached: netconvert must run
     monkeypatch.setattr(scenarios, "sumo_binary", lambda name, explicit=None: str(tmp_path / "no" / name))
@@ -201,8 +201,8 @@ def test_a_database_that_is_not_ours_is_refused(tmp_path, capsys):
 
 def test_output_piped_into_head_ends_quietly(tmp_path):
     """Regression: `d4sumo export db | head` ended with a BrokenPipeError traceback."""
-    from d4sumo.campaign import Campaign
-    from d4sumo.store import Store
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.search.store import Store
 
     db = tmp_path / "r.sqlite"
     with Store(db) as store:
@@ -303,7 +303,7 @@ pathlib.Path("imported.marker").write_text("myctl ran")
 
 from dataclasses import dataclass
 
-from d4sumo.control import SwitchingController, SwitchingParams
+from d4sumo.model.control import SwitchingController, SwitchingParams
 
 
 class Gentle(SwitchingController):
@@ -336,7 +336,7 @@ def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_im
     marker.unlink()
     exported = d4sumo("export", "r.sqlite")
     assert exported.returncode == 0 and "myctl:Gentle(" in exported.stdout.splitlines()[1]
-    from d4sumo.analysis import load_records
+    from d4sumo.results.analysis import load_records
 
     records = load_records([tmp_path / "r.sqlite"])
     assert len(records) == 3 and records[0].system.startswith("myctl:Gentle(")

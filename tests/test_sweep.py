@@ -16,7 +16,7 @@ import pytest
 
 from d4sumo.cli import main
 from d4sumo.errors import ConfigError
-from d4sumo.store import Store, StoreError
+from d4sumo.search.store import Store, StoreError
 from d4sumo.sweep import Sweep, claim, run_sweep
 
 TINY = """
@@ -229,7 +229,7 @@ def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
     from threadpoolctl import threadpool_info
 
     import d4sumo.sweep as sweep_module
-    from d4sumo.scenarios import network_source
+    from d4sumo.engine.scenarios import network_source
 
     seen = []
 
@@ -367,7 +367,7 @@ def test_a_kill_while_the_database_is_created_never_leaves_one_the_next_run_refu
         time.sleep(delay)
         proc.kill()
         proc.wait()
-        from d4sumo.store import Store as S
+        from d4sumo.search.store import Store as S
 
         if db.exists() and db.stat().st_size:
             with S(db):  # opens (and if needed, creates) cleanly
@@ -451,12 +451,12 @@ def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(
 class KillsItsWorkerAt9m:
     """The paper's controller, except that at a setpoint of 9 m it kills the worker process it runs in."""
 
-    from d4sumo.control import SwitchingParams as Params
+    from d4sumo.model.control import SwitchingParams as Params
 
     def __init__(self, params, *, setpoint_m, **kwargs):
         import multiprocessing
 
-        from d4sumo.control import SwitchingController
+        from d4sumo.model.control import SwitchingController
 
         self.inner = SwitchingController(params, setpoint_m=setpoint_m, **kwargs)
         self.kill = setpoint_m == 9.0 and multiprocessing.parent_process() is not None

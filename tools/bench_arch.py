@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from bench_falsify import optimizer_of  # tools/ is on the path of a script run from it
-from d4sumo.optimizers import make_optimizer
+from d4sumo.search.optimizers import make_optimizer
 
 DT, DURATION, SEGMENTS = 0.1, 100.0, 20
 STEPS = int(round(DURATION / DT))
@@ -114,7 +114,7 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
 
 def sumo_episode_seconds(repeats: int = 20) -> float:
     """One episode of d4sumo's default scenario (random knot attacks, played alone), simulation and scoring."""
-    from d4sumo.campaign import Campaign, Evaluator
+    from d4sumo.search.campaign import Campaign, Evaluator
 
     ev = Evaluator(Campaign())
     rng = np.random.default_rng(0)

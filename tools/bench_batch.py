@@ -18,9 +18,9 @@ import os
 import statistics
 import time
 
-from d4sumo.batch import DEFAULT_BATCH
-from d4sumo.campaign import Campaign, Evaluator, run_campaign
-from d4sumo.config import EpisodeConfig
+from d4sumo.model.batch import DEFAULT_BATCH
+from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.model.config import EpisodeConfig
 
 
 def timed(campaign: Campaign, evaluator: Evaluator, batch: int) -> tuple[float, list]:

@@ -3,7 +3,7 @@ for followers commanded by the paper's Python controller and for followers drive
 
 Both sides are timed the same way, start to close, interleaved in one run so machine noise hits both:
   bare     libsumo start, the same cars (and vehicle types) inserted, `steps` calls of simulationStep, close
-  episode  d4sumo.simulation.simulate: controllers, actuators, speed commands, sensing, collision
+  episode  d4sumo.engine.simulation.simulate: controllers, actuators, speed commands, sensing, collision
            checks and the Trace, for an attack that never crashes (so every step runs)
 
 Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC]
@@ -18,10 +18,10 @@ import time
 import libsumo
 import numpy as np
 
-from d4sumo.config import ControllerConfig, EpisodeConfig
-from d4sumo.scenarios import build_road
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.sumo import load_platoon, sumo_command
-from d4sumo.simulation import check_episode, simulate
+from d4sumo.engine.simulation import check_episode, simulate
 
 
 def bare(config: EpisodeConfig, road) -> float:

@@ -25,9 +25,9 @@ import warnings
 
 import numpy as np
 
-from d4sumo.campaign import Campaign, Evaluator, run_campaign
-from d4sumo.optimizers import Optimizer
-from d4sumo.simulation import simulate
+from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.search.optimizers import Optimizer
+from d4sumo.engine.simulation import simulate
 
 
 class SkoptDefaults(Optimizer):
@@ -71,7 +71,7 @@ def rtamt_ratio(repeats: int = 20) -> None:
 
 
 def bo_overhead(samples: int, with_defaults: bool) -> None:
-    import d4sumo.optimizers as optimizers
+    import d4sumo.search.optimizers as optimizers
 
     variants = [("bo", "bo", {}), ("bo gp_version=1", "bo", {"gp_version": 1}), ("turbo", "turbo", {})]
     if with_defaults:
@@ -101,7 +101,7 @@ CONDITIONS = (("7 m, 25 m/s, rest", 7.0, 25.0, "rest"), ("12 m, 20 m/s, steady (
 @contextlib.contextmanager
 def timed_optimizer():
     """Time every ask and tell of the campaigns' optimisers: [seconds]."""
-    import d4sumo.campaign as campaign_module
+    import d4sumo.search.campaign as campaign_module
 
     clock = [0.0]
     real = campaign_module.make_optimizer
@@ -132,8 +132,8 @@ def optimizer_of(spec: str) -> tuple[str, dict]:
 
 
 def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:
-    from d4sumo.analysis import distinct_count
-    from d4sumo.config import EpisodeConfig
+    from d4sumo.results.analysis import distinct_count
+    from d4sumo.model.config import EpisodeConfig
 
     table: dict[str, dict[str, float]] = {o: {} for o in optimizers}
     own: dict[str, list[float]] = {o: [] for o in optimizers}

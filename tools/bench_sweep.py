@@ -21,10 +21,10 @@ import tomllib
 import time
 from pathlib import Path
 
-from d4sumo.batch import DEFAULT_BATCH
-from d4sumo.config import read_toml
+from d4sumo.model.batch import DEFAULT_BATCH
+from d4sumo.model.config import read_toml
 from d4sumo.inputs import with_overrides
-from d4sumo.campaign import open_store
+from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 
 HERE = Path(__file__).resolve().parent.parent

@@ -40,16 +40,16 @@ from pathlib import Path
 import numpy as np
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.attacks import FAMILIES
-from d4sumo.batch import batch_key
-from d4sumo.campaign import Campaign, Evaluator, open_store
-from d4sumo.config import START_MODES, ControllerConfig, EpisodeConfig
+from d4sumo.model.attacks import FAMILIES
+from d4sumo.model.batch import batch_key
+from d4sumo.search.campaign import Campaign, Evaluator, open_store
+from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.errors import ConfigError
-from d4sumo.maneuvers import attack_plan, maneuver_of, occupied_lanes
-from d4sumo.scenarios import build_road
-from d4sumo.simulation import check_road, simulate, simulate_batch
-from d4sumo.spec import psi_robustness
-from d4sumo.store import Store
+from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
+from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.simulation import check_road, simulate, simulate_batch
+from d4sumo.search.spec import psi_robustness
+from d4sumo.search.store import Store
 
 FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 decimals
 #: the roads drawn from: the shipped 4-lane highway (one edge), and roads of several edges: a speed

@@ -25,13 +25,14 @@ import json
 import time
 from pathlib import Path
 
-from d4sumo import __version__, paper
-from d4sumo.analysis import Record, load_records, most_severe
-from d4sumo.config import read_toml
+from d4sumo import __version__
+from d4sumo.results import paper
+from d4sumo.results.analysis import Record, load_records, most_severe
+from d4sumo.model.config import read_toml
 from d4sumo.inputs import with_overrides
-from d4sumo.figures import heatmap_columns, heatmap_panels, heatmaps
-from d4sumo.report import describe, plot_sample
-from d4sumo.campaign import open_store
+from d4sumo.results.figures import heatmap_columns, heatmap_panels, heatmaps
+from d4sumo.results.report import describe, plot_sample
+from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,11 +16,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..batch import PlatoonBatch, collided
-from ..config import EpisodeConfig
-from ..maneuvers import AttackPlan, maneuver_of
-from ..platoon import Platoon, collisions_at
-from ..trace import Episode
+from ..model.batch import PlatoonBatch, collided
+from ..model.config import EpisodeConfig
+from ..model.maneuvers import AttackPlan, maneuver_of
+from ..model.platoon import Platoon, collisions_at
+from ..model.trace import Episode
 
 #: episodes go on one at a time once this few are left: the arrays' fixed cost per step then exceeds
 #: what they save (measured with tools/bench_batch.py)

@@ -21,11 +21,12 @@ from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
-from ..config import ControllerConfig, EpisodeConfig
+from ..model.config import ControllerConfig, EpisodeConfig
 from ..errors import ConfigError, SumoError
-from ..maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
-from ..platoon import SumoFollower, followers_of
-from ..scenarios import Road, default_cache_dir, sumo_binary
+from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
+from ..model.platoon import SumoFollower, followers_of
+from ..sumohome import sumo_binary
+from .scenarios import Road, default_cache_dir
 
 ROUTE_ID = "platoon"
 VTYPE_ID = "d4car"

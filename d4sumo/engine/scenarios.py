@@ -1,0 +1,314 @@
+"""Road network variants: plain SUMO node/edge XML in ``sumo_scenarios/<name>/``, built with netconvert.
+
+A variant is a folder holding one ``*.nod.xml`` and one ``*.edg.xml`` that describe a straight one-way
+road (one edge, or a chain of edges). The shipped variants live in the ``sumo_scenarios`` package
+(installed with d4sumo); a user's own folder works the same way. The ``.net.xml`` is built on first use
+and cached under the user's cache folder, keyed by a hash of the inputs, so editing a variant rebuilds
+it. A `NetworkSource` carries a variant's XML itself, so a worker on another machine builds the same
+road without seeing the client's disk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.resources
+import json
+import logging
+import os
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import ConfigError, SumoError
+from ..sumohome import sumo_binary
+
+log = logging.getLogger(__name__)
+
+#: The variants shipped with d4sumo: the ``sumo_scenarios`` package (a folder of data).
+SCENARIOS_DIR = Path(str(importlib.resources.files("sumo_scenarios")))
+
+
+@dataclass(frozen=True)
+class Road:
+    """A built network variant: what an episode needs to know about the road."""
+
+    name: str
+    net_file: Path
+    route_edges: tuple[str, ...]  # the straight chain of edges the platoon drives
+    length_m: float
+    speed_limit_mps: float  # the lowest limit along the chain
+    lanes: int
+    lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
+    copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
+    first_edge_m: float = float("inf")  # the first edge's length: every car starts on it
+
+    @property
+    def one_edge(self) -> bool:
+        """Whether the route is one edge: a car's lane position is then its position along the route."""
+        return len(self.route_edges) == 1
+
+    def route(self, copy: int = 0) -> tuple[str, ...]:
+        """The edges of one copy of the road."""
+        return self.route_edges if self.copies == 1 else tuple(f"{copy_prefix(copy)}{e}" for e in self.route_edges)
+
+
+def copy_prefix(copy: int) -> str:
+    return f"c{copy}_"
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "d4sumo" / "nets"
+
+
+def list_scenarios(root: Path | None = None) -> list[str]:
+    root = root or SCENARIOS_DIR
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if p.is_dir() and _inputs(p, strict=False))
+
+
+def scenario_folder(name: str, root: Path | None = None) -> Path:
+    """The folder of a named variant, or of a path given directly."""
+    root = root or SCENARIOS_DIR
+    candidates = [root / name] if "/" not in name and os.sep not in name else []
+    candidates.append(Path(name))
+    for folder in candidates:
+        if folder.is_dir() and _inputs(folder, strict=False):
+            return folder.resolve()
+    names = list_scenarios(root)
+    raise ConfigError("scenario.network", name, f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, or a folder with *.nod.xml and *.edg.xml")
+
+
+def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | None:
+    nodes = sorted(folder.glob("*.nod.xml"))
+    edges = sorted(folder.glob("*.edg.xml"))
+    if len(nodes) == 1 and len(edges) == 1:
+        return nodes[0], edges[0]
+    if strict:
+        raise ConfigError("scenario.network", str(folder), "a folder with exactly one *.nod.xml and one *.edg.xml")
+    return None
+
+
+@dataclass(frozen=True)
+class NetworkSource:
+    """A variant's node and edge XML, by value: what a road is built from, anywhere."""
+
+    name: str
+    nodes_xml: bytes
+    edges_xml: bytes
+
+    @property
+    def digest(self) -> str:
+        return hashlib.sha256(self.nodes_xml + b"\0" + self.edges_xml).hexdigest()[:16]
+
+
+def network_source(name: str, root: Path | None = None) -> NetworkSource:
+    """The XML of a named variant, or of a folder given directly."""
+    folder = scenario_folder(name, root)
+    nodes, edges = _inputs(folder)
+    try:
+        return NetworkSource(folder.name, nodes.read_bytes(), edges.read_bytes())
+    except OSError as exc:
+        raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
+
+
+def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
+               netconvert: str | None = None) -> Road:
+    """Build (or take from the cache) the network of a variant and describe its road."""
+    source = name if isinstance(name, NetworkSource) else network_source(name, root)
+    cache = Path(cache_dir) if cache_dir else default_cache_dir()
+    net_file = cache / f"{source.name}-{source.digest}.net.xml"
+    info_file = net_file.with_suffix(".json")
+    info = _read_info(info_file) if net_file.is_file() else None
+    if info is None:
+        _build_net(source, net_file, netconvert)
+        info = _describe(net_file)
+        _write_atomic(info_file, json.dumps(info))
+    return Road(
+        name=source.name,
+        net_file=net_file,
+        route_edges=tuple(info["route_edges"]),
+        length_m=info["length_m"],
+        speed_limit_mps=info["speed_limit_mps"],
+        lanes=info["lanes"],
+        lane_width_m=info["lane_width_m"],
+        first_edge_m=info["first_edge_m"],
+    )
+
+
+def _build_net(source: NetworkSource, net_file: Path, netconvert: str | None = None) -> None:
+    try:
+        net_file.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SumoError(f"cannot create the network cache {net_file.parent} ({exc.strerror})") from None
+    with tempfile.TemporaryDirectory(dir=net_file.parent) as tmp:
+        nodes, edges = Path(tmp) / "road.nod.xml", Path(tmp) / "road.edg.xml"
+        nodes.write_bytes(source.nodes_xml)
+        edges.write_bytes(source.edges_xml)
+        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
+
+
+#: the largest batch of episodes one SUMO instance plays side by side
+MAX_COPIES = 64
+
+
+def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None) -> Road:
+    """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
+    named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
+    rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
+    with its y coordinates shifted, so a car drives exactly as on the road alone."""
+    if not 1 <= copies <= MAX_COPIES:
+        raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
+    source = name if isinstance(name, NetworkSource) else network_source(name, root)
+    road = build_road(source, cache_dir=cache_dir)
+    if copies == 1:
+        return road
+    copies = 1 << (copies - 1).bit_length()
+    nodes, edges = _side_by_side(source, copies)
+    copied = NetworkSource(f"{source.name}-x{copies}", nodes, edges)
+    net_file = road.net_file.parent / f"{copied.name}-{copied.digest}.net.xml"
+    if not net_file.is_file():
+        _build_net(copied, net_file)
+    return dataclasses.replace(road, net_file=net_file, copies=copies)
+
+
+def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes]:
+    """Node and edge XML of ``copies`` copies of a variant, each shifted in y past the one before."""
+    from xml.etree import ElementTree as ET
+
+    try:
+        nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
+    except ET.ParseError as exc:
+        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+    ys = [float(n.get("y", 0.0)) for n in nodes.iter("node")]
+    spacing = (max(ys) - min(ys) if ys else 0.0) + 100.0  # wider than any road of a few lanes
+
+    def shifted(shape: str, dy: float) -> str:
+        points = [p.split(",") for p in shape.split()]
+        return " ".join(",".join([p[0], repr(float(p[1]) + dy), *p[2:]]) for p in points)
+
+    out_nodes, out_edges = ET.Element(nodes.tag, nodes.attrib), ET.Element(edges.tag, edges.attrib)
+    for j in range(copies):
+        prefix, dy = copy_prefix(j), j * spacing
+        for node in nodes.iter("node"):
+            copy = ET.SubElement(out_nodes, "node", dict(node.attrib))
+            copy.set("id", prefix + node.get("id"))
+            copy.set("y", repr(float(node.get("y", 0.0)) + dy))
+            if node.get("shape"):
+                copy.set("shape", shifted(node.get("shape"), dy))
+        for edge in edges.iter("edge"):
+            copy = ET.SubElement(out_edges, "edge", dict(edge.attrib))
+            for key in ("id", "from", "to"):
+                copy.set(key, prefix + edge.get(key))
+            if edge.get("shape"):
+                copy.set("shape", shifted(edge.get("shape"), dy))
+            copy.extend(list(edge))
+    return ET.tostring(out_nodes), ET.tostring(out_edges)
+
+
+def _read_info(path: Path) -> dict | None:
+    """A built road's description, or None when missing or written by an older d4sumo (then rebuilt)."""
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return info if isinstance(info, dict) and "first_edge_m" in info else None
+
+
+def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> None:
+    # Build into a temporary file and rename, so parallel workers never read a half-written net.
+    fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".net.xml")
+    os.close(fd)
+    cmd = [binary, "--node-files", str(nodes), "--edge-files", str(edges), "--output-file", tmp, "--no-turnarounds", "true"]
+    log.info("building %s with netconvert", out.name)
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    except OSError as exc:
+        os.unlink(tmp)
+        raise SumoError(f"netconvert could not run ({binary}): {exc}") from None
+    if result.returncode != 0:
+        os.unlink(tmp)
+        names = {str(nodes): "the node file", str(edges): "the edge file"}
+        raise ConfigError("scenario.network", name, f"node and edge XML that netconvert builds into a road "
+                                                    f"(netconvert: {_netconvert_errors(result.stderr or result.stdout, names)})")
+    os.replace(tmp, out)
+
+
+def _netconvert_errors(text: str, files: dict[str, str]) -> str:
+    """netconvert's errors in one line: each error with where it is ("In file ..., At line/column a/b"),
+    its temporary files named as the user knows them, without "Quitting (on error)"."""
+    errors: list[str] = []
+    for line in text.splitlines():
+        line = line.strip()
+        if line.startswith("Error:"):
+            errors.append(line.removeprefix("Error:").strip().rstrip("."))
+        elif line.startswith("In file") and errors:
+            path = line.removeprefix("In file").strip().strip("'")
+            errors[-1] += f" in {files.get(path, Path(path).name)}"
+        elif line.startswith("At line/column") and errors:
+            at = line.removeprefix("At line/column").strip().rstrip(".").split("/")
+            errors[-1] += f", line {at[0]}, column {at[1]}" if len(at) == 2 else f", at {'/'.join(at)}"
+    return "; ".join(errors) or text.strip().splitlines()[-1] if text.strip() else "no message"
+
+
+def _describe(net_file: Path) -> dict:
+    """The straight chain of edges from the road's start, its length and its lowest speed limit."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_file))
+    edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
+    starts = [e for e in edges if not e.getIncoming()]
+    if len(starts) != 1:
+        raise ConfigError("scenario.network", net_file.name, "a network with exactly one road start (a straight one-way chain of edges)")
+    chain = [starts[0]]
+    while True:
+        nxt = list(chain[-1].getOutgoing())
+        if not nxt:
+            break
+        if len(nxt) > 1 or nxt[0] in chain:
+            raise ConfigError("scenario.network", net_file.name, "a straight chain of edges without branches")
+        chain.append(nxt[0])
+    lanes = _through_lanes(chain)
+    if lanes == 0:
+        raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+                          f"a road whose rightmost lane (the platoon's, lane 0) leads on through every junction; "
+                          f"lane 0 of {_lane_end(chain)} ends there")
+    return {
+        "route_edges": [e.getID() for e in chain],
+        "length_m": sum(e.getLength() for e in chain),
+        "speed_limit_mps": min(e.getSpeed() for e in chain),
+        "lanes": lanes,
+        "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
+        "first_edge_m": chain[0].getLength(),
+    }
+
+
+def _leads_on(edge, lane: int, to) -> bool:
+    """Whether lane ``lane`` of ``edge`` connects to the lane of the same index of the next edge ``to``."""
+    return any(c.getTo() == to and c.getToLane().getIndex() == lane for c in edge.getLanes()[lane].getOutgoing())
+
+
+def _through_lanes(chain) -> int:
+    """How many lanes, from the rightmost (0) up, lead on along the whole chain with the same index.
+
+    Only these can hold a platoon (and a lane change between them): a car in a lane that ends at a
+    junction (a lane drop) stops there, which is no collision of the followers' doing."""
+    lanes = min(e.getLaneNumber() for e in chain)
+    for edge, to in zip(chain, chain[1:]):
+        lanes = next((i for i in range(lanes) if not _leads_on(edge, i, to)), lanes)
+    return lanes
+
+
+def _lane_end(chain) -> str:
+    """The first edge whose lane 0 does not lead on."""
+    return next(edge.getID() for edge, to in zip(chain, chain[1:]) if not _leads_on(edge, 0, to))
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)

@@ -1,0 +1,147 @@
+"""Playing episodes in SUMO: the checks an episode must pass before it runs, and the entry points that
+play one episode (`simulate`) or many side by side in one SUMO (`simulate_batch`). The step loop is
+`engine.loop.play`; everything that talks to SUMO is in `engine.sumo`.
+
+A collision is any bumper overlap at the end of a step, measured on SUMO's positions along the route
+(`platoon.collisions_at`): SUMO's own reports miss overlaps of 1 mm or less. The episode ends at the
+first one: SUMO lets the cars drive through each other afterwards, so later data are not physical.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..model.batch import episode_configs
+from ..model.config import EpisodeConfig
+from .loop import DETACH_AT, play
+from .sumo import followers_file, load_platoon, open_world, sumo_command
+from ..errors import ConfigError, SumoError
+from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
+from ..model.platoon import followers_of, road_needed_m
+from .scenarios import MAX_COPIES, Road, batch_road, build_road
+from ..model.trace import Episode
+
+log = logging.getLogger(__name__)
+
+__all__ = ["check_road", "check_episode", "simulate", "simulate_batch", "shares_sumo", "sumo_command", "load_platoon",
+           "DETACH_AT"]
+
+def check_road(config: EpisodeConfig, road: Road) -> None:
+    """Refuse episodes the road cannot hold: a target speed above the limit, or a road too short."""
+    check_road_lanes(config, road.name, road.lanes)
+    if config.speed_mps > road.speed_limit_mps + 1e-9:
+        raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
+    start = max(car.position_m for car in maneuver_of(config).cars())
+    if start > road.first_edge_m:
+        raise ConfigError(
+            "scenario.network",
+            road.name,
+            f"a road whose first edge holds the platoon's start ({start:.1f} m; the first edge is {road.first_edge_m:g} m)",
+        )
+    needed = road_needed_m(config, road.speed_limit_mps)
+    if needed > road.length_m:
+        raise ConfigError(
+            "scenario.duration_s",
+            config.duration_s,
+            f"an episode that fits on {road.name} ({road.length_m:g} m; this one may need {needed:.0f} m)",
+        )
+
+
+def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
+    """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters.
+    Returns the followers' checked vehicle-type file (None when no follower is SUMO-driven)."""
+    check_road(config, road)
+    return followers_file(config, road)
+
+
+def simulate(
+    config: EpisodeConfig,
+    attack: AttackPlan | np.ndarray,
+    *,
+    road: Road | None = None,
+    fcd_path: str | Path | None = None,
+    gui: bool = False,
+) -> Episode:
+    """Play one episode in SUMO. ``attack``: the attacker's plan (`maneuvers.attack_plan`), or only its
+    command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
+    A user's follower controller's error in it is raised."""
+    road = road or build_road(config.network)
+    types_file = check_episode(config, road)
+    plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
+    if plan.u.shape != (config.steps,):
+        raise ValueError(f"attack signal has shape {plan.u.shape}, expected ({config.steps},)")
+    with open_world(config, road, [config], fcd_path=fcd_path, gui=gui, types_file=types_file) as world:
+        result = play(world, [config], [plan])[0]
+    if isinstance(result, Exception):
+        raise result
+    return result
+
+
+# --- a batch: many episodes side by side in one SUMO ---------------------------------------------
+
+def shares_sumo(config: EpisodeConfig) -> bool:
+    """Whether the configuration's platoons may share one SUMO (see `simulate_batch`)."""
+    return all(f.shares_sumo for f in followers_of(config))
+
+
+def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
+    """`simulate_batch`'s results, each episode played alone."""
+    road = road or build_road(config.network)
+    check_episode(config, road)
+    results: list = []
+    for i, plan in enumerate(plans):
+        try:
+            result = simulate(config, plan, road=road)
+        except (SumoError, ConfigError):
+            raise  # as in a batch: SUMO's failure, or a configuration it cannot play, ends them all
+        except Exception as exc:  # a user's controller: this episode's error, as alone
+            result = exc
+        results.append(result)
+        if on_episode:
+            on_episode(i, result)
+    return results
+
+
+def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *,
+                   road: Road | None = None,
+                   on_episode: Callable[[int, "Episode | Exception"], None] | None = None) -> list["Episode | Exception"]:
+    """Play many episodes side by side in one SUMO instance, each platoon on its own copy of the road
+    (`scenarios.batch_road`), commanded together (`batch.PlatoonBatch`). ``config``: one for every
+    episode, or one per plan, differing at most in setpoint, target speed and start from rest or
+    steady (`batch.batch_key`: several campaigns' episodes in one SUMO).
+
+    Each result is bit for bit what `simulate` gives for the same plan alone: the episode, or the
+    exception a user's follower controller raised in it (alone it would end that episode). An episode
+    that ends (its first collision) leaves SUMO at once and costs nothing more; ``on_episode(i, result)``
+    hears of it then. Followers whose SUMO model draws from SUMO's random streams (`carfollowing.shares_sumo`)
+    would draw differently beside other platoons: their episodes play one at a time, in turn.
+    """
+    if not plans:
+        return []
+    if len(plans) > MAX_COPIES:
+        raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
+    configs = episode_configs(config, len(plans))
+    config = configs[0]
+    distinct = list({id(c): c for c in configs}.values())
+    if not shares_sumo(config):
+        alone = road if road is not None and road.copies == 1 else None
+        if len(distinct) == 1:
+            return _one_at_a_time(config, plans, alone, on_episode)
+        results = []
+        for i, (c, plan) in enumerate(zip(configs, plans)):  # each with its own configuration, in turn
+            results += _one_at_a_time(c, [plan], alone, on_episode and (lambda _, r, i=i: on_episode(i, r)))
+        return results
+    if road is None or road.copies < len(plans):
+        road = batch_road(config.network, len(plans))
+    types_file = check_episode(config, road)
+    for c in distinct[1:]:
+        check_episode(c, road)
+    for plan in plans:
+        if plan.u.shape != (config.steps,):
+            raise ValueError(f"attack signal has shape {plan.u.shape}, expected ({config.steps},)")
+    with open_world(config, road, configs, types_file=types_file) as world:
+        return play(world, configs, plans, on_episode=on_episode)

@@ -1,0 +1,284 @@
+"""The episode configuration: frozen, validated on construction, round-trips through TOML/JSON.
+
+Its tables in a config file are [scenario], [vehicle] and [controller] (every key optional; defaults
+from SPEC section 1); `inputs` reads the whole file, flags included.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from . import carfollowing
+from .maneuvers import MANEUVERS as MANEUVER_CLASSES
+from .control import ControllerImportError, NotImported, VehicleParams, build_params, resolve_controller, user_module
+from ..errors import ConfigError, check_int, check_number
+
+#: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
+#: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);
+#: warmup: the paper's steady-state procedure, drive from rest for warmup_s with the attacker cruising,
+#: attack after (every system then starts from its own steady state).
+START_MODES = ("rest", "steady", "warmup")
+MAX_FOLLOWERS = 10
+#: inlane: the paper's attacker, leading the platoon in its lane; cutin: it changes into the platoon's lane
+#: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car (see `maneuvers`)
+MANEUVERS = tuple(MANEUVER_CLASSES)
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """One follower's controller and its parameters (as (name, value) pairs, all resolved).
+
+    ``cls`` is a Python controller ("switching", "timegap", "package.module:ClassName") or one of
+    SUMO's car-following models ("sumo:ACC", "sumo:IDM", ...), whose parameters are SUMO's attributes
+    for that model (see `carfollowing`).
+    """
+
+    cls: str = "switching"
+    params: tuple[tuple[str, Any], ...] = ()
+    where: str = dataclasses.field(default="controller", compare=False)  # its place in the config, for messages
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cls, str) or not self.cls:
+            raise ConfigError(f"{self.where}.class", self.cls,
+                              "a registered controller name, 'sumo:MODEL' or 'package.module:ClassName'")
+        if carfollowing.is_sumo(self.cls):
+            object.__setattr__(self, "params", carfollowing.check_params(self.cls, dict(self.params), self.where))
+            return
+        try:
+            controller = resolve_controller(self.cls)
+            resolved = build_params(controller, dict(self.params))  # validates every value
+        except NotImported:  # read by name only: its parameters as given
+            object.__setattr__(self, "params", tuple(self.params))
+            return
+        except ConfigError as exc:  # name the follower of a mixed platoon: controller.v2.acc_kp
+            if self.where == "controller" or not exc.field.startswith("controller") or isinstance(exc, ControllerImportError):
+                raise
+            raise ConfigError(self.where + exc.field.removeprefix("controller"), exc.given, exc.allowed) from None
+        object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
+
+    @property
+    def sumo_model(self) -> str | None:
+        """The SUMO car-following model driving this follower, or None for a Python controller."""
+        return carfollowing.model_of(self.cls) if carfollowing.is_sumo(self.cls) else None
+
+    def controller_class(self) -> type:
+        return resolve_controller(self.cls)
+
+    def build_params(self) -> Any:
+        return build_params(self.controller_class(), dict(self.params))
+
+    def to_dict(self) -> dict:
+        return {"class": self.cls, **dict(self.params)}
+
+    @property
+    def label(self) -> str:
+        """A short name for reports: the class and the parameters that differ from its defaults."""
+        if self.sumo_model:
+            defaults = dict(carfollowing.check_params(self.cls, {}))
+        elif user_module(self.cls) is None:
+            defaults = dataclasses.asdict(self.controller_class().Params())
+        else:  # a user's class is not imported for a name: every parameter is shown
+            defaults = {}
+        changed = [f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.params if defaults.get(k) != v]
+        return self.cls + (f"({', '.join(changed)})" if changed else "")
+
+    @classmethod
+    def from_table(cls, table: Any, where: str = "controller") -> "ControllerConfig":
+        """From a [controller] table, or a bare class name."""
+        if isinstance(table, str):
+            return cls(cls=table, where=where)
+        if not isinstance(table, Mapping):
+            raise ConfigError(where, table, "a table with a class key, or a controller name")
+        values = dict(table)
+        return cls(cls=values.pop("class", "switching"), params=tuple(values.items()), where=where)
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """One episode of the paper's scenario: road, platoon, start mode, step and duration."""
+
+    network: str = "highway_4lane"  # a folder of sumo_scenarios/ or a path to one
+    followers: int = 3  # N followers behind the attacker: ids v1..vN
+    setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
+    speed_mps: float = 25.0  # target speed v_d of every car
+    start: str = "rest"  # see START_MODES
+    step_s: float = 0.05
+    duration_s: float = 60.0  # from the attack's start to the episode's end
+    warmup_s: float = 15.0  # start = "warmup": seconds driven from rest before the attack starts
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    #: one controller for every follower, or one per follower (v1 first): a mixed platoon
+    controller: ControllerConfig | tuple[ControllerConfig, ...] = field(default_factory=ControllerConfig)
+    #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
+    #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
+    attacker_declared_decel_mps2: float | None = None
+    maneuver: str = "inlane"  # see MANEUVERS
+    cutin_follower: int = 1  # cutin: the attacker starts beside, and aims in front of, this follower (1 = v1)
+    cutin_offset_m: float = 0.0  # cutin: the attacker's rear bumper ahead of that follower's front bumper at t = 0
+    lane_change_s: float = 2.0  # cutin/cutout: how long SUMO takes to move the attacker across (0: in one step)
+    obstacle_distance_m: float = 150.0  # cutout: bumper gap from the attacker to the car ahead of it at t = 0
+    obstacle_speed_mps: float = 0.0  # cutout: the constant speed of that car (0: stopped)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.network, str) or not self.network:
+            raise ConfigError("scenario.network", self.network, "a scenario name (see `d4sumo scenarios`) or a folder")
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        fix("followers", check_int("scenario.followers", self.followers, 1, MAX_FOLLOWERS))
+        fix("setpoint_m", check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True))
+        fix("speed_mps", check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True))
+        if self.start not in START_MODES:
+            raise ConfigError("scenario.start", self.start, f"one of {', '.join(START_MODES)}")
+        fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
+        fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
+        fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
+        if self.start == "warmup" and not _on_grid(self.warmup_s, self.step_s):  # read only with a warm-up
+            raise ConfigError("scenario.warmup_s", self.warmup_s, f"a whole number of steps of {self.step_s:g} s")
+        if not isinstance(self.vehicle, VehicleParams):
+            raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
+        if isinstance(self.controller, (list, tuple)):
+            if len(self.controller) != self.followers:
+                raise ConfigError("controller", f"{len(self.controller)} tables",
+                                  f"one [[controller]] table per follower ({self.followers}), or one [controller] for all")
+            fix("controller", tuple(self.controller))
+        controllers = self.controllers
+        if not all(isinstance(c, ControllerConfig) for c in controllers):
+            raise ConfigError("controller", self.controller, "a [controller] table")
+        if len(set(controllers)) == 1 and isinstance(self.controller, tuple):  # the same for all: one table
+            fix("controller", controllers[0])
+        for c in controllers:  # SUMO rounds an action step to whole steps, silently
+            step = dict(c.params).get("actionStepLength") if c.sumo_model else None
+            if step is not None and not (step >= self.step_s and _on_grid(step, self.step_s)):
+                raise ConfigError(f"{c.where}.actionStepLength", step, f"a whole number of steps of {self.step_s:g} s")
+        declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
+        fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
+                                                         "m/s^2 (positive)", low_open=True))
+        if self.maneuver not in MANEUVERS:
+            raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
+        fix("cutin_follower", check_int("scenario.cutin_follower", self.cutin_follower, 1, MAX_FOLLOWERS,
+                                        f"(a follower: 1 for v1 .. {self.followers} for v{self.followers})"))
+        fix("cutin_offset_m", check_number("scenario.cutin_offset_m", self.cutin_offset_m, -500.0, 500.0, "metres"))
+        fix("lane_change_s", check_number("scenario.lane_change_s", self.lane_change_s, 0.0, 20.0, "seconds"))
+        # SUMO rounds it to whole steps, silently; only a maneuver that changes lanes reads it
+        if MANEUVER_CLASSES[self.maneuver].lateral and not _on_grid(self.lane_change_s, self.step_s):
+            raise ConfigError("scenario.lane_change_s", self.lane_change_s, f"a whole number of steps of {self.step_s:g} s")
+        fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 5000.0,
+                                                "metres", low_open=True))
+        fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,
+                                               f"m/s (at most the target speed, {self.speed_mps:g})"))
+        self.maneuver_class.check(self)
+
+    @property
+    def attack_start_step(self) -> int:
+        """The step at which the attack starts (0 except after a warm-up)."""
+        return int(round(self.warmup_s / self.step_s)) if self.start == "warmup" else 0
+
+    @property
+    def attack_start_s(self) -> float:
+        return self.attack_start_step * self.step_s
+
+    @property
+    def steps(self) -> int:
+        """Number of simulation steps in a full episode (warm-up included)."""
+        return self.attack_start_step + int(round(self.duration_s / self.step_s))
+
+    @property
+    def total_s(self) -> float:
+        return self.steps * self.step_s
+
+    @property
+    def controllers(self) -> tuple[ControllerConfig, ...]:
+        """Each follower's controller, v1 first."""
+        if isinstance(self.controller, tuple):
+            return self.controller
+        return (self.controller,) * self.followers
+
+    @property
+    def sumo_driven(self) -> bool:
+        """Whether any follower is driven by a SUMO car-following model."""
+        return any(c.sumo_model for c in self.controllers)
+
+    @property
+    def system_label(self) -> str:
+        """The system under test in a few words: the controller, or each follower's for a mixed platoon."""
+        if isinstance(self.controller, ControllerConfig):
+            return self.controller.label
+        return " / ".join(c.label for c in self.controller)
+
+    @property
+    def vehicle_ids(self) -> tuple[str, ...]:
+        """The attacker v0, the followers v1..vN, then the maneuver's other car (lead or obstacle), if any."""
+        other = self.maneuver_class.other_car
+        return tuple(f"v{i}" for i in range(self.followers + 1)) + ((other,) if other else ())
+
+    @property
+    def maneuver_class(self) -> type:
+        """The attacker's maneuver (a class of `maneuvers`)."""
+        return MANEUVER_CLASSES[self.maneuver]
+
+    # --- TOML/JSON round trip -----------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("vehicle", "controller")}
+        # Keys without effect are not part of what identifies the episode.
+        if self.start != "warmup":
+            del scenario["warmup_s"]
+        if not self.sumo_driven:  # only SUMO's models read what the attacker declares
+            del scenario["attacker_declared_decel_mps2"]
+        for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
+            del scenario[key]  # a maneuver's settings have no effect on another
+        controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
+                      else [c.to_dict() for c in self.controller])
+        return {"scenario": scenario, "vehicle": dataclasses.asdict(self.vehicle), "controller": controller}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
+        """Build from the [scenario], [vehicle] and [controller] tables of a document; [controller] may
+        be a list of tables (TOML's [[controller]]) or names, one per follower."""
+        tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
+        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in ("vehicle", "controller")]
+        _check_keys("scenario", tables["scenario"], scenario_keys)
+        _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)])
+        given = doc.get("controller", {})
+        if isinstance(given, (list, tuple)):
+            controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
+        else:
+            controller = ControllerConfig.from_table(_table(doc, "controller"))
+        return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), controller=controller)
+
+
+def read_toml(path: str | Path, field: str = "--config") -> dict:
+    """Parse a TOML file; an unreadable, non-UTF-8 or malformed file is a ConfigError naming ``field``."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise ConfigError(field, str(p), f"a readable TOML file ({exc.strerror})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(field, str(p), f"a UTF-8 text file (byte {exc.start} is not UTF-8)") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(field, str(p), f"valid TOML ({exc})") from None
+
+
+def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
+    value = doc.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"[{name}]", value, "a table")
+    return value
+
+
+def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")
+
+
+def _on_grid(value: float, step: float) -> bool:
+    count = value / step
+    return abs(count - round(count)) <= 1e-9 * max(1.0, count)

@@ -1,0 +1,493 @@
+"""Longitudinal control of the cars: the paper's switching ACC/cruise controller (its Eq. 1) and its
+constant time-gap variant (the paper's suggested mitigation).
+
+Pure code, no SUMO. A follower controller turns what the car senses (bumper gap to the car ahead,
+its own speed, the speed of the car ahead) into a command u in [-1, 1] (-1 full brake, +1 full
+throttle). Controllers are pluggable: a config names a registered controller ("switching",
+"timegap") or any class as "package.module:ClassName" that follows the `FollowerController`
+protocol. (Followers driven by SUMO's own car-following models are named "sumo:MODEL"; see
+`carfollowing`.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import dataclasses
+import importlib
+import math
+import os
+import sys
+from dataclasses import dataclass
+from typing import Any, Mapping, Protocol
+
+import numpy as np
+
+from ..errors import ConfigError, check_number
+
+#: Mode values recorded in traces (signal ``mode_vI``).
+MODE_CC = 0.0
+MODE_ACC = 1.0
+
+#: Tolerances of the mode switch's comparisons. Gaps are differences of positions of some tens or
+#: hundreds of metres, so a platoon spaced exactly at its setpoint measures a gap a few 1e-14 m off;
+#: within these tolerances a value counts as at the threshold, so no mode decision hinges on rounding.
+GAP_TOLERANCE_M = 1e-6
+SPEED_TOLERANCE_MPS = 1e-6
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Vehicle body and actuator: the same for the attacker and every follower."""
+
+    length_m: float = 4.5
+    max_accel_mps2: float = 3.5  # at full throttle, u = +1
+    max_decel_mps2: float = 8.0  # at full brake, u = -1 (a positive number)
+    actuator_lag_s: float = 0.5  # first-order lag between command and acceleration
+
+    def __post_init__(self) -> None:
+        for name, low, high, unit in (("length_m", 0.5, 30.0, "metres"), ("max_accel_mps2", 0.1, 20.0, "m/s^2"),
+                                      ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds")):
+            object.__setattr__(self, name, check_number(f"vehicle.{name}", getattr(self, name), low, high, unit))
+
+
+def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:
+    """Map a throttle/brake command in [-1, 1] to the acceleration it asks for [m/s^2]."""
+    return u * vehicle.max_accel_mps2 if u >= 0.0 else u * vehicle.max_decel_mps2
+
+
+def acceleration_to_command(a_mps2: float, vehicle: VehicleParams) -> float:
+    """The low-level controller: a wanted acceleration to throttle (u > 0) or brake (u < 0), never both."""
+    u = a_mps2 / vehicle.max_accel_mps2 if a_mps2 >= 0.0 else a_mps2 / vehicle.max_decel_mps2
+    return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+
+
+class Actuator:
+    """A car's drivetrain: command -> first-order-lagged acceleration -> speed (never below 0).
+
+    The lag is discretised exactly for a command held over one step. The speed is integrated from
+    the sensed speed, so the simulator stays the single source of the car's state.
+    """
+
+    __slots__ = ("accel_max", "decel_max", "alpha", "step_s", "max_speed_mps", "accel_mps2")
+
+    def __init__(self, vehicle: VehicleParams, step_s: float, max_speed_mps: float = math.inf):
+        self.accel_max = vehicle.max_accel_mps2
+        self.decel_max = vehicle.max_decel_mps2
+        lag = vehicle.actuator_lag_s
+        self.alpha = 1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag)
+        self.step_s = step_s
+        self.max_speed_mps = max_speed_mps
+        self.accel_mps2 = 0.0
+
+    def apply(self, u: float, speed_mps: float) -> float:
+        """Hold command u for one step from ``speed_mps``; return the speed at the step's end [m/s]."""
+        target = u * self.accel_max if u >= 0.0 else u * self.decel_max
+        self.accel_mps2 += (target - self.accel_mps2) * self.alpha
+        v = speed_mps + self.accel_mps2 * self.step_s
+        if v < 0.0:  # brakes stop the car, they never reverse it
+            v = 0.0
+        elif v > self.max_speed_mps:
+            v = self.max_speed_mps
+        else:
+            return v
+        # Clamped: the drivetrain's acceleration is what the car actually did, so the lag does not
+        # wind up while the car stands still or rides the speed limit.
+        self.accel_mps2 = (v - speed_mps) / self.step_s
+        return v
+
+
+@dataclass(frozen=True)
+class SwitchingParams:
+    """Gains of the paper's switching controller; defaults from the authors' public code."""
+
+    cruise_kp: float = 0.4  # [1/s] (m/s^2 per m/s of speed error)
+    cruise_ki: float = 0.01  # [1/s^2]
+    cruise_kd: float = 0.1  # [-]
+    cruise_integral_clamp: float = 20.0  # [m] bound on the integrated speed error
+    cruise_output_limit_mps2: float = 3.0
+    acc_kp: float = 0.9304  # [1/s^2] (m/s^2 per m of gap error)
+    acc_kv: float = 2.1599  # [1/s] (m/s^2 per m/s of speed difference)
+    eps_x_m: float = 1.0  # hysteresis on the gap
+    eps_v_mps: float = 1.0  # hysteresis on the speed
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            low = 1e-3 if f.name in ("eps_x_m", "eps_v_mps") else 0.0  # hysteresis wider than the tolerances
+            object.__setattr__(self, f.name, check_number(f"controller.{f.name}", getattr(self, f.name), low, 1e6))
+
+
+class CruiseControl:
+    """Discrete PID on speed with a clamped integral and a clamped output [m/s^2]."""
+
+    __slots__ = ("kp", "ki", "kd", "clamp", "limit", "step_s", "target_mps", "integral", "prev_error")
+
+    def __init__(self, params: SwitchingParams, target_speed_mps: float, step_s: float):
+        self.kp, self.ki, self.kd = params.cruise_kp, params.cruise_ki, params.cruise_kd
+        self.clamp = params.cruise_integral_clamp
+        self.limit = params.cruise_output_limit_mps2
+        self.step_s = step_s
+        self.target_mps = target_speed_mps
+        self.integral = 0.0
+        self.prev_error: float | None = None  # None: no derivative kick on (re)engagement
+
+    def disengage(self) -> None:
+        self.prev_error = None
+
+    def reset(self) -> None:
+        """Start afresh: no integrated error, no derivative kick."""
+        self.integral = 0.0
+        self.prev_error = None
+
+    def acceleration(self, speed_mps: float) -> float:
+        e = self.target_mps - speed_mps
+        i = self.integral + e * self.step_s
+        self.integral = i = self.clamp if i > self.clamp else (-self.clamp if i < -self.clamp else i)
+        d = 0.0 if self.prev_error is None else (e - self.prev_error) / self.step_s
+        self.prev_error = e
+        a = self.kp * e + self.ki * i + self.kd * d
+        return self.limit if a > self.limit else (-self.limit if a < -self.limit else a)
+
+
+class FollowerController(Protocol):
+    """What the co-simulation needs of a follower's controller.
+
+    Constructed as ``cls(params, setpoint_m=..., target_speed_mps=..., vehicle=..., step_s=...)`` where
+    ``params`` is an instance of ``cls.Params`` (a dataclass built from the config's controller table).
+    ``mode`` (optional) is recorded in the trace each step.
+    """
+
+    Params: type
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float: ...
+
+
+class SwitchingController:
+    """The paper's switching policy (Eq. 1): cruise control (PID) or ACC, with hysteresis.
+
+    CC when gap >= d + eps_x or v >= v_d + eps_v; ACC when gap <= d and v <= v_d; otherwise the mode
+    stays (every comparison within GAP_TOLERANCE_M / SPEED_TOLERANCE_MPS of its threshold counts as
+    reaching it). ACC: a = Kp (gap - d) + Kv (v_lead - v).
+    """
+
+    Params = SwitchingParams
+
+    def __init__(
+        self,
+        params: SwitchingParams,
+        *,
+        setpoint_m: float,
+        target_speed_mps: float,
+        vehicle: VehicleParams,
+        step_s: float,
+    ):
+        self.params = params
+        self.vehicle = vehicle
+        self.setpoint_m = setpoint_m
+        self.target_speed_mps = target_speed_mps
+        self.cruise = CruiseControl(params, target_speed_mps, step_s)
+        self.mode = MODE_CC
+        self._mode_known = False
+        self._eps_x = params.eps_x_m
+        self._cc_speed = target_speed_mps + params.eps_v_mps - SPEED_TOLERANCE_MPS
+        self._acc_speed = target_speed_mps + SPEED_TOLERANCE_MPS
+        self._acc_kp, self._acc_kv = params.acc_kp, params.acc_kv
+        self._accel_max, self._decel_max = vehicle.max_accel_mps2, vehicle.max_decel_mps2
+
+    def desired_gap_m(self, speed_mps: float) -> float:
+        """The gap the ACC keeps: the setpoint d (Eq. 1)."""
+        return self.setpoint_m
+
+    def select_mode(self, gap_m: float, speed_mps: float) -> float:
+        desired = self.desired_gap_m(speed_mps)
+        if gap_m >= desired + self._eps_x - GAP_TOLERANCE_M or speed_mps >= self._cc_speed:
+            mode = MODE_CC
+        elif gap_m <= desired + GAP_TOLERANCE_M and speed_mps <= self._acc_speed:
+            mode = MODE_ACC
+        elif self._mode_known:
+            mode = self.mode
+        else:
+            mode = MODE_CC  # inside the hysteresis band at start: cruise
+        if mode != self.mode and mode == MODE_ACC:
+            self.cruise.disengage()
+        self.mode = mode
+        self._mode_known = True
+        return mode
+
+    def desired_acceleration(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        """Eq. 1: the acceleration the active law asks for [m/s^2]."""
+        if self.select_mode(gap_m, speed_mps) == MODE_CC:
+            return self.cruise.acceleration(speed_mps)
+        return self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps)
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        # acceleration_to_command inlined: this runs for every follower at every step
+        a = self.desired_acceleration(gap_m, speed_mps, lead_speed_mps)
+        u = a / self._accel_max if a >= 0.0 else a / self._decel_max
+        return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+
+
+@dataclass(frozen=True)
+class TimeGapParams(SwitchingParams):
+    """The switching controller with a constant time-gap spacing policy (the paper's mitigation)."""
+
+    time_gap_s: float = 1.0  # h: seconds of own speed added to the standstill distance
+
+
+class TimeGapController(SwitchingController):
+    """Eq. 1 with a speed-dependent desired gap: d(v) = s0 + h v, s0 the scenario's setpoint.
+
+    The paper suggests ACCs "that can handle different distances at different speeds" as a
+    mitigation; this is the textbook one. The mode switch and the ACC law use d(v) where Eq. 1 uses
+    d: CC when gap >= d(v) + eps_x or v >= v_d + eps_v; ACC when gap <= d(v) and v <= v_d;
+    ACC: a = Kp (gap - d(v)) + Kv (v_lead - v). At h = 0 it is the paper's controller.
+    """
+
+    Params = TimeGapParams
+
+    def __init__(self, params: TimeGapParams, **kwargs):
+        super().__init__(params, **kwargs)
+        self.time_gap_s = params.time_gap_s
+
+    def desired_gap_m(self, speed_mps: float) -> float:
+        return self.setpoint_m + self.time_gap_s * speed_mps
+
+
+# --- registry of follower controllers ------------------------------------------------------------
+
+_REGISTRY: dict[str, type] = {}
+
+
+def register_controller(name: str, cls: type) -> None:
+    """Make a controller class available under a short name; names are never silently replaced."""
+    if name in _REGISTRY and _REGISTRY[name] is not cls:
+        raise ValueError(f"a follower controller is already registered as {name!r}")
+    _REGISTRY[name] = cls
+
+
+register_controller("switching", SwitchingController)
+register_controller("timegap", TimeGapController)
+
+
+def registered_controllers() -> tuple[str, ...]:
+    return tuple(sorted(_REGISTRY))
+
+
+#: Whether a user's controller module may be imported here. Reading a results database someone sent
+#: must never run code: its readers name controllers without importing them (`names_only`).
+_IMPORTS = contextvars.ContextVar("d4sumo_controller_imports", default=True)
+
+
+class NotImported(ConfigError):
+    """A user's controller named where nothing may be imported (`names_only`)."""
+
+
+class ControllerImportError(ConfigError):
+    """A user's controller class that does not import here: says how to make it importable."""
+
+    def __init__(self, name: str, reason: Exception):
+        module = name.partition(":")[0]
+        self.hint = (f"{module} did not import here ({reason}): run from the folder that holds "
+                     f"{module.replace('.', '/')}.py, or put its folder on PYTHONPATH")
+        super().__init__("controller.class", name, f"an importable 'package.module:ClassName'; {self.hint}")
+
+
+@contextlib.contextmanager
+def names_only():
+    """Within it, a user's controller ("package.module:ClassName") is a name: nothing is imported, its
+    parameters are taken as stored, unchecked."""
+    token = _IMPORTS.set(False)
+    try:
+        yield
+    finally:
+        _IMPORTS.reset(token)
+
+
+def user_module(name: str) -> str | None:
+    """The module a controller name imports: None for a registered controller or a SUMO model."""
+    return name.partition(":")[0] if name not in _REGISTRY and ":" in name and not name.startswith("sumo:") else None
+
+
+def resolve_controller(name: str) -> type:
+    """A registered name, or "package.module:ClassName" for a user's own controller class, found as
+    Python's ``-m`` would: installed, on PYTHONPATH, or in the current folder.
+
+    (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    allowed = f"one of {', '.join(registered_controllers())}, a SUMO model as 'sumo:MODEL' or 'package.module:ClassName'"
+    if ":" not in name:
+        raise ConfigError("controller.class", name, allowed)
+    if not _IMPORTS.get():
+        raise NotImported("controller.class", name, "a controller read by its name only (nothing is imported here)")
+    module_name, _, attr = name.partition(":")
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:  # the `d4sumo` script does not see the current folder
+        sys.path.append(cwd)
+    try:
+        cls = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise ControllerImportError(name, exc) from None
+    if not isinstance(getattr(cls, "Params", None), type) or not callable(getattr(cls, "command", None)):
+        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
+    return cls
+
+
+def build_params(cls: type, values: Mapping[str, Any]) -> Any:
+    """The controller's Params from a config table, refusing keys the class does not know."""
+    known = {f.name for f in dataclasses.fields(cls.Params)}
+    for key in values:
+        if key not in known:
+            raise ConfigError(f"controller.{key}", values[key], f"a key of {', '.join(sorted(known))}")
+    try:
+        return cls.Params(**values)
+    except TypeError as exc:
+        raise ConfigError("controller", dict(values), str(exc)) from None
+
+
+
+# --- the same laws over arrays: many episodes (and followers) in one numpy operation ----------------
+#
+# A batch of episodes played side by side (`batch`) runs these instead of one object per car. Each
+# performs, element by element, exactly the floating-point operations of its scalar counterpart above,
+# in the same order, so an episode played in a batch is bit for bit the episode played alone (a test
+# checks it). Every method takes and returns arrays of one shape (episodes, or episodes x cars).
+# Constants are 0-d arrays: numpy combines them with an array a third faster than a Python float,
+# with the same result.
+
+def _c(value: float) -> np.ndarray:
+    return np.array(value, dtype=float)
+
+
+def per_row(values, shape: tuple[int, ...]) -> np.ndarray:
+    """A value that may differ between episodes (rows: a batch of several campaigns' episodes): a 0-d
+    array when it is the same in every row, else one value per row, broadcasting against ``shape``.
+    Each element is the very float the scalar code uses, so the arithmetic stays the same."""
+    values = [float(v) for v in values]
+    if len(set(values)) <= 1:
+        return _c(values[0])
+    return np.array(values, dtype=float).reshape((len(values),) + (1,) * (len(shape) - 1))
+
+
+_ZERO, _ONE, _MINUS_ONE = _c(0.0), _c(1.0), _c(-1.0)
+
+
+class ActuatorArray:
+    """`Actuator` over an array of cars; ``max_speed_mps`` broadcasts against the cars' shape."""
+
+    def __init__(self, vehicle: VehicleParams, step_s: float, shape: tuple[int, ...], max_speed_mps):
+        self.accel_max = _c(vehicle.max_accel_mps2)
+        self.decel_max = _c(vehicle.max_decel_mps2)
+        lag = vehicle.actuator_lag_s
+        self.alpha = _c(1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag))
+        self.step_s = _c(step_s)
+        self.max_speed_mps = np.broadcast_to(np.asarray(max_speed_mps, dtype=float), shape)
+        self.accel_mps2 = np.zeros(shape)
+
+    def apply(self, u: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+        target = u * np.where(u >= _ZERO, self.accel_max, self.decel_max)
+        accel = self.accel_mps2 + (target - self.accel_mps2) * self.alpha
+        v = speed_mps + accel * self.step_s
+        clamped = np.minimum(np.maximum(v, _ZERO), self.max_speed_mps)
+        hit = clamped != v
+        if np.count_nonzero(hit):  # what the car actually did: no wind-up while clamped
+            accel = np.where(hit, (clamped - speed_mps) / self.step_s, accel)
+        self.accel_mps2 = accel
+        return clamped
+
+
+class CruiseArray:
+    """`CruiseControl` over an array of cars; only the cars in ``active`` use it (and change its state).
+    ``target_speed_mps``: one speed, or an array broadcasting against ``shape`` (`per_row`)."""
+
+    def __init__(self, params: SwitchingParams, target_speed_mps, step_s: float, shape: tuple[int, ...]):
+        self.kp, self.ki, self.kd = _c(params.cruise_kp), _c(params.cruise_ki), _c(params.cruise_kd)
+        self.clamp, self.minus_clamp = _c(params.cruise_integral_clamp), _c(-params.cruise_integral_clamp)
+        self.limit, self.minus_limit = _c(params.cruise_output_limit_mps2), _c(-params.cruise_output_limit_mps2)
+        self.step_s = _c(step_s)
+        self.target_mps = np.asarray(target_speed_mps, dtype=float)
+        self.integral = np.zeros(shape)
+        self.prev_error = np.zeros(shape)
+        self.engaged = np.zeros(shape, dtype=bool)  # False: prev_error is None (no derivative kick)
+
+    def disengage(self, where: np.ndarray) -> None:
+        self.engaged &= ~where
+
+    def reset(self, where: np.ndarray) -> None:
+        self.integral = np.where(where, _ZERO, self.integral)
+        self.engaged &= ~where
+
+    def acceleration(self, speed_mps: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
+        """The PID's output for every car; the state moves on for the ``active`` ones (None: all)."""
+        e = self.target_mps - speed_mps
+        i = np.minimum(np.maximum(self.integral + e * self.step_s, self.minus_clamp), self.clamp)
+        d = np.where(self.engaged, (e - self.prev_error) / self.step_s, _ZERO)
+        if active is None:
+            self.integral, self.prev_error = i, e
+            self.engaged[...] = True
+        else:
+            self.integral = np.where(active, i, self.integral)
+            self.prev_error = np.where(active, e, self.prev_error)
+            self.engaged |= active
+        a = self.kp * e + self.ki * i + self.kd * d
+        return np.minimum(np.maximum(a, self.minus_limit), self.limit)
+
+
+class CommandArray:
+    """`acceleration_to_command` over an array: a wanted acceleration to throttle/brake in [-1, 1]."""
+
+    def __init__(self, vehicle: VehicleParams):
+        self.accel_max, self.decel_max = _c(vehicle.max_accel_mps2), _c(vehicle.max_decel_mps2)
+
+    def __call__(self, a_mps2: np.ndarray) -> np.ndarray:
+        u = a_mps2 / np.where(a_mps2 >= _ZERO, self.accel_max, self.decel_max)
+        return np.minimum(np.maximum(u, _MINUS_ONE), _ONE)
+
+
+class SwitchingArray:
+    """`SwitchingController` (or `TimeGapController`) over an array of followers (episodes x cars) that
+    share its gains: built from one such controller per episode (row), whose setpoint and target
+    speed may differ from row to row (a batch of several campaigns' episodes)."""
+
+    def __init__(self, controllers: "SwitchingController | list[SwitchingController]", shape: tuple[int, ...], step_s: float):
+        rows = controllers if isinstance(controllers, list) else [controllers]
+        controller = rows[0]
+        self.cruise = CruiseArray(controller.params, per_row([c.target_speed_mps for c in rows], shape), step_s, shape)
+        self.mode = np.full(shape, MODE_CC)
+        self._mode_known = False
+        self._time_gap = isinstance(controller, TimeGapController)
+        # the thresholds of Eq. 1's switch, with the same arithmetic as SwitchingController.select_mode
+        self._setpoint = per_row([c.setpoint_m for c in rows], shape)
+        self._cc_gap = per_row([c.setpoint_m + c._eps_x - GAP_TOLERANCE_M for c in rows], shape)
+        self._acc_gap = per_row([c.setpoint_m + GAP_TOLERANCE_M for c in rows], shape)
+        self._h = _c(getattr(controller, "time_gap_s", 0.0))
+        self._eps_x, self._tolerance = _c(controller._eps_x), _c(GAP_TOLERANCE_M)
+        self._cc_speed = per_row([c._cc_speed for c in rows], shape)
+        self._acc_speed = per_row([c._acc_speed for c in rows], shape)
+        self._acc_kp, self._acc_kv = _c(controller._acc_kp), _c(controller._acc_kv)
+        self._command = CommandArray(controller.vehicle)
+
+    def command(self, gap_m: np.ndarray, speed_mps: np.ndarray, lead_speed_mps: np.ndarray) -> np.ndarray:
+        if self._time_gap:  # d(v) = s0 + h v
+            desired = self._setpoint + self._h * speed_mps
+            cc_gap, acc_gap = desired + self._eps_x - self._tolerance, desired + self._tolerance
+        else:
+            desired, cc_gap, acc_gap = self._setpoint, self._cc_gap, self._acc_gap
+        cc = (gap_m >= cc_gap) | (speed_mps >= self._cc_speed)
+        acc = (gap_m <= acc_gap) & (speed_mps <= self._acc_speed)
+        held = self.mode if self._mode_known else MODE_CC  # inside the hysteresis band at start: cruise
+        mode = np.where(cc, MODE_CC, np.where(acc, MODE_ACC, held))
+        changed = mode != self.mode
+        if np.count_nonzero(changed):
+            self.cruise.disengage(changed & (mode == MODE_ACC))
+        self.mode = mode
+        self._mode_known = True
+        a = self._acc_kp * (gap_m - desired) + self._acc_kv * (lead_speed_mps - speed_mps)
+        cruising = mode == MODE_CC
+        if np.count_nonzero(cruising):
+            a = np.where(cruising, self.cruise.acceleration(speed_mps, cruising), a)
+        return self._command(a)
+
+
+#: controller classes whose law also runs over arrays (exactly these classes: a subclass may change the law)
+ARRAY_KERNELS: dict[type, type] = {SwitchingController: SwitchingArray, TimeGapController: SwitchingArray}

@@ -1,0 +1,267 @@
+"""The attack's maneuver: where the cars start, and who follows whom in each lane. Pure code, no SUMO.
+
+    inlane  the paper's attack: the attacker v0 leads the platoon v1 .. vN in lane 0.
+    cutin   a benign car `lead` cruising at the target speed leads the platoon (lead, v1 .. vN) in lane 0;
+            the attacker starts in lane 1 beside follower k (scenario.cutin_follower), its rear bumper
+            scenario.cutin_offset_m ahead of vk's front bumper, plays its signal and changes into lane 0
+            at t_lc_s.
+    cutout  the attacker leads the platoon in lane 0 with a slower or stopped car `obstacle` ahead
+            (scenario.obstacle_distance_m, obstacle_speed_mps); at t_lc_s it changes to lane 1, revealing
+            the obstacle to v1.
+
+Lanes are numbered from the right (0). The optimiser picks t_lc_s (seconds from the attack's start), a
+parameter the maneuver adds to the attack family's box; SUMO performs the lane change.
+
+A maneuver says, at each step, which cars follow which: the *pairs* (leader, follower, bumper gap) of
+cars next to each other in a lane. A car changing lanes occupies both lanes from the moment its body
+crosses the lane line. Every follower's leader, every collision (a pair with gap < 0) and every gap
+signal of the trace come from these pairs, with one arithmetic, so verdicts and traces always agree.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from .attacks import AttackFamily, Parameter
+from ..errors import ConfigError
+
+if TYPE_CHECKING:
+    from .config import EpisodeConfig
+
+#: the gap a car with nobody ahead in its lane sees [m]: beyond any ACC's range, and finite for rtamt
+FREE_ROAD_GAP_M = 1000.0
+#: car width [m] (SUMO's passenger car): how much of a lane a car changing lanes covers
+CAR_WIDTH_M = 1.8
+#: a car occupies a lane when it overlaps it by more than this [m]: a body exactly on the line does not
+LANE_TOLERANCE_M = 1e-6
+
+Pair = tuple[int, int, float]  # (leader index, follower index, bumper gap [m])
+
+
+@dataclass(frozen=True)
+class Car:
+    id: str
+    lane: int
+    position_m: float  # front bumper, along the road
+    speed_mps: float
+
+
+def initial_state(config: "EpisodeConfig") -> tuple[list[float], list[float]]:
+    """Front-bumper positions and speeds at t = 0 of a column of followers + 1 cars in one lane, front to
+    back, spaced at the setpoint (the attacker and the followers; in a cut-in, the benign lead and the followers)."""
+    n = config.followers + 1
+    spacing = config.vehicle.length_m + config.setpoint_m
+    rear = config.vehicle.length_m + REAR_START_M
+    positions = [rear + spacing * (n - 1 - i) for i in range(n)]
+    speed = config.speed_mps if config.start == "steady" else 0.0  # rest and warmup start standing
+    return positions, [speed] * n
+
+
+#: The rearmost car's front bumper starts this far from the road's start [m].
+REAR_START_M = 10.0
+
+
+def occupied_lanes(y_m: float, lane_width_m: float) -> tuple[int, ...]:
+    """The lanes a car whose centre is ``y_m`` from the road's right edge covers."""
+    half = CAR_WIDTH_M / 2.0
+    low = max(0, math.floor((y_m - half) / lane_width_m))
+    high = math.floor((y_m + half) / lane_width_m)
+    return tuple(j for j in range(low, high + 1)
+                 if min(y_m + half, (j + 1) * lane_width_m) - max(y_m - half, j * lane_width_m) > LANE_TOLERANCE_M)
+
+
+class Maneuver:
+    """The paper's maneuver (`inlane`): nobody changes lanes, so the order is v0, v1, .., vN for the
+    whole episode (in a lane, cars pass each other only through a collision, which ends it)."""
+
+    name = "inlane"
+    lateral = False  # whether the attacker changes lanes
+    lanes_needed = 1
+    other_car: str | None = None  # the id of the car the maneuver adds to the attacker and the followers
+    other_cruises = False  # that car cruises at the target speed (else it holds its own constant speed)
+    settings: tuple[str, ...] = ()  # the scenario keys the maneuver reads
+
+    def __init__(self, config: "EpisodeConfig"):
+        self.config = config
+        self.ids = config.vehicle_ids
+        self.length_m = config.vehicle.length_m
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        """Refuse settings this maneuver cannot play (each value's own range is checked by the config)."""
+
+    def cars(self) -> list[Car]:
+        """Every car at t = 0, in the order of ``config.vehicle_ids``."""
+        positions, speeds = initial_state(self.config)
+        return [Car(i, 0, x, v) for i, x, v in zip(self.ids, positions, speeds)]
+
+    def start_lanes(self) -> list[int]:
+        return [car.lane for car in self.cars()]
+
+    def family(self, longitudinal: AttackFamily) -> AttackFamily:
+        """The attack's box: the longitudinal family's, plus what the maneuver adds."""
+        return longitudinal
+
+    def target_lane(self) -> int | None:
+        """The lane the attacker changes into (None: it keeps its lane)."""
+        return None
+
+    def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
+        """(leader, follower, gap) of the cars next to each other in a lane, frontmost first."""
+        length = self.length_m
+        return [(i, i + 1, positions[i] - length - positions[i + 1]) for i in range(len(positions) - 1)]
+
+
+class LaneChange(Maneuver):
+    """A maneuver in which the attacker changes lanes once, at t_lc_s, a parameter of the attack."""
+
+    lateral = True
+    lanes_needed = 2
+    settings = ("maneuver", "lane_change_s")
+
+    def family(self, longitudinal: AttackFamily) -> AttackFamily:
+        return LaneChangeAttack(longitudinal, self.config.duration_s)
+
+    def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
+        if lanes is None:
+            raise ValueError("a lane-changing maneuver needs each car's lanes")
+        by_lane: dict[int, list[int]] = {}
+        for i, covered in enumerate(lanes):
+            for lane in covered:
+                by_lane.setdefault(lane, []).append(i)
+        length = self.length_m
+        found = set()
+        for cars in by_lane.values():
+            cars.sort(key=lambda i: (-positions[i], i))
+            found.update(zip(cars, cars[1:]))
+        return sorted(((a, b, positions[a] - length - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
+
+
+class CutIn(LaneChange):
+    name = "cutin"
+    other_car = "lead"
+    other_cruises = True
+    settings = (*LaneChange.settings, "cutin_follower", "cutin_offset_m")
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        if config.cutin_follower > config.followers:
+            raise ConfigError("scenario.cutin_follower", config.cutin_follower,
+                              f"a follower: 1 for v1 .. {config.followers} for v{config.followers}")
+        positions, _ = initial_state(config)
+        rear = positions[config.cutin_follower] + config.cutin_offset_m  # the attacker's rear bumper
+        if rear < 0.0:  # SUMO would read a negative position from the road's end
+            raise ConfigError("scenario.cutin_offset_m", config.cutin_offset_m,
+                              f"at least {-(rear - config.cutin_offset_m):g} m: the attacker starts on the road")
+
+    def cars(self) -> list[Car]:
+        positions, speeds = initial_state(self.config)  # the benign lead where the paper's attacker would be
+        k = self.config.cutin_follower
+        attacker = positions[k] + self.config.cutin_offset_m + self.length_m
+        followers = [Car(i, 0, x, v) for i, x, v in zip(self.ids[1:-1], positions[1:], speeds[1:])]
+        return [Car("v0", 1, attacker, speeds[0]), *followers, Car("lead", 0, positions[0], speeds[0])]
+
+    def target_lane(self) -> int:
+        return 0
+
+
+class CutOut(LaneChange):
+    name = "cutout"
+    other_car = "obstacle"
+    settings = (*LaneChange.settings, "obstacle_distance_m", "obstacle_speed_mps")
+
+    @classmethod
+    def check(cls, config: "EpisodeConfig") -> None:
+        closed = (config.speed_mps - config.obstacle_speed_mps) * config.attack_start_s  # at most, cruising
+        if config.obstacle_distance_m <= closed:
+            raise ConfigError("scenario.obstacle_distance_m", config.obstacle_distance_m,
+                              f"more than the attacker may close on the obstacle during the {config.warmup_s:g} s warm-up "
+                              f"({closed:g} m), or it hits it before the attack starts")
+
+    def cars(self) -> list[Car]:
+        column = super().cars()
+        front = column[0].position_m + self.config.obstacle_distance_m + self.length_m
+        return [*column, Car("obstacle", 0, front, self.config.obstacle_speed_mps)]
+
+    def target_lane(self) -> int:
+        return 1
+
+
+#: every maneuver by name: a new kind of attacker is a new class here
+MANEUVERS: dict[str, type[Maneuver]] = {m.name: m for m in (Maneuver, CutIn, CutOut)}
+
+
+def maneuver_of(config: "EpisodeConfig") -> Maneuver:
+    return MANEUVERS[config.maneuver](config)
+
+
+#: the attack parameter of a lane-changing maneuver: when the attacker begins its lane change (seconds
+#: from the attack's start)
+LANE_CHANGE_PARAMETER = "t_lc_s"
+
+
+class LaneChangeAttack(AttackFamily):
+    """A longitudinal attack family plus the time of the attacker's lane change, `LANE_CHANGE_PARAMETER`
+    (found in the box by its name). Its name and options stay the longitudinal family's."""
+
+    def __init__(self, longitudinal: AttackFamily, window_s: float):
+        self.longitudinal = longitudinal
+        self.name = longitudinal.name
+        self.options = longitudinal.options
+        self.parameters = (*longitudinal.parameters, Parameter(LANE_CHANGE_PARAMETER, 0.0, float(window_s), "s"))
+        self._lane_change = self.names.index(LANE_CHANGE_PARAMETER)
+        self._signal_index = [i for i in range(self.dimension) if i != self._lane_change]
+
+    def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return self.longitudinal._signal(x[self._signal_index], t)
+
+    def lane_change_s(self, params) -> float:
+        return float(self.check(params)[self._lane_change])
+
+    def describe(self) -> dict:
+        d = self.longitudinal.describe()
+        d["parameters"] = [p.__dict__ for p in self.parameters]
+        return d
+
+
+@dataclass(frozen=True)
+class AttackPlan:
+    """What the attacker does in an episode: its command at each step's start (NaN: it cruises) and
+    the step at whose start it begins its lane change (None: it keeps its lane)."""
+
+    u: np.ndarray
+    lane_change_step: int | None = None
+
+
+def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") -> AttackPlan:
+    """The plan of an attack that begins after the warm-up (if any): the longitudinal signal, and the
+    lane change at the step nearest to t_lc_s after the attack's start."""
+    from .attacks import attack_signal
+
+    u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+    t_lc_s = family.lane_change_s(params) if family is not None else None
+    if t_lc_s is None:
+        return AttackPlan(u)
+    step = config.attack_start_step + lane_change_steps(t_lc_s, config.step_s)
+    return AttackPlan(u, step if step < config.steps else None)
+
+
+#: a lane change time within this many steps of a half step counts as the half step (which rounds up)
+HALF_STEP_TOLERANCE = 1e-9
+
+
+def lane_change_steps(t_lc_s: float, step_s: float) -> int:
+    """The whole steps nearest to t_lc_s, a half step rounding up whatever the rounding of t_lc_s / step_s
+    (1.075 s / 0.05 s is 21.499999999999996 in floating point: it rounds to 22, as 1.025 s to 21)."""
+    return int(math.floor(t_lc_s / step_s + 0.5 + HALF_STEP_TOLERANCE))
+
+
+def check_road_lanes(config: "EpisodeConfig", road_name: str, lanes: int) -> None:
+    maneuver = config.maneuver_class
+    if lanes < maneuver.lanes_needed:
+        raise ConfigError("scenario.maneuver", config.maneuver,
+                          f"a road with at least {maneuver.lanes_needed} lanes ({road_name} has {lanes}), or maneuver inlane")

@@ -1,0 +1,286 @@
+"""The platoon's longitudinal control, one step at a time: pure code, no SUMO.
+
+The system under test is a platoon of followers of two kinds: a `PythonFollower` runs a Python
+controller whose command goes through the car's actuator; a `SumoFollower` is driven by one of SUMO's
+car-following models, which the co-simulation only senses. `Platoon.advance` takes the sensed state
+(positions and speeds, front to back) and returns the speed at the end of the step of each car Python
+commands: the attacker plays its attack signal (or cruises where the signal is NaN) and each Python
+follower runs its controller. The step loop (`engine.loop.play`) calls it each step, in SUMO or in the
+SUMO-free ballistic world (`engine.ballistic.integrate`, for physics tests).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+from . import carfollowing
+from .config import ControllerConfig, EpisodeConfig
+from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
+from ..errors import D4sumoError
+from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
+from .trace import Collision, Trace
+
+
+class ControllerError(D4sumoError, ValueError):
+    """A follower controller returned something that is not a command."""
+
+
+def checked_command(c, car: int, k: int) -> float:
+    """A follower controller's command as a float in [-1, 1] (a float32 or a numpy scalar becomes the
+    float it stands for), or a ControllerError: a user's controller must not corrupt the trace."""
+    u = float(c) if isinstance(c, numbers.Real) else math.nan  # not a string that reads as a number
+    if not -1.0 <= u <= 1.0:  # NaN fails too
+        raise ControllerError(f"the controller of v{car} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
+    return u
+
+
+def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
+    """Road length an episode may use: no car, clamped to the limit, passes the frontmost car's start."""
+    return max(car.position_m for car in maneuver_of(config).cars()) + speed_limit_mps * config.total_s
+
+
+def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], speeds: list[float],
+                  ids: tuple[str, ...]) -> tuple[Collision, ...]:
+    """Every bumper overlap (a pair's gap < 0) at the end of a step, frontmost pair first.
+
+    This is the definition of a collision, whether SUMO reports it or not (SUMO ignores overlaps up to
+    1 mm). The gaps are the maneuver's pairs, from which the trace's gaps come too, so the outcome, the
+    collision record and the trace's minimum gaps always agree. The position is the follower's front
+    bumper, where it hit.
+    """
+    return tuple(Collision(ids[a], ids[b], time_s, positions[b], (speeds[b] - speeds[a]) * 3.6)
+                 for a, b, gap in pairs if gap < 0.0)
+
+
+class PythonFollower:
+    """A follower commanded each step by a Python controller, through its actuator."""
+
+    sumo_driven = False
+    shares_sumo = True  # its platoon may share one SUMO with others (a batch)
+
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+        self.config = config
+        self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
+                                                    target_speed_mps=episode.speed_mps, vehicle=episode.vehicle,
+                                                    step_s=episode.step_s)
+        self.actuator = Actuator(episode.vehicle, episode.step_s, float("inf"))
+        self.command = self.controller.command
+        self.has_mode = hasattr(self.controller, "mode")
+
+
+class SumoFollower:
+    """A follower driven by one of SUMO's car-following models: d4sumo senses it and commands nothing.
+
+    It is the same car as the attacker (length, full-throttle acceleration and full-brake deceleration
+    from [vehicle]) whose desired speed is the target speed; the model and its attributes come from
+    its controller table. `vtype` and `parameters` say it in SUMO's terms; the simulation loads them.
+    """
+
+    sumo_driven = True
+    has_mode = False  # SUMO does not expose its models' internal modes to TraCI
+
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+        self.config = config
+        self.model = config.sumo_model
+        self.params = dict(config.params)
+        self.episode = episode
+        #: whether its platoon may share one SUMO with others: not when its model draws random numbers
+        self.shares_sumo = carfollowing.shares_sumo(self.model, self.params)
+
+    def vtype(self, lanes: int) -> dict[str, str]:
+        """Its <vType> attributes."""
+        v = self.episode.vehicle
+        attributes = carfollowing.vtype_attributes(self.model, self.params, lanes=lanes)
+        attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
+                          maxSpeed=repr(self.episode.speed_mps), speedFactor="1", speedDev="0")
+        return attributes
+
+    def parameters(self) -> dict[str, str]:
+        """Per-vehicle parameters its model reads after insertion."""
+        return carfollowing.runtime_parameters(self.model, self.params, self.episode.speed_mps)
+
+
+def make_follower(controller: ControllerConfig, config: EpisodeConfig) -> PythonFollower | SumoFollower:
+    """The one place that tells the kinds of follower apart."""
+    return (SumoFollower if controller.sumo_model else PythonFollower)(controller, config)
+
+
+def followers_of(config: EpisodeConfig) -> list[PythonFollower | SumoFollower]:
+    """Each follower of the platoon, v1 first."""
+    return [make_follower(c, config) for c in config.controllers]
+
+
+class Platoon:
+    """Every car Python knows of: the attacker, the followers and the maneuver's other car (a benign
+    lead that cruises at the target speed, or an obstacle at its constant speed)."""
+
+    def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float,
+                 followers: list[PythonFollower | SumoFollower] | None = None):
+        attack_u = np.asarray(attack_u, dtype=float)
+        if attack_u.shape != (config.steps,):
+            raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
+        self.config = config
+        self.maneuver = maneuver_of(config)
+        self.ids = config.vehicle_ids
+        self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
+        vehicle, dt = config.vehicle, config.step_s
+        self.followers = followers or followers_of(config)  # given: an episode carried on from a batch
+        gains = cruise_params(config)  # the attacker is the same kind of car
+        self.attacker_cruise = CruiseControl(gains, config.speed_mps, dt)
+        self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
+        n = config.followers + 1
+        #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
+        self._others = [(i, CruiseControl(gains, config.speed_mps, dt) if self.maneuver.other_cruises else None,
+                         Actuator(vehicle, dt, attacker_max_speed_mps)) for i, vid in enumerate(self.ids[n:], start=n)]
+        #: the cars Python commands (the attacker, the Python-commanded followers, the other car): advance
+        #: returns their speeds
+        self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven),
+                          *(i for i, _, _ in self._others))
+        self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
+        self._with_mode = [f.controller for f in self.followers if f.has_mode]
+        self._attacking = False
+        self.commands: list[list[float]] = []
+        self.modes: list[list[float]] = []
+        self.pairs: list[list[Pair]] = []  # per sample, lane-changing maneuvers only: who followed whom
+
+    def advance(self, k: int, positions: list[float], speeds: list[float], pairs: list[Pair]) -> list[float]:
+        """Commands for step k from the sensed state and the maneuver's ``pairs`` (who follows whom in
+        each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
+        own followers)."""
+        u = self.attack_u[k]
+        if u != u:  # NaN: no attack here, the attacker cruises like everyone else
+            if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
+                self.attacker_cruise.reset()
+                self._attacking = False
+            u = acceleration_to_command(self.attacker_cruise.acceleration(speeds[0]), self.config.vehicle)
+        else:
+            self._attacking = True
+        commands = [u]
+        new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
+        ahead: dict[int, tuple[int, float]] = {}
+        for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
+            if b not in ahead or gap < ahead[b][1]:
+                ahead[b] = (a, gap)
+        for i, follower in self._python:
+            leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
+            c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
+            commands.append(c)
+            new_speeds.append(follower.actuator.apply(c, speeds[i]))
+        for i, cruise, actuator in self._others:
+            if cruise is None:  # the obstacle holds its speed
+                commands.append(0.0)
+                new_speeds.append(self.config.obstacle_speed_mps)
+                continue
+            c = acceleration_to_command(cruise.acceleration(speeds[i]), self.config.vehicle)
+            commands.append(c)
+            new_speeds.append(actuator.apply(c, speeds[i]))
+        self.commands.append(commands)
+        if self._with_mode:
+            self.modes.append([c.mode for c in self._with_mode])
+        return new_speeds
+
+    def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray,
+              lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float]]:
+        """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands (and, for a
+        lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
+        gap of every pair of cars that followed each other."""
+        commands = np.array(self.commands, dtype=float).reshape(-1, len(self.commanded))
+        modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
+        return assemble_trace(self.config, self.followers, self.commanded, times_s, positions, speeds, commands, modes,
+                              self.pairs, lateral_m)
+
+
+def cruise_params(config: EpisodeConfig) -> SwitchingParams:
+    """The gains the attacker (and a benign lead) cruise with: the followers' PID gains when they all
+    run the paper's controller (or its time-gap variant), the default gains otherwise."""
+    uniform = isinstance(config.controller, ControllerConfig) and not config.controller.sumo_model
+    params = config.controller.build_params() if uniform else None
+    return params if isinstance(params, SwitchingParams) else SwitchingParams()
+
+
+def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int, ...], times_s: np.ndarray,
+                   positions: np.ndarray, speeds: np.ndarray, commands: np.ndarray, modes: np.ndarray | None,
+                   pairs: list[list[Pair]], lateral_m: np.ndarray | None) -> tuple[Trace, dict[str, float]]:
+    """The Trace of an episode from its sensed rows (samples x cars), the commands recorded per step
+    (steps x ``commanded`` cars) and the modes of the followers that have one (steps x those); for a
+    lane-changing maneuver also the pairs of each sample and each car's lateral position. With it the
+    minimum gap of every pair of cars that followed each other. One function for an episode played
+    alone or in a batch, so both give the same trace."""
+    n_samples = times_s.size
+    ids = config.vehicle_ids
+    accel = np.zeros_like(speeds)
+    accel[1:] = np.diff(speeds, axis=0) / config.step_s
+    cmds = np.empty((n_samples, len(ids)))
+    cmds[:, list(commanded)] = _hold_last(commands, n_samples)
+    vehicle = config.vehicle
+    for i, follower in enumerate(followers, start=1):
+        if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
+            ahead = np.append(accel[1:, i], accel[-1, i])
+            u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
+            cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
+    signals: dict[str, np.ndarray] = {}
+    for i, vid in enumerate(ids):
+        signals[f"pos_{vid}"] = positions[:, i]
+        signals[f"speed_{vid}"] = speeds[:, i]
+        signals[f"accel_{vid}"] = accel[:, i]
+        signals[f"cmd_{vid}"] = cmds[:, i]
+    if config.maneuver_class.lateral:
+        min_gaps = _lane_gaps(ids, signals, pairs, lateral_m)
+    else:
+        min_gaps = _column_gaps(config.vehicle.length_m, signals, positions)
+    if modes is not None and modes.size:
+        modes = _hold_last(modes, n_samples)
+        with_mode = [i for i, f in enumerate(followers, start=1) if f.has_mode]
+        for column, i in enumerate(with_mode):
+            signals[f"mode_v{i}"] = modes[:, column]
+    return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps
+
+
+def _column_gaps(length_m: float, signals: dict, positions: np.ndarray) -> dict[str, float]:
+    """The paper's column v0, v1, .., vN: gap_I between vI and vI+1, vectorised (the same arithmetic as
+    the maneuver's pairs), and the named gaps every maneuver's trace has."""
+    n = positions.shape[1]
+    for i in range(n - 1):
+        signals[f"gap_{i}"] = positions[:, i] - length_m - positions[:, i + 1]
+    free = np.full(positions.shape[0], FREE_ROAD_GAP_M)
+    signals["gap_v0"] = free
+    for i in range(1, n):
+        signals[f"gap_v{i}"] = signals[f"gap_{i - 1}"]
+    signals["attacker_gap"] = signals["gap_0"]
+    signals["victim_gap"] = np.min([signals[f"gap_{i}"] for i in range(1, n - 1)], axis=0) if n > 2 else free
+    return {f"v{i}-v{i + 1}": float(signals[f"gap_{i}"].min()) for i in range(n - 1)}
+
+
+def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lateral_m: np.ndarray) -> dict[str, float]:
+    """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
+    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions."""
+    n_samples = len(pairs)
+    gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
+    victim = np.full(n_samples, FREE_ROAD_GAP_M)
+    attacker = np.full(n_samples, FREE_ROAD_GAP_M)
+    min_gaps: dict[str, float] = {}
+    for k, sample in enumerate(pairs):
+        for a, b, gap in sample:
+            gaps[k, b] = min(gaps[k, b], gap)
+            if a == 0 or b == 0:
+                attacker[k] = min(attacker[k], gap)
+            else:
+                victim[k] = min(victim[k], gap)
+            name = f"{ids[a]}-{ids[b]}"
+            min_gaps[name] = min(min_gaps.get(name, gap), gap)
+    for i, vid in enumerate(ids):
+        signals[f"gap_{vid}"] = gaps[:, i]
+        signals[f"y_{vid}"] = lateral_m[:, i]
+    signals["victim_gap"] = victim
+    signals["attacker_gap"] = attacker
+    return min_gaps
+
+
+def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:
+    """Rows recorded per step, one per sample: the last sample has no step after it, so it holds the last row."""
+    if rows.shape[0] < n_samples:
+        rows = np.vstack([rows, np.repeat(rows[-1:], n_samples - rows.shape[0], axis=0)])
+    return rows[:n_samples]

@@ -1,0 +1,276 @@
+"""One HTML report of stored results: the paper's tables, heatmaps, time-space diagrams, accelerations
+and clusters. The time-space diagrams replay the most severe attacks through SUMO into FCD files.
+
+Also the single figures of ``d4sumo plot``: ``plot_figure`` checks where the figure goes before any
+work and writes nothing but the figure (and the FCD, only where one is asked for).
+"""
+
+from __future__ import annotations
+
+import html
+import logging
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
+
+from .. import __version__
+from . import figures, paper
+from .analysis import (
+    Record,
+    Table,
+    cluster_knots,
+    count_noun,
+    load_records,
+    most_severe,
+    richest_conditions,
+    table_attacker_crashes,
+    table_by_speed,
+    table_success_statistics,
+    table_systems,
+)
+from ..search.campaign import Campaign, Evaluator, open_store
+from ..errors import ConfigError
+from ..engine.simulation import simulate
+from ..search.store import collision_dict
+
+log = logging.getLogger(__name__)
+
+PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
+SEVERITY = "largest speed difference between the colliding cars at the first collision"
+
+
+def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
+    """Re-simulate a stored sample into an FCD file; returns the parsed FCD."""
+    with open_store(record.db, create=False) as store:
+        definition = store.campaign(record.campaign_id).definition
+    campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
+    evaluator = Evaluator(campaign)
+    simulate(campaign.config, evaluator.plan(record.params), road=evaluator.road, fcd_path=fcd_path)
+    return figures.read_fcd(fcd_path)
+
+
+def collision_of(record: Record) -> dict | None:
+    """The stored first collision, its time in simulation time (the FCD's clock)."""
+    return collision_dict(record.pair, record.time_s, record.position_m, record.speed_diff_kmh)
+
+
+def describe(record: Record) -> str:
+    where = (f"{record.network}, " if record.network != "highway_4lane" else "") + (
+        f"{record.followers} followers, " if record.followers != 3 else "")
+    start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
+    system = f"{record.system}, " if record.system != "switching" else ""
+    maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""
+    head = (f"sample {record.sample_id}: {system}{maneuver}{record.attack} {record.optimizer}, {where}{start}, "
+            f"setpoint {record.setpoint_m:g} m, {record.speed_mps:g} m/s")
+    if record.pair is None:
+        return f"{head}; {record.outcome.replace('_', ' ')}"
+    return (f"{head}; {record.pair} collided {record.time_from_attack_start_s:.1f} s after the attack started, "
+            f"{record.speed_diff_kmh:.1f} km/h")
+
+
+def _sample_figure(record: Record, kind: str, fcd: dict, out: Path, speed_max_mps: float | None = None) -> Path:
+    title = describe(record)
+    moments = dict(attack_start_s=record.attack_start_s, lane_change_s=record.lane_change_at_s)
+    if kind == "time-space":
+        return figures.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps, **moments)
+    return figures.accelerations(fcd, title, out, collision_of(record), **moments)
+
+
+def _check_kind(kind: str, allowed: Sequence[str]) -> None:
+    if kind not in allowed:
+        raise ConfigError("kind", kind, f"one of {', '.join(allowed)}")
+
+
+def plot_sample(record: Record, kind: str, out: str | Path, fcd_path: str | Path | None = None) -> Path:
+    """A time-space or acceleration figure of one stored sample, replayed through SUMO. The FCD goes to
+    ``fcd_path`` when given, else to a temporary folder that is removed afterwards."""
+    _check_kind(kind, ("time-space", "accel"))
+    out = figures.check_figure_path(out, "--out")
+    if fcd_path is not None:
+        fcd_path = Path(fcd_path)
+        if not fcd_path.parent.is_dir() or fcd_path.is_dir():
+            raise ConfigError("--fcd", str(fcd_path), "a file in an existing folder")
+        return _sample_figure(record, kind, replay_to_fcd(record, fcd_path), out)
+    with tempfile.TemporaryDirectory(prefix="d4sumo-fcd-") as folder:
+        fcd = replay_to_fcd(record, Path(folder) / "fcd.xml")
+    return _sample_figure(record, kind, fcd, out)
+
+
+def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label: str = "all samples") -> Path:
+    """A heatmap (one panel per attack, optimiser and start mode, one colour range) or the clusters of
+    the successful knot vectors of ``records``."""
+    _check_kind(kind, ("heatmap", "clusters"))
+    out = figures.check_figure_path(out, "--out")
+    if kind == "heatmap":
+        return figures.heatmap(records, f"Successful attacks over setpoint and target speed: {label}", out)
+    clustering = cluster_knots(records, label)
+    if clustering is None:
+        raise ConfigError("filters", label, "a selection with at least 4 successful knot attacks")
+    return figures.clusters(clustering, out)
+
+
+def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample: int | None = None,
+                fcd_path: str | Path | None = None, attack: str | None = None, optimizer: str | None = None,
+                start: str | None = None, setpoint_m: float | None = None, speed_mps: float | None = None) -> str:
+    """``d4sumo plot``: one figure into ``out`` (checked first: a file in an existing folder); a sample
+    (time-space, accel) or a selection (heatmap, clusters). Returns the line to print."""
+    _check_kind(kind, PLOT_KINDS)
+    out = figures.check_figure_path(out, "--out")
+    if fcd_path is not None and kind not in ("time-space", "accel"):
+        raise ConfigError("--fcd", str(fcd_path), "an FCD file only with a time-space or accel plot")
+    if kind in ("time-space", "accel") and sample is None:
+        raise ConfigError("--sample", "nothing", f"a sample id: a {kind} plot draws one stored sample")
+    records = load_records(dbs)
+    if kind in ("time-space", "accel"):
+        matches = [r for r in records if r.sample_id == sample]
+        if not matches:
+            raise ConfigError("--sample", sample, f"a sample id of {', '.join(map(str, dbs))}")
+        plot_sample(matches[0], kind, out, fcd_path)
+        return f"{kind} plot written to {out}" + (f" (FCD: {fcd_path})" if fcd_path is not None else "")
+    filters = {"attack": attack, "optimizer": optimizer, "start": start, "setpoint_m": setpoint_m, "speed_mps": speed_mps}
+    chosen = [r for r in records if all(v is None or getattr(r, k) == v for k, v in filters.items())]
+    if not chosen:
+        raise ConfigError("filters", {k: v for k, v in filters.items() if v is not None}, "values that match stored samples")
+    label = ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{v}" for k, v in filters.items() if v is not None) or "all samples"
+    plot_selection(chosen, kind, out, label)
+    return f"{kind} plot written to {out}"
+
+
+def build_report(
+    dbs: Sequence[str | Path], out_dir: str | Path, *, severe: int = 3, progress: Callable[[str], None] | None = None
+) -> Path:
+    """Write ``index.html`` and its figures into ``out_dir``; returns the HTML path."""
+    out = Path(out_dir)
+    records = load_records(dbs)
+    (out / "fcd").mkdir(parents=True, exist_ok=True)
+    step = progress or (lambda what: log.info("%s", what))
+    parts: list[str] = []
+    db_names = [str(db) for db in dbs]
+
+    def stem(r: Record) -> str:  # sample ids repeat across databases
+        return f"sample_{r.sample_id}" if len(set(db_names)) == 1 else f"db{db_names.index(r.db) + 1}_sample_{r.sample_id}"
+
+    step("tables")
+    systems = sorted({r.system for r in records})
+    compare_systems = systems != ["switching"]
+    tables = [table_success_statistics(records), table_attacker_crashes(records), table_by_speed(records)]
+    if compare_systems:
+        tables.insert(0, table_systems(records))
+    for t in tables:
+        parts.append(_table_html(t))
+    (out / "tables.txt").write_text("\n\n".join(t.to_text() for t in tables) + "\n")
+    parts.append("<p>The tables as text: <a href='tables.txt'>tables.txt</a>. Times count from the attack's start "
+                 "(after the warm-up drive for start mode warmup).</p>")
+
+    step("heatmaps")
+    panels = figures.heatmap_panels(records)
+    parts.append("<h2>Successful attacks over setpoint and target speed</h2>"
+                 f"<p>One panel per attack, optimiser and start mode ({count_noun(len(panels), 'panel')}"
+                 f"{'; a row per system under test' if panels and isinstance(panels[0][0], tuple) else ''}), "
+                 "all on one colour range; grey cells were not run.</p>")
+    figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
+                     columns=figures.heatmap_columns(records))
+    parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
+
+    compared = paper.comparisons(records)
+    if compared:
+        parts.append("<h2>Compare with the paper</h2><p>The paper's tables (typed in from its source) with ours under "
+                     "each of its rows, for the parts of its grids these databases cover (the paper's controller only). "
+                     "<span class='far'>Highlighted</span>: ours more than twice or less than half the paper's. "
+                     "docs/paper.md discusses each difference.</p>")
+        parts += [_comparison_html(c) for c in compared]
+
+    if compare_systems:
+        step("worst counterexample per system")
+        parts.append("<h2>Worst counterexample per system under test</h2><p>For each system, its successful attack "
+                     f"with the {SEVERITY}, replayed through SUMO; a system without one is named with its budget.</p>")
+        for system in systems:
+            rs = [r for r in records if r.system == system]
+            worst = most_severe(rs, 1)
+            if not worst:
+                parts.append(f"<h3>{html.escape(system)}</h3><p>No successful attack in {count_noun(len(rs), 'sample')} "
+                             f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
+                continue
+            r = worst[0]
+            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml")
+            ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
+            parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
+                         f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
+
+    step("time-space diagrams")
+    top = most_severe(records, severe)
+    parts.append(f"<h2>Most severe attacks</h2><p>The successful attacks with the {SEVERITY}, at most one per "
+                 "configuration (network, followers, setpoint, target speed, start mode, system, attack, optimiser): "
+                 f"{count_noun(len(top), 'attack')}. Each is replayed through SUMO; its time-space diagram shows every "
+                 "car's position over time coloured by speed (one scale for all diagrams), and beside it every car's "
+                 "acceleration.</p>")
+    fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml") for r in top]
+    speed_max_mps = max((float(d["speed"].max()) for fcd in fcds for d in fcd.values() if len(d["speed"])), default=None)
+    for r, fcd in zip(top, fcds):
+        ts = _sample_figure(r, "time-space", fcd, out / f"time_space_{stem(r)}.png", speed_max_mps)
+        acc = _sample_figure(r, "accel", fcd, out / f"accel_{stem(r)}.png")
+        parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
+                     f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; FCD: "
+                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; "
+                     f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
+                     f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
+    if not top:
+        parts.append("<p>No successful attack.</p>")
+
+    step("clusters")
+    parts.append("<h2>Clusters of successful knot vectors</h2><p>For each attack, optimiser and start mode, the "
+                 "configuration with the most successes. A knot counts only if it can have shaped the attack before "
+                 "the collision (with PCHIP, knot k reaches back to the time of knot k-2); k-means and DBSCAN ignore "
+                 "the others, and each knot's mean and standard deviation rest on the attacks shown above it.</p>")
+    found = False
+    for condition, rs in richest_conditions(records):
+        c = cluster_knots(rs, condition)
+        if c is None:
+            continue
+        found = True
+        name = "clusters_" + "".join(ch if ch.isalnum() else "_" for ch in condition) + ".png"
+        figures.clusters(c, out / name)
+        parts.append(f"<h3>{html.escape(condition)}</h3><p>{html.escape(clusters_caption(c))}</p>{_img(name, condition)}")
+    if not found:
+        parts.append("<p>No knot campaign with at least 4 successes.</p>")
+
+    page = (
+        "<!doctype html><html><head><meta charset='utf-8'><title>d4sumo report</title><style>"
+        "body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}"
+        "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right;font-size:13px}td:first-child,th:first-child{text-align:left}"
+        ".row{display:flex;flex-wrap:wrap;gap:12px}img{max-width:100%;border:1px solid #eee}.far{background:#ffe08a}"
+        "</style></head><body>"
+        f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
+        f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
+    )
+    index = out / "index.html"
+    index.write_text(page, encoding="utf-8")
+    return index
+
+
+def clusters_caption(c) -> str:
+    """One sentence on a clustering: k-means clusters with their sizes and own collision times, DBSCAN."""
+    sizes = ", ".join(f"{count_noun(s.size, 'attack')} colliding at {s.median_collision_s:.1f} s" for s in c.cluster_stats())
+    return (f"{count_noun(len(c.vectors), 'success', 'successes')}. k-means with the elbow rule: "
+            f"{count_noun(c.k, 'cluster')} ({sizes}; median times from the attack's start). DBSCAN: "
+            f"{count_noun(c.dbscan_clusters, 'cluster')}, {count_noun(c.dbscan_noise, 'noise point')}.")
+
+
+def _comparison_html(c) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in c.header)
+    body = "".join(
+        "<tr>" + f"<td>{html.escape(label)}</td><td>{html.escape(who)}</td>"
+        + "".join(f"<td class='far'>{html.escape(cell)}</td>" if far else f"<td>{html.escape(cell)}</td>"
+                  for cell, far in zip(cells, flags)) + "</tr>"
+        for label, who, cells, flags in c.rows)
+    return f"<h3>{html.escape(c.title)}</h3><table><tr>{head}</tr>{body}</table>"
+
+
+def _table_html(t: Table) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in t.header)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in t.rows)
+    return f"<h2>{html.escape(t.title)}</h2><table><tr>{head}</tr>{body}</table>"
+
+
+def _img(name: str, alt: str) -> str:
+    return f"<img src='{html.escape(name)}' alt='{html.escape(alt)}'>"

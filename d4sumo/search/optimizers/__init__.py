@@ -1,0 +1,99 @@
+"""Optimisers with one ask/tell interface. They maximise a score over a box and know nothing else.
+
+    opt = make_optimizer("bo", lower, upper, budget=100, rng=np.random.default_rng(seed))
+    x = opt.ask(); opt.tell(x, score)
+
+- ``random``: uniform samples in the box.
+- ``halton``: a scrambled Halton sequence (low discrepancy), scaled to the box.
+- ``ce``: cross-entropy: sample a batch from independent truncated normals, keep the elite quantile
+  (ties included), refit mean and standard deviation with smoothing, widened by a little noise so that
+  a plateau of nearly equal scores does not collapse it; a batch that is all one plateau leaves the
+  distribution as it was. ``noise_fraction = 0`` is ce as d4sumo 0.4 and before ran it.
+- ``ce-bucket``: VerifAI's cross-entropy over buckets, the sampler the paper ran, for comparison.
+- ``cmaes``: CMA-ES (pycma) with restarts and a growing population (IPOP).
+- ``bo``: Bayesian optimisation: a Gaussian process (Matern 5/2 with a length scale per dimension,
+  learned noise; d4sumo's own, `gp.py`) and expected improvement, maximised over random candidates and
+  perturbations of the incumbent. It proposes ``batch_size`` points at once (5; 1 is the paper's one
+  point per score) by the constant liar. ``gp_version = 1`` runs scikit-optimize's GP instead, as
+  campaigns stored by d4sumo 0.3 and before did (5-20 times BO's own time).
+- ``turbo``: TuRBO-1, the same inside a trust region that follows the best point, grows on successes,
+  shrinks on failures and restarts when it collapses: for 10-40 dimensions.
+
+``ready()`` says how many points an optimiser proposes before it is told a score: a cross-entropy
+generation, a CMA-ES population, any number of random or Halton points, BO's and TuRBO's initial
+designs and their constant-liar batches. The campaign always asks for that many at once and plays them
+side by side (`batch`), so how many episodes share a SUMO changes no proposal.
+
+Every optimiser draws from the Generator it is given: one seed reproduces a campaign exactly. Options
+(``OPTIONS`` of each class) come from a config's ``[search.<optimizer>]`` table, validated by
+`resolve_options`. A score that is NaN or infinite counts as the worst score told so far: one failed
+sample never breaks later proposals. No optimiser proposes past its budget.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from ...errors import ConfigError
+from .base import INDEPENDENT_BATCH, Optimizer, check_options
+from .bayes import BayesianOptimization, TrustRegionBO
+from .cmaes import CMAES
+from .crossentropy import BucketCrossEntropy, CrossEntropy
+from .sampling import Halton, RandomSearch
+
+OPTIMIZERS = ("bo", "turbo", "ce", "ce-bucket", "cmaes", "random", "halton")
+
+_FACTORIES: dict[str, Callable[..., Optimizer]] = {
+    "bo": BayesianOptimization,
+    "turbo": TrustRegionBO,
+    "ce": CrossEntropy,
+    "ce-bucket": BucketCrossEntropy,
+    "cmaes": CMAES,
+    "random": RandomSearch,
+    "halton": Halton,
+}
+
+
+#: options added after campaigns were stored, each with the value those campaigns ran with: a campaign's
+#: definition leaves such an option out at that value, and a stored definition without it gets it back,
+#: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
+#: ran scikit-optimize's GP; ce added no noise)
+OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1}, "ce": {"noise_fraction": 0.0}}
+
+
+#: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
+#: (bo in 0.3: scikit-optimize's GP; in 0.2 also one point per score; ce in 0.4 and before: no noise)
+EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"gp_version": 1}, {"gp_version": 1, "batch_size": 1}),
+                                                            "ce": ({"noise_fraction": 0.0},)}
+
+
+def as_set_flags(name: str, options: dict) -> str:
+    """``--set search.<name>.<key>=<value>`` for each option."""
+    return " ".join(f"--set search.{name}.{k}={v}" for k, v in options.items())
+
+
+def stored_options(name: str, options: dict) -> dict:
+    """The options as a campaign's definition holds them (see OPTIONS_SINCE)."""
+    since = OPTIONS_SINCE.get(name, {})
+    return {k: v for k, v in options.items() if not (k in since and since[k] == v)}
+
+
+def resolve_options(name: str, options: dict | None) -> dict:
+    """Every option of optimiser ``name``, defaults filled in, each value checked."""
+    if name not in _FACTORIES:
+        raise ConfigError("search.optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
+    resolved = check_options(name, _FACTORIES[name].OPTIONS, options)
+    _FACTORIES[name].check_together(resolved)
+    return resolved
+
+
+def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Generator, options: dict | None = None) -> Optimizer:
+    if name not in _FACTORIES:
+        raise ConfigError("optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
+    return _FACTORIES[name](np.asarray(lower, float), np.asarray(upper, float), budget, rng, **(options or {}))
+
+
+__all__ = ["OPTIMIZERS", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
+           "CMAES", "CrossEntropy", "Halton", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]

@@ -1,0 +1,227 @@
+"""The attacker's specification and its robustness (SPEC section 3).
+
+    psi = F( OR_{i=1..N-1} gap_i <= d_safe )  and  G( gap_0 > d_safe )
+
+rho > 0: the followers came within d_safe of each other (with d_safe = 0: collided) while the attacker
+stayed clear of v1 the whole time: a successful attack. The optimisers maximise rho. When the attacker
+changes lanes (a cut-in or cut-out) the same meaning is said over whoever follows whom in each lane:
+
+    psi = F( victim_gap <= d_safe )  and  G( attacker_gap > d_safe )
+
+victim_gap: the smallest gap between two cars neither of which is the attacker; attacker_gap: the
+smallest gap between the attacker and the car ahead of or behind it (see `trace`).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import types
+from fractions import Fraction
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..model.maneuvers import MANEUVERS
+from ..model.trace import Trace
+
+
+def paper_formula(followers: int, d_safe_m: float = 0.0) -> str:
+    """psi in rtamt's syntax over the trace's gap signals."""
+    _needs_pair(followers)
+    pairs = " or ".join(f"(gap_{i} <= {d_safe_m!r})" for i in range(1, followers))
+    return f"(eventually({pairs})) and (always(gap_0 > {d_safe_m!r}))"
+
+
+def lane_formula(d_safe_m: float = 0.0) -> str:
+    """psi for a lane-changing attacker, over the gaps between whoever follows whom."""
+    return f"(eventually(victim_gap <= {d_safe_m!r})) and (always(attacker_gap > {d_safe_m!r}))"
+
+
+def default_formula(maneuver: str, followers: int, d_safe_m: float = 0.0) -> str:
+    return lane_formula(d_safe_m) if MANEUVERS[maneuver].lateral else paper_formula(followers, d_safe_m)
+
+
+def psi_robustness(trace: Trace, d_safe_m: float = 0.0) -> float:
+    """Robustness of psi at t = 0, computed directly with numpy (discrete time, the trace's samples).
+
+    F(x <= c) scores max_t (c - x); G(x > c) scores min_t (x - c); 'or' is max, 'and' is min.
+    """
+    _needs_pair(trace.followers)
+    gaps = trace.gaps()
+    adversarial = float(np.max(d_safe_m - gaps[:, 1:]))
+    attacker_safe = float(np.min(gaps[:, 0] - d_safe_m))
+    return min(adversarial, attacker_safe)
+
+
+def _needs_pair(followers: int) -> None:
+    if followers < 2:
+        raise ConfigError(
+            "scenario.followers", followers, "at least 2 for the paper's specification (two followers must be able to collide), or give your own formula"
+        )
+
+
+def trace_signals(followers: int, maneuver: str = "inlane") -> tuple[str, ...]:
+    """Every signal a trace of N followers carries in a maneuver: the variables a formula may name."""
+    cars = _car_ids(followers, maneuver)
+    names = [f"{kind}_{c}" for kind in ("pos", "speed", "accel", "cmd", "gap") for c in cars]
+    names += ["victim_gap", "attacker_gap"]
+    if MANEUVERS[maneuver].lateral:
+        names += [f"y_{c}" for c in cars]
+    else:  # the paper's column of cars
+        names += [f"gap_{i}" for i in range(followers)]
+    names += [f"mode_v{i}" for i in range(1, followers + 1)]
+    return tuple(names)
+
+
+def _car_ids(followers: int, maneuver: str) -> list[str]:
+    other = MANEUVERS[maneuver].other_car
+    return [f"v{i}" for i in range(followers + 1)] + ([other] if other else [])
+
+
+class Specification:
+    """An STL formula over the trace's signals, scored by rtamt (discrete time, sampled at the step).
+
+    The formula is parsed once; ``robustness(trace)`` evaluates it at t = 0 of the window that starts at
+    ``start_step`` (the attack's start after a warm-up: the warm-up drive is not the attack's doing, and
+    its first instant, every gap at the setpoint, would otherwise bound the paper's psi for every attack).
+    Without a formula it is the paper's psi with ``d_safe_m``. Time bounds in a formula are in seconds,
+    ``duration_s`` the window's length.
+    """
+
+    def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0,
+                 duration_s: float | None = None, start_step: int = 0, maneuver: str = "inlane"):
+        import rtamt
+
+        self.followers = followers
+        self.start_step = start_step
+        self.d_safe_m = d_safe_m
+        self.formula = formula if formula is not None else default_formula(maneuver, followers, d_safe_m)
+        if not isinstance(self.formula, str) or not self.formula.strip():
+            raise ConfigError("spec.formula", formula, "an STL formula in rtamt syntax, e.g. eventually(gap_v2 <= 0)")
+        declared = trace_signals(followers, maneuver)
+        self._help = _signal_help(followers, maneuver)
+        spec = rtamt.StlDiscreteTimeSpecification()
+        for name in declared:
+            spec.declare_var(name, "float")
+        spec.spec = self.formula
+        spec.set_sampling_period(round(step_s * 1000.0, 6), "ms", 0.1)
+        unknown = _unknown_identifiers(self.formula, declared)
+        try:
+            with _quiet_rtamt():
+                spec.parse()
+        except KeyError as exc:  # rtamt's way of meeting an undeclared variable
+            raise ConfigError("spec.formula", self.formula, f"signals among {self._help} (unknown: {exc.args[0]})") from None
+        except Exception as exc:  # rtamt raises RTAMTException or ANTLR errors
+            raise ConfigError("spec.formula", self.formula, f"an STL formula rtamt can parse ({str(exc).splitlines()[0].split(' expecting')[0][:200]})") from None
+        implicit = set(spec.ast.var_object_dict) - set(declared) - {"out"}
+        if implicit or unknown:
+            raise ConfigError("spec.formula", self.formula, f"signals among {self._help} (unknown: {', '.join(sorted(implicit | unknown))})")
+        _check_time_bounds(spec.ast, self.formula, step_s, duration_s)
+        self.variables = tuple(n for n in declared if re.search(rf"\b{n}\b", self.formula))
+        _speed_up_predicates(spec.offline_interpreter)
+        self._spec = spec
+        if duration_s is not None:  # a formula that passes the checks never fails at evaluation
+            samples = start_step + int(round(duration_s / step_s)) + 1
+            trial = Trace(np.arange(samples) * step_s, {n: np.zeros(samples) for n in declared}, followers)
+            try:
+                value = self.robustness(trial)
+            except Exception as exc:
+                raise ConfigError("spec.formula", self.formula, f"an STL formula rtamt can evaluate ({type(exc).__name__}: {exc})") from None
+            if value != value:
+                raise ConfigError("spec.formula", self.formula, "an STL formula with a defined robustness (it gave NaN)")
+
+    def robustness(self, trace: Trace) -> float:
+        """The robustness at ``start_step`` (the attack's start; 0 unless scored after a warm-up), the
+        window's own t = 0. An episode that ended before it is scored at its end, the collision."""
+        trace = trace.window(self.start_step)
+        data = {"time": trace.times_s.tolist()}
+        for name in self.variables:
+            values = trace.signals.get(name)
+            if values is None:
+                raise ConfigError("spec.formula", self.formula, f"signals this trace has (it has no {name})")
+            if not np.all(np.isfinite(values)):  # rtamt gives wrong robustness on NaN
+                raise ValueError(f"signal {name} has NaN or infinite values: not scored")
+            data[name] = values.tolist()
+        return float(self._spec.evaluate(data)[0][1])
+
+
+_UNIT_S = {"": Fraction(1), "s": Fraction(1), "ms": Fraction(1, 1000), "us": Fraction(1, 10**6), "ns": Fraction(1, 10**9)}
+
+
+def _check_time_bounds(ast, formula: str, step_s: float, duration_s: float | None) -> None:
+    """Every time bound [a:b] of the formula: ordered, on the step grid, within the episode."""
+    step = Fraction(step_s).limit_denominator(10**6)
+    stack = list(getattr(ast, "specs", [ast]))
+    while stack:
+        node = stack.pop()
+        stack.extend(getattr(node, "children", []))
+        if not hasattr(node, "begin"):
+            continue
+        begin = Fraction(node.begin) * _UNIT_S.get(getattr(node, "begin_unit", ""), Fraction(1))
+        end = Fraction(node.end) * _UNIT_S.get(getattr(node, "end_unit", ""), Fraction(1))
+        where = f"bound [{float(begin):g} s, {float(end):g} s]"
+        if begin > end:
+            raise ConfigError("spec.formula", formula, f"time bounds [a:b] with a <= b (the {where} is reversed)")
+        if begin % step or end % step:
+            raise ConfigError("spec.formula", formula, f"time bounds on the step grid, multiples of {step_s:g} s (the {where})")
+        if duration_s is not None and end > Fraction(duration_s).limit_denominator(10**6):
+            raise ConfigError("spec.formula", formula, f"time bounds within the episode of {duration_s:g} s (the {where})")
+
+
+def _signal_help(followers: int, maneuver: str) -> str:
+    cars = _car_ids(followers, maneuver)
+    lateral = MANEUVERS[maneuver].lateral
+    per_car = f"pos_X, speed_X, accel_X, cmd_X, gap_X{', y_X' if lateral else ''} (X = {', '.join(cars)})"
+    column = "" if lateral else f", gap_I (I = 0..{followers - 1})"
+    return f"{per_car}, victim_gap, attacker_gap{column}, mode_vI (I = 1..{followers})"
+
+
+_KEYWORDS = {
+    "and", "or", "not", "implies", "iff", "xor", "eventually", "always", "until", "since", "once",
+    "historically", "precedes", "next", "prev", "rise", "fall", "abs", "sqrt", "exp", "pow", "true",
+    "false", "F", "G", "U", "S", "O", "H", "X", "Y", "s", "ms", "us", "ns", "unless", "out",
+}
+
+
+def _unknown_identifiers(formula: str, declared: Sequence[str]) -> set[str]:
+    words = set(re.findall(r"\b[A-Za-z_][A-Za-z0-9_]*\b", formula))
+    return {w for w in words if w not in _KEYWORDS and w not in declared and not re.fullmatch(r"[eE]\d*", w)}
+
+
+class _quiet_rtamt:
+    """rtamt logs through the root logger when it meets an undeclared variable; we report it ourselves."""
+
+    def __enter__(self):
+        self._level = logging.root.level
+        logging.root.setLevel(logging.ERROR)
+
+    def __exit__(self, *exc):
+        logging.root.setLevel(self._level)
+
+
+def _speed_up_predicates(interpreter) -> None:
+    """Evaluate rtamt's comparison predicates with the same arithmetic, minus a per-sample Enum lookup.
+
+    rtamt 0.4's offline visitPredicate reads ``node.operator.value`` up to four times per sample; on
+    our 1200-sample traces that is ~90% of its evaluation time. The replacement decides the operator
+    once per node, then runs the identical expressions (tests compare it with stock rtamt).
+    """
+    from rtamt.semantics.enumerations.comp_oper import StlComparisonOperator as Op
+
+    def visit_predicate(self, node, *args, **kwargs):
+        left = self.visit(node.children[0], *args, **kwargs)
+        right = self.visit(node.children[1], *args, **kwargs)
+        op = node.operator.value
+        if op == Op.EQ.value:
+            return [-abs(a - b) for a, b in zip(left, right)]
+        if op == Op.NEQ.value:
+            return [abs(a - b) for a, b in zip(left, right)]
+        if op in (Op.LEQ.value, Op.LESS.value):
+            return [b - a for a, b in zip(left, right)]
+        if op in (Op.GEQ.value, Op.GREATER.value):
+            return [a - b for a, b in zip(left, right)]
+        return type(self).visitPredicate(self, node, *args, **kwargs)  # unknown: rtamt's own error
+
+    interpreter.visitPredicate = types.MethodType(visit_predicate, interpreter)

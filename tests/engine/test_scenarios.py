@@ -1,0 +1,70 @@
+"""Network variants: plain node/edge XML built by netconvert and cached."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from d4sumo.errors import ConfigError, SumoError
+from d4sumo.engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
+
+
+def test_at_least_three_variants_ship():
+    names = list_scenarios()
+    assert {"highway_4lane", "highway_1lane"} <= set(names) and len(names) >= 3
+    for name in names:
+        assert (SCENARIOS_DIR / name / "README.md").is_file()
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("name", list_scenarios())
+def test_every_variant_builds_into_a_straight_road(name, tmp_path):
+    road = build_road(name, cache_dir=tmp_path)
+    assert road.net_file.is_file() and road.route_edges
+    assert road.length_m >= 3000 and road.speed_limit_mps > 30
+
+
+@pytest.mark.sumo
+def test_the_net_is_cached_and_rebuilt_when_the_variant_changes(tmp_path):
+    variant = tmp_path / "mine"
+    shutil.copytree(SCENARIOS_DIR / "highway_1lane", variant)
+    cache = tmp_path / "cache"
+    first = build_road(str(variant), cache_dir=cache)
+    mtime = first.net_file.stat().st_mtime_ns
+    assert build_road(str(variant), cache_dir=cache).net_file.stat().st_mtime_ns == mtime
+    edges = variant / "highway.edg.xml"
+    edges.write_text(edges.read_text().replace('speed="40"', 'speed="30"'))
+    changed = build_road(str(variant), cache_dir=cache)
+    assert changed.net_file != first.net_file and changed.speed_limit_mps == 30.0
+
+
+def test_an_unknown_variant_lists_the_known_ones():
+    with pytest.raises(ConfigError, match="highway_4lane"):
+        build_road("autobahn")
+
+
+def test_a_missing_netconvert_is_a_clear_error(tmp_path):
+    with pytest.raises(SumoError, match="netconvert"):
+        build_road("highway_4lane", cache_dir=tmp_path, netconvert=str(tmp_path / "netconvert"))
+
+
+def _road_folder(folder, edges: str, nodes: str = '<node id="a" x="0" y="0"/><node id="b" x="2000" y="0"/>'
+                                                 '<node id="c" x="5000" y="0"/>'):
+    folder.mkdir()
+    (folder / "road.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
+    (folder / "road.edg.xml").write_text(f"<edges>{edges}</edges>")
+    return folder
+
+
+def test_a_road_of_several_edges_counts_only_the_lanes_that_lead_on_through_every_junction(tmp_path):
+    """A lane that ends at a junction would stop the cars in it: a lane drop on the left leaves three
+    lanes for maneuvers, one on the right (the platoon's lane 0) is refused."""
+    left = _road_folder(tmp_path / "left", '<edge id="e" from="a" to="c" numLanes="4" speed="40">'
+                                           '<split pos="2000" lanes="0 1 2"/></edge>', '<node id="a" x="0" y="0"/><node id="c" x="5000" y="0"/>')
+    road = build_road(str(left), cache_dir=tmp_path / "cache")
+    assert (road.route_edges, road.lanes, road.first_edge_m) == (("e", "e.2000"), 3, pytest.approx(2000.0, abs=5))
+    right = _road_folder(tmp_path / "right", '<edge id="e1" from="a" to="b" numLanes="2" speed="40"/>'
+                                             '<edge id="e2" from="b" to="c" numLanes="1" speed="40"/>')
+    with pytest.raises(ConfigError, match="rightmost lane .* leads on through every junction; lane 0 of e1 ends there"):
+        build_road(str(right), cache_dir=tmp_path / "cache")

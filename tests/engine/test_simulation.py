@@ -1,0 +1,536 @@
+"""The SUMO co-simulation, for real through libsumo."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
+from sumolib.xml import parse_fast_nested
+
+from d4sumo.results import figures
+from d4sumo.model.attacks import make_attack
+from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.control import SwitchingController, register_controller
+from d4sumo.errors import ConfigError
+from d4sumo.engine.ballistic import integrate
+from d4sumo.model.maneuvers import AttackPlan, attack_plan, maneuver_of
+from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.simulation import simulate
+from d4sumo.search.spec import Specification
+
+pytestmark = pytest.mark.sumo
+
+CONFIG = EpisodeConfig()
+
+
+@pytest.fixture(scope="module")
+def success(road):
+    return simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road)
+
+
+def test_a_rear_end_collision_is_detected_at_the_first_real_overlap_with_the_right_pair(success):
+    assert success.outcome == "success"
+    first = success.first_collision
+    gaps = success.trace.gaps()
+    overlapping = np.argwhere(gaps < 0.0)
+    k, pair = overlapping[0]
+    assert k == len(success.trace) - 1  # the episode ends at the first overlap
+    assert np.all(gaps[:-1] >= 0.0)
+    assert first.pair == f"v{pair}-v{pair + 1}" == "v2-v3"
+    assert first.time_s == pytest.approx(success.trace.times_s[-1])
+    speeds = success.trace
+    assert first.speed_diff_kmh == pytest.approx((speeds["speed_v3"][-1] - speeds["speed_v2"][-1]) * 3.6)
+    assert first.speed_diff_kmh > 0
+
+
+def test_an_attacker_crash_is_classified_as_such(road):
+    episode = simulate(CONFIG, knots_signal(ATTACKER_CRASH_KNOTS, CONFIG), road=road)
+    assert episode.outcome == "attacker_crash"
+    assert episode.first_collision.pair == "v0-v1"
+
+
+def test_sumo_moves_the_cars_exactly_as_commanded(road, success):
+    """SUMO's ballistic update and Python's reference integration agree to rounding."""
+    reference = integrate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road.speed_limit_mps)
+    assert len(reference.trace) == len(success.trace)
+    for name in success.trace.names:
+        assert np.allclose(success.trace[name], reference.trace[name], atol=1e-6), name
+
+
+def test_fcd_gaps_agree_with_the_trace_to_one_centimetre(road, tmp_path):
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road, fcd_path=fcd)
+    pos = {}
+    for step, vehicle in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "speed", "pos"]):
+        pos[(round(float(step.time), 6), vehicle.id)] = float(vehicle.pos)
+    times = episode.trace.times_s
+    assert len({t for t, _ in pos}) == len(times)
+    for i in range(CONFIG.followers):
+        fcd_gap = np.array([pos[(round(t, 6), f"v{i}")] - 4.5 - pos[(round(t, 6), f"v{i + 1}")] for t in times])
+        assert np.max(np.abs(fcd_gap - episode.trace[f"gap_{i}"])) < 0.01
+
+
+def test_the_same_inputs_give_the_same_trace_twice(road, success):
+    again = simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road)
+    assert again.collisions == success.collisions
+    for name in success.trace.names:
+        assert np.array_equal(again.trace[name], success.trace[name])
+
+
+def test_full_brake_stops_every_car_without_reversing(road):
+    cfg = EpisodeConfig(start="steady", setpoint_m=60.0)  # far apart: everyone stops in time
+    episode = simulate(cfg, np.full(cfg.steps, -1.0), road=road)
+    assert episode.outcome == "no_crash"
+    for i in range(cfg.followers + 1):
+        speed = episode.trace[f"speed_v{i}"]
+        assert speed.min() == 0.0 and speed[-1] == 0.0
+
+
+def test_full_throttle_keeps_the_attacker_at_the_road_limit(road):
+    cfg = EpisodeConfig(start="steady", speed_mps=38.0)
+    episode = simulate(cfg, np.full(cfg.steps, 1.0), road=road)
+    assert episode.trace["speed_v0"].max() == road.speed_limit_mps
+
+
+def test_no_attack_from_rest_brings_every_car_to_the_target_speed(road):
+    episode = simulate(CONFIG, np.full(CONFIG.steps, np.nan), road=road)
+    assert episode.outcome == "no_crash" and len(episode.trace) == CONFIG.steps + 1
+    for i in range(CONFIG.followers + 1):
+        assert abs(episode.trace[f"speed_v{i}"][-1] - 25.0) < 0.5
+    assert set(np.unique(episode.trace["mode_v1"])) <= {0.0, 1.0}
+
+
+class Cautious(SwitchingController):
+    """A follower that keeps twice the setpoint: a user's own controller, plugged in by name."""
+
+    def __init__(self, params, *, setpoint_m, **kwargs):
+        super().__init__(params, setpoint_m=2 * setpoint_m, **kwargs)
+
+
+def test_a_users_controller_class_runs_in_sumo(road):
+    register_controller("test-cautious", Cautious)
+    cfg = EpisodeConfig(controller=ControllerConfig(cls="test-cautious"))
+    default = simulate(CONFIG, np.full(CONFIG.steps, np.nan), road=road)
+    cautious = simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+    assert cautious.trace["gap_2"][-1] > default.trace["gap_2"][-1] + 3.0
+
+
+def test_a_road_too_short_or_too_slow_is_refused(road):
+    with pytest.raises(ConfigError, match="speed limit"):
+        simulate(EpisodeConfig(speed_mps=45.0), np.full(1200, np.nan), road=road)
+    with pytest.raises(ConfigError, match="fits on"):
+        cfg = EpisodeConfig(duration_s=200.0)
+        simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+
+
+def test_an_overlap_sumo_does_not_report_ends_the_episode_at_once(road):
+    """Regression: SUMO ignores overlaps up to 1 mm, so this 0.23 mm overlap at 3.85 s was missed and
+    the episode ran on (outcome, collision time and minimum gaps disagreed)."""
+    config = EpisodeConfig(setpoint_m=6.118633151283105, start="steady")
+    values = [-0.7434975895033542, -0.00799454828211621, -0.7807212009393558, -0.3290245197619086, 0.6116075492610233,
+              -0.45921552198458704, 0.7687692730609377, -0.051854840905022126, -0.23664748282734083]
+    episode = simulate(config, knots_signal(values, config), road=road)
+    gap = episode.trace["gap_2"][-1]
+    assert -1e-3 < gap < 0
+    assert episode.outcome == "success" and episode.first_collision.pair == "v2-v3"
+    assert episode.first_collision.time_s == pytest.approx(3.85)
+    assert episode.min_gaps_m()["v2-v3"] == gap
+
+
+def test_warmup_episodes_in_sumo_match_the_reference_integration(road):
+    config = EpisodeConfig(start="warmup", setpoint_m=9.3)
+    u = np.full(config.steps, np.nan)
+    u[config.attack_start_step:] = knots_signal(ATTACKER_CRASH_KNOTS, EpisodeConfig())
+    episode = simulate(config, u, road=road)
+    reference = integrate(config, u, road.speed_limit_mps)
+    assert episode.outcome == reference.outcome and episode.collisions[0].pair == reference.collisions[0].pair
+    assert episode.trace.times_s[-1] == reference.trace.times_s[-1] > config.warmup_s
+
+
+# --- followers driven by SUMO's own car-following models -------------------------------------------
+
+#: Found by `d4sumo falsify --controller sumo:ACC --set controller.tau=0.5 --start steady --optimizer ce
+#: --samples 100` (sample 4 of seed 0): v3 hits v2 at 51.1 s, 19.6 km/h faster, the attacker untouched.
+SUMO_ACC_TAU_05_SUCCESS_KNOTS = [0.9473164841377867, 0.32304009950861967, 0.26038596731253244, 0.3282815479400487,
+                                 -0.1912424504245193, -0.6717098386366155, 0.3885832289277623, 0.04340117517536158,
+                                 -0.3306508328295664]
+
+
+@pytest.mark.parametrize("model", ["ACC", "CACC", "CC", "IDM", "EIDM", "Krauss"])
+def test_each_listed_sumo_model_drives_the_followers(model, road):
+    config = EpisodeConfig(controller=ControllerConfig(f"sumo:{model}"), start="steady", duration_s=20.0)
+    episode = simulate(config, knots_signal(ATTACKER_CRASH_KNOTS, config), road=road)
+    trace = episode.trace
+    assert len(trace) >= 2 and np.all(np.isfinite(trace["cmd_v1"])) and np.all(np.abs(trace["cmd_v1"]) <= 1.0)
+    assert "mode_v1" not in trace.names  # SUMO does not expose its models' modes
+    # SUMO's model, not d4sumo's controller: the same attack gives another motion than the paper's controller
+    paper = simulate(EpisodeConfig(start="steady", duration_s=20.0), knots_signal(ATTACKER_CRASH_KNOTS, config), road=road)
+    n = min(len(trace), len(paper.trace))
+    assert not np.allclose(trace["speed_v1"][:n], paper.trace["speed_v1"][:n])
+    assert episode.min_gaps_m() == {f"v{i}-v{i + 1}": pytest.approx(float(trace[f"gap_{i}"].min())) for i in range(3)}
+
+
+def test_a_known_counterexample_against_sumos_acc_still_crashes(road):
+    config = EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 0.5),)), start="steady")
+    episode = simulate(config, knots_signal(SUMO_ACC_TAU_05_SUCCESS_KNOTS, config), road=road)
+    assert episode.outcome == "success"
+    assert episode.first_collision.pair == "v2-v3"
+    assert episode.first_collision.time_s == pytest.approx(51.1)
+    assert episode.first_collision.speed_diff_kmh == pytest.approx(19.58, abs=0.01)
+    # SUMO's ACC as shipped (tau 1 s) survives the same attack
+    safe = EpisodeConfig(controller=ControllerConfig("sumo:ACC"), start="steady")
+    assert simulate(safe, knots_signal(SUMO_ACC_TAU_05_SUCCESS_KNOTS, safe), road=road).outcome == "no_crash"
+
+
+def test_what_the_attacker_declares_is_what_sumos_models_plan_with(road):
+    def full_brake(declared):
+        config = EpisodeConfig(controller=ControllerConfig("sumo:Krauss"), start="steady", duration_s=20.0,
+                               attacker_declared_decel_mps2=declared)
+        return simulate(config, np.full(config.steps, -1.0), road=road)
+
+    assert full_brake(8.0).outcome == "no_crash"  # honest: Krauss keeps a gap it can stop in
+    lied = full_brake(0.5)  # the attacker claims weak brakes, then brakes at 8 m/s^2
+    assert lied.outcome == "attacker_crash" and lied.first_collision.pair == "v0-v1"
+
+
+def test_a_mixed_platoon_runs_each_follower_with_its_own_controller(road):
+    config = EpisodeConfig.from_dict({"controller": ["sumo:ACC", "switching", {"class": "sumo:IDM", "tau": 1.5}]})
+    episode = simulate(config, knots_signal(SUCCESS_KNOTS, config), road=road)
+    trace = episode.trace
+    assert "mode_v2" in trace.names and "mode_v1" not in trace.names and "mode_v3" not in trace.names
+    # the Python follower's command is its controller's, in [-1, 1]
+    assert np.all(np.abs(trace["cmd_v2"]) <= 1.0) and np.all(np.isfinite(trace["cmd_v3"]))
+
+
+def test_a_value_sumo_refuses_is_a_config_error_before_any_episode(road):
+    config = EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 0.0),)))
+    with pytest.raises(ConfigError) as err:
+        simulate(config, np.full(config.steps, np.nan), road=road)
+    assert err.value.field == "controller.tau" and "Must be greater than 0" in err.value.allowed
+
+
+def test_sumo_models_cannot_run_without_sumo():
+    config = EpisodeConfig(controller=ControllerConfig("sumo:IDM"))
+    with pytest.raises(ConfigError, match="Python controllers only"):
+        integrate(config, np.full(config.steps, np.nan))
+
+
+def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatch, road):
+    from d4sumo.engine import sumo
+    from d4sumo.errors import SumoError
+
+    (tmp_path / "d4sumo").mkdir()
+    (tmp_path / "d4sumo" / "vtypes").write_text("a file where the folder should be")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(sumo, "_CHECKED", {})
+    config = EpisodeConfig(controller=ControllerConfig("sumo:IDM", (("tau", 0.77),)))
+    with pytest.raises(SumoError, match="cannot write SUMO's vehicle types"):
+        simulate(config, np.full(config.steps, np.nan), road=road)
+
+
+# --- attackers that change lanes ---------------------------------------------------------------
+
+CUTIN = EpisodeConfig(maneuver="cutin", start="steady", cutin_follower=2, cutin_offset_m=2.0, lane_change_s=0.0)
+LANE_CHANGE_STEP = 100  # the attacker starts its lane change at 5 s
+
+
+def _fcd_lanes(path) -> dict[str, dict[float, tuple[float, float, str]]]:
+    """FCD as {vehicle: {time: (y, pos, lane)}}."""
+    rows: dict = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos", "lane"]):
+        rows.setdefault(v.id, {})[round(float(step.time), 6)] = (float(v.y), float(v.pos), v.lane)
+    return rows
+
+
+def _fcd_gap(fcd, vid: str, t: float) -> float:
+    """The bumper gap from ``vid`` to the nearest car ahead of it in its lane, from the FCD alone."""
+    _, pos, lane = fcd[vid][t]
+    ahead = [p for other, rows in fcd.items() if other != vid for _, p, ln in [rows[t]] if ln == lane and p > pos]
+    return min(ahead) - 4.5 - pos
+
+
+def test_the_attacker_changes_lane_at_the_chosen_time_and_the_followers_gap_jumps_then(road, tmp_path):
+    path = tmp_path / "fcd.xml"
+    episode = simulate(CUTIN, AttackPlan(np.full(CUTIN.steps, np.nan), LANE_CHANGE_STEP), road=road, fcd_path=path)
+    fcd = _fcd_lanes(path)
+    times = sorted(fcd["v0"])
+    start_lane = fcd["v0"][0.0][2]
+    changed = [t for t in times if fcd["v0"][t][2] != start_lane]
+    assert changed[0] == pytest.approx((LANE_CHANGE_STEP + 1) * 0.05)  # SUMO carries it out in the step at 5 s
+    assert fcd["v0"][changed[0]][2] == fcd["v2"][changed[0]][2]  # into the platoon's lane
+    before, after = times[LANE_CHANGE_STEP], changed[0]
+    assert _fcd_gap(fcd, "v2", before) == pytest.approx(7.0, abs=0.01)  # v2 followed v1 at the setpoint
+    assert _fcd_gap(fcd, "v2", after) == pytest.approx(2.0, abs=0.01)  # now the attacker, 2 m ahead
+    trace = episode.trace
+    fcd_gaps = np.array([_fcd_gap(fcd, "v2", t) for t in times[:len(trace)]])
+    assert np.max(np.abs(fcd_gaps - trace["gap_v2"])) < 0.01
+    assert trace["gap_v2"][LANE_CHANGE_STEP] == pytest.approx(7.0) and trace["gap_v2"][LANE_CHANGE_STEP + 1] == pytest.approx(2.0)
+    assert trace["speed_v2"][LANE_CHANGE_STEP + 20] < 25.0 - 0.5  # v2 brakes for the car that cut in
+
+
+def test_a_lane_change_that_takes_time_covers_both_lanes_once_the_body_crosses_the_line(road):
+    config = EpisodeConfig(maneuver="cutin", start="steady", cutin_follower=2, cutin_offset_m=2.0, lane_change_s=2.0)
+    trace = simulate(config, AttackPlan(np.full(config.steps, np.nan), LANE_CHANGE_STEP), road=road).trace
+    y = trace["y_v0"]
+    assert y[LANE_CHANGE_STEP] == pytest.approx(1.5 * road.lane_width_m) and y[LANE_CHANGE_STEP + 1] < y[LANE_CHANGE_STEP]
+    assert y[LANE_CHANGE_STEP + 40] == pytest.approx(0.5 * road.lane_width_m, abs=0.05)  # across in about 2 s
+    crossing = road.lane_width_m + 0.9  # its right side on the line
+    inside = np.flatnonzero(y < crossing)[0]
+    assert trace["gap_v2"][inside - 1] == pytest.approx(7.0, abs=0.01) and trace["gap_v2"][inside] < 2.5
+
+
+def test_sumos_own_models_answer_the_car_that_cut_in(road):
+    config = dataclasses.replace(CUTIN, controller=ControllerConfig("sumo:ACC"))
+    cut = simulate(config, AttackPlan(np.full(config.steps, np.nan), LANE_CHANGE_STEP), road=road).trace
+    stay = simulate(config, AttackPlan(np.full(config.steps, np.nan), None), road=road).trace
+    after = LANE_CHANGE_STEP + 1
+    behind = [i for i in (1, 2, 3) if cut[f"gap_v{i}"][after] != stay[f"gap_v{i}"][after]]
+    assert len(behind) == 1  # one follower has the attacker ahead now (SUMO's ACC fell back from 7 m meanwhile)
+    v = f"speed_v{behind[0]}"
+    assert cut[f"gap_v{behind[0]}"][after] < stay[f"gap_v{behind[0]}"][after]
+    assert cut[v][after + 40] < stay[v][after + 40] - 0.5  # and slows down for it
+
+
+def test_a_cut_out_reveals_a_stopped_car_and_the_first_follower_hits_it(road):
+    config = EpisodeConfig(maneuver="cutout", start="steady", obstacle_distance_m=120.0, lane_change_s=2.0)
+    episode = simulate(config, AttackPlan(np.full(config.steps, np.nan), 20), road=road)
+    assert episode.outcome == "success" and episode.first_collision.pair == "obstacle-v1"
+    gaps = episode.min_gaps_m()
+    assert gaps["obstacle-v1"] < 0 and gaps["obstacle-v0"] > 0 and all(v >= 0 for k, v in gaps.items() if k != "obstacle-v1")
+    spec = Specification(followers=3, step_s=0.05, maneuver="cutout")
+    assert spec.robustness(episode.trace) > 0
+
+
+@pytest.mark.parametrize("maneuver", ["cutin", "cutout"])
+def test_lane_change_verdicts_agree_sample_by_sample(road, maneuver):
+    """Outcome, collision record, the sign of robustness and the minimum gaps, for random attacks."""
+    config = EpisodeConfig(maneuver=maneuver, start="steady", cutin_offset_m=1.0, setpoint_m=6.0)
+    evaluator = Evaluator(Campaign(config=config, attack="knots", optimizer="random"), road=road)
+    rng = np.random.default_rng(7)
+    outcomes = set()
+    for i in range(16):
+        r = evaluator(i, rng.uniform(evaluator.family.lower, evaluator.family.upper))
+        outcomes.add(r.outcome)
+        assert r.outcome != "error", r.error
+        hit = {k for k, v in r.min_gaps.items() if v < 0}
+        assert hit == ({r.collision["pair"]} if r.collision else set()) or (r.collision and r.collision["pair"] in hit)
+        assert (r.robustness > 0) == (r.outcome == "success") or r.robustness == 0
+        if r.outcome == "attacker_crash":
+            assert "v0" in r.collision["pair"].split("-")
+    assert len(outcomes) >= 2  # the random attacks do not all end alike
+
+
+def test_a_one_lane_road_has_no_room_for_a_lane_change():
+    from d4sumo.engine.scenarios import build_road
+    from d4sumo.engine.simulation import check_episode
+
+    with pytest.raises(ConfigError, match="at least 2 lanes .highway_1lane has 1") as e:
+        check_episode(EpisodeConfig(maneuver="cutin", network="highway_1lane"), build_road("highway_1lane"))
+    assert e.value.field == "scenario.maneuver"
+
+
+class FlakyController(SwitchingController):
+    """A user's controller (no array form) that returns NaN once its gap opens past 16 m."""
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        u = super().command(gap_m, speed_mps, lead_speed_mps)
+        return float("nan") if gap_m > 16.0 else u
+
+
+class RaisingController(SwitchingController):
+    """A user's controller that raises once its gap opens past 16 m, and answers in float32 until then."""
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if gap_m > 16.0:
+            raise RuntimeError(f"gap {gap_m:.3f} m out of my range")
+        return np.float32(super().command(gap_m, speed_mps, lead_speed_mps))
+
+
+class BadModeController(SwitchingController):
+    """A user's controller whose mode becomes a word once its gap opens past 12 m, and that gives up past 18 m."""
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if gap_m > 18.0:
+            raise RuntimeError("gave up")
+        u = super().command(gap_m, speed_mps, lead_speed_mps)
+        if gap_m > 12.0:
+            self.mode = "CC"
+        return u
+
+
+BATCH_CONFIGS = {
+    "rest": EpisodeConfig(),
+    "steady": EpisodeConfig(start="steady", setpoint_m=12.0, speed_mps=20.0),
+    "warmup": EpisodeConfig(start="warmup", setpoint_m=3.0, warmup_s=5.0),
+    "sumo-acc": EpisodeConfig(controller=ControllerConfig("sumo:ACC", params=(("tau", 0.5),)), start="steady"),
+    "krauss-sigma": EpisodeConfig(controller=ControllerConfig("sumo:Krauss", params=(("sigma", 0.5),)), setpoint_m=4.0),
+    "mixed": EpisodeConfig(controller=(ControllerConfig("sumo:ACC"), ControllerConfig("switching", where="controller.v2"),
+                                       ControllerConfig("timegap", where="controller.v3")), setpoint_m=5.0),
+    "cutin": EpisodeConfig(maneuver="cutin", cutin_follower=2, cutin_offset_m=3.0, lane_change_s=1.0),
+    "cutin-krauss": EpisodeConfig(maneuver="cutin", lane_change_s=0.0, controller=ControllerConfig("sumo:Krauss")),
+    "cutout": EpisodeConfig(maneuver="cutout", obstacle_distance_m=60.0, obstacle_speed_mps=5.0),
+    "user-nan": EpisodeConfig(controller=ControllerConfig("test_simulation:FlakyController")),
+    "user-mode": EpisodeConfig(controller=ControllerConfig("test_simulation:BadModeController")),
+    "user-raises": EpisodeConfig(controller=(ControllerConfig("test_simulation:RaisingController"),
+                                             ControllerConfig("test_simulation:FlakyController", where="controller.v2"),
+                                             ControllerConfig("test_simulation:RaisingController", where="controller.v3"))),
+}
+BATCH_CONFIGS.update({f"sumo-{m}": EpisodeConfig(controller=ControllerConfig(f"sumo:{m}"), setpoint_m=4.0)
+                      for m in ("ACC", "CACC", "CC", "Daniel1", "EIDM", "IDM", "IDMM", "Krauss", "KraussOrig1", "KraussPS",
+                                "PWagner2009", "SmartSK", "W99", "Wiedemann", "BKerner")})
+
+
+@pytest.mark.parametrize("name", BATCH_CONFIGS)
+def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, name):
+    """Issue 13: many platoons in one SUMO, each on its own copy of the road, never meet; followers whose
+    SUMO model draws random numbers (which SUMO deals out by car) play one at a time instead."""
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.model.carfollowing import SHARE_SUMO
+    from d4sumo.model.platoon import followers_of
+    from d4sumo.engine.simulation import simulate_batch
+
+    config = BATCH_CONFIGS[name]
+    register_controller("test_simulation:FlakyController", FlakyController)
+    register_controller("test_simulation:RaisingController", RaisingController)
+    register_controller("test_simulation:BadModeController", BadModeController)
+    plans = random_plans(config, 10 if name.startswith("user") or not name.startswith("sumo-") else 6, seed=4)
+    heard = {}
+    batched = simulate_batch(config, plans, road=None, on_episode=lambda i, r: heard.setdefault(i, r))
+    assert heard.keys() == set(range(len(plans))) and all(heard[i] is batched[i] for i in heard)
+    errors = 0
+    for plan, result in zip(plans, batched):
+        try:
+            alone = simulate(config, plan, road=road)
+        except Exception as exc:
+            assert type(result) is type(exc) and str(result) == str(exc)
+            errors += 1
+            continue
+        assert_same_episode(result, alone)
+    assert (errors > 0) == name.startswith("user")  # the users' controllers did fail in some episodes
+    shared = all(f.shares_sumo for f in followers_of(config))
+    models = {c.sumo_model for c in config.controllers if c.sumo_model}
+    assert shared == (models <= SHARE_SUMO and name != "krauss-sigma")
+
+
+
+MIXED_CASES = {  # what the batch's configurations share; each varies setpoint and, where allowed, speed and start
+    "switching": ({}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "sumo-ACC": ({"controller": ControllerConfig("sumo:ACC")}, (25.0,), ("rest", "steady")),
+    "cutin": ({"maneuver": "cutin", "lane_change_s": 0.0}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "cutout": ({"maneuver": "cutout", "obstacle_distance_m": 60.0, "obstacle_speed_mps": 5.0}, (20.0, 25.0, 30.0), ("rest", "steady")),
+    "warmup-mixed": ({"controller": (ControllerConfig("sumo:ACC"), ControllerConfig("timegap", where="controller.v2"),
+                                     ControllerConfig("switching", where="controller.v3"))}, (25.0,), ("warmup",)),
+}
+
+
+@pytest.mark.parametrize("case", MIXED_CASES)
+def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alone(road, case):
+    """Issue 13: a sweep's campaigns of other setpoints, target speeds and starts share one SUMO
+    (SUMO's models keep one target speed: it is their vehicle type's)."""
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.engine.simulation import simulate_batch
+
+    shared, speeds, starts = MIXED_CASES[case]
+    configs = [EpisodeConfig(setpoint_m=s, speed_mps=speeds[i % len(speeds)], start=starts[i % len(starts)], **shared)
+               for i, s in enumerate((3.0, 7.0, 12.0, 5.0, 9.0, 4.0, 15.0, 6.0))]
+    plans = [random_plans(config, 1, seed=i)[0] for i, config in enumerate(configs)]
+    heard = {}
+    batched = simulate_batch(configs, plans, on_episode=lambda i, r: heard.setdefault(i, r))
+    assert heard.keys() == set(range(len(plans)))
+    for config, plan, result in zip(configs, plans, batched):
+        assert_same_episode(result, simulate(config, plan, road=road))
+    assert len({tuple(e.min_gaps_m().values()) for e in batched}) == len(plans)  # not one episode eight times
+
+
+# --- roads of several edges: positions along the route, not the lane -----------------------------
+
+ROADS = Path(__file__).resolve().parents[2] / "examples" / "roads"
+
+
+def short_edges_road(folder: Path) -> Path:
+    """A four-lane road of three edges, the first two short, so that every episode crosses two joins."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "road.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0" type="priority"/><node id="b" x="120" y="0" type="priority"/>'
+        '<node id="c" x="320" y="0" type="priority"/><node id="d" x="5000" y="0" type="priority"/></nodes>')
+    (folder / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="4" speed="40"/>'
+        '<edge id="e2" from="b" to="c" numLanes="4" speed="40"/>'
+        '<edge id="e3" from="c" to="d" numLanes="4" speed="40"/></edges>')
+    return folder
+
+
+def test_a_two_edge_road_has_no_collision_at_its_join_and_moves_the_cars_as_commanded(tmp_path):
+    """Positions once came from the lane position, which starts again at 0 on the second edge: this
+    episode was an attacker crash 1,864 m long that SUMO's FCD did not show."""
+    config = EpisodeConfig(network=str(ROADS / "two_edges"), start="steady", speed_mps=30.0, duration_s=90.0)
+    u = make_attack("knots", horizon_s=24.0).signal([0.2, -0.5, 0.3, -0.8, 0.5], np.arange(config.steps) * config.step_s)
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, u, fcd_path=fcd)
+    assert episode.outcome == "no_crash" and not episode.collisions
+    assert min(episode.min_gaps_m().values()) > 0
+    x0 = episode.trace["pos_v0"]
+    assert x0[0] < 2000.0 < x0[-1] and np.all(np.diff(x0) >= 0)  # across the join, never back
+    # the SUMO-free reference on a straight road of no edges: the same motion to rounding
+    reference = integrate(config, u, 40.0)
+    for name in episode.trace.names:
+        assert np.allclose(episode.trace[name], reference.trace[name], atol=1e-6), name
+    # SUMO's FCD, read as positions along the route (start plus odometer)
+    traces = figures.read_fcd(fcd)
+    for vid in config.vehicle_ids:
+        assert np.max(np.abs(traces[vid]["pos"] - episode.trace[f"pos_{vid}"])) < 1.1e-6
+    assert set(figures.lanes(traces)) == {"0"}  # one lane across both edges: one panel
+
+
+def test_every_collision_of_a_campaign_on_a_three_edge_road_is_in_sumos_fcd(tmp_path):
+    network = short_edges_road(tmp_path / "three")
+    config = EpisodeConfig(network=str(network), start="steady", speed_mps=30.0, setpoint_m=4.0)
+    campaign = Campaign(config=config, attack="persistent", optimizer="random", samples=24, seed=3)
+    summary = run_campaign(campaign)
+    collided = [s for s in summary.samples if s.collision is not None]
+    assert len(collided) >= 5
+    evaluator = Evaluator(campaign)
+    fcd = tmp_path / "fcd.xml"
+    for s in collided:
+        again = evaluator(s.index, np.array(s.params), fcd_path=fcd)
+        assert (again.outcome, again.collision) == (s.outcome, s.collision)
+        traces = figures.read_fcd(fcd)
+        lead, follower = s.collision["pair"].split("-")
+        gaps = traces[lead]["pos"] - config.vehicle.length_m - traces[follower]["pos"]
+        assert gaps[-1] < 0 and np.all(gaps[:-1] > -2.5e-6), s.index  # overlapping first at the end
+        assert traces[follower]["time"][-1] == pytest.approx(s.collision["time_s"])
+        assert traces[follower]["pos"][-1] == pytest.approx(s.collision["position_m"], abs=1e-5)
+    # past both joins, where lane positions start again at 0
+    assert sum(s.collision["position_m"] > 320.0 for s in collided) >= 3
+
+
+def test_a_platoon_that_starts_beyond_the_first_edge_is_refused(tmp_path):
+    network = tmp_path / "short_first"
+    network.mkdir()
+    (network / "road.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="30" y="0"/><node id="c" x="5000" y="0"/></nodes>')
+    (network / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="1" speed="40"/><edge id="e2" from="b" to="c" numLanes="1" speed="40"/></edges>')
+    with pytest.raises(ConfigError, match=r"first edge holds the platoon's start \(49\.0 m; the first edge is 30"):
+        simulate(EpisodeConfig(network=str(network)), np.zeros(EpisodeConfig().steps))
+
+
+@pytest.mark.parametrize("road_name, maneuver", [("three_edges", {}), ("curved", {}),
+                                                 ("lane_drop", {"maneuver": "cutin", "cutin_follower": 2})])
+def test_a_batch_on_a_road_of_several_edges_is_bit_for_bit_each_episode_alone(road_name, maneuver):
+    from conftest import assert_same_episode, random_plans
+    from d4sumo.engine.simulation import simulate_batch
+
+    config = EpisodeConfig(network=str(ROADS / road_name), start="steady", speed_mps=30.0, followers=4,
+                           duration_s=90.0, setpoint_m=12.0, controller=[ControllerConfig("switching"), ControllerConfig("sumo:ACC")] * 2, **maneuver)
+    box = maneuver_of(config).family(make_attack("knots"))
+    steady = (box.lower + box.upper) / 2  # knots of 0: the attacker holds its speed (a lane change halfway)
+    plans = [*random_plans(config, 6, seed=5), attack_plan(box, steady, config), attack_plan(box, steady, config)]
+    batched = simulate_batch(config, plans)
+    for plan, result in zip(plans, batched):
+        assert_same_episode(result, simulate(config, plan))
+    assert sum(r.trace["pos_v1"][-1] > build_road(config.network).first_edge_m for r in batched) >= 2  # past a join

@@ -1,0 +1,111 @@
+"""Attack families: every point of each box is a valid attack; PCHIP never leaves [-1, 1]."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d4sumo.model.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, make_attack
+from d4sumo.errors import ConfigError
+
+TIMES = np.arange(1200) * 0.05
+
+
+def box_points(family, rng, n=200):
+    corners = np.array([family.lower, family.upper])
+    return np.vstack([corners, rng.uniform(family.lower, family.upper, size=(n, family.dimension))])
+
+
+@pytest.mark.parametrize("name", FAMILIES)
+def test_every_point_of_the_box_is_a_valid_attack(name):
+    family = make_attack(name)
+    rng = np.random.default_rng(7)
+    for x in box_points(family, rng):
+        u = family.signal(x, TIMES)
+        assert u.shape == TIMES.shape
+        active = u[~np.isnan(u)]
+        assert np.all((active >= -1.0) & (active <= 1.0))
+
+
+def test_pchip_knots_never_overshoot_while_the_cubic_spline_would():
+    rng = np.random.default_rng(3)
+    pchip, spline = Knots(), Spline()
+    overshoots = 0
+    for x in rng.choice([-1.0, 1.0], size=(50, pchip.dimension)):
+        u = pchip.signal(x, TIMES)
+        assert np.all(np.abs(u) <= 1.0)
+        raw = spline._signal(x, TIMES)  # before clipping
+        overshoots += bool(np.any(np.abs(raw) > 1.0 + 1e-9))
+        assert np.all(np.abs(spline.signal(x, TIMES)) <= 1.0)
+    assert overshoots > 0  # the reason the paper picks PCHIP
+
+
+def test_knots_pass_through_their_values_and_hold_after_the_horizon():
+    k = Knots(delta_s=6.0, horizon_s=48.0)
+    assert k.dimension == 9
+    x = np.linspace(-1, 1, 9)
+    assert np.allclose(k.signal(x, k.knot_times_s), x)
+    assert np.all(k.signal(x, np.array([48.0, 50.0, 59.95])) == 1.0)
+
+
+def test_persistent_is_a_square_wave_between_plus_and_minus_c_from_t_a():
+    family = make_attack("persistent")
+    u = family.signal([0.8, 0.5, 4.0], TIMES)
+    assert np.all(np.isnan(u[TIMES < 4.0]))
+    active = u[TIMES >= 4.0]
+    assert set(np.round(active, 9)) == {0.8, -0.8}
+    # period 2 s: +c for 1 s, then -c
+    assert u[np.searchsorted(TIMES, 4.5)] == 0.8 and u[np.searchsorted(TIMES, 5.5)] == -0.8
+
+
+def test_intermittent_windows_are_ordered_for_every_box_point():
+    family = Intermittent()
+    rng = np.random.default_rng(1)
+    for x in box_points(family, rng):
+        t1, t2, t3, t4 = family.window_times(x)
+        assert t1 <= t2 <= t3 <= t4 < 60.0
+    u = family.signal([2.0, 3.0, 1.0, 2.0, 1.0, -1.0], TIMES)
+    assert np.isnan(u[TIMES < 2.0]).all()
+    assert (u[(TIMES >= 2.0) & (TIMES <= 5.0)] == 1.0).all()
+    assert (u[(TIMES >= 6.0) & (TIMES <= 8.0)] == -1.0).all()
+    assert np.isnan(u[TIMES > 8.0]).all()
+
+
+@pytest.mark.parametrize(
+    "name, params, message",
+    [
+        ("knots", [0.0] * 8, "9 values"),
+        ("knots", [2.0] + [0.0] * 8, "m0"),
+        ("persistent", [0.5, 5.0, 1.0], "f_hz"),
+        ("sine", [float("nan"), 0.1, 0.0], "amplitude"),
+    ],
+)
+def test_bad_parameters_name_the_parameter(name, params, message):
+    with pytest.raises(ConfigError, match=message):
+        make_attack(name).check(params)
+
+
+def test_unknown_family_lists_the_allowed_ones():
+    with pytest.raises(ConfigError, match="persistent"):
+        make_attack("zigzag")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(delta_s=0.0), r"attack.delta_s: got 0.0; allowed: a number in \[0.05, 600\] seconds"),
+    (dict(horizon_s=47.0), "attack.horizon_s: got 47.0; allowed: a whole multiple of delta_s=6 s"),
+    (dict(interpolation="linear"), "attack.interpolation: got 'linear'; allowed: an option of an attack family: delta_s, horizon_s"),
+])
+def test_bad_knot_settings(kwargs, message):
+    with pytest.raises(ConfigError, match=message):
+        Knots(**kwargs)
+
+
+def test_a_family_owns_its_options_and_leaves_other_families_options_out():
+    """One [attack] table serves a sweep of several families: each reads its own options."""
+    assert make_attack("knots", {"delta_s": 4, "horizon_s": 8}).options == {"delta_s": 4.0, "horizon_s": 8.0}
+    assert make_attack("knots", delta_s=4, horizon_s=8).names == ("m0", "m1", "m2")
+    assert make_attack("spline").options == {"delta_s": 6.0, "horizon_s": 48.0}
+    assert make_attack("persistent", {"delta_s": 4}).options == {}
+    with pytest.raises(ConfigError, match="attack.delta_s: got -1"):  # checked even where not read
+        make_attack("persistent", {"delta_s": -1})
+    assert set(FAMILY_CLASSES) == set(FAMILIES) and all(FAMILY_CLASSES[n].name == n for n in FAMILIES)

@@ -1,0 +1,107 @@
+"""The whole HTML report from a small real database: every figure and file it links exists, every table
+has data, the severe attacks come from different configurations, and the wording counts right."""
+
+from __future__ import annotations
+
+import re
+from html.parser import HTMLParser
+from urllib.parse import urlparse
+
+import pytest
+
+from d4sumo.results.analysis import load_records, most_severe
+
+pytestmark = pytest.mark.sumo
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+class _Page(HTMLParser):
+    """The links and tables of a page: img src, a href, and the data rows (rows with td) of each table."""
+
+    def __init__(self):
+        super().__init__()
+        self.images: list[str] = []
+        self.links: list[str] = []
+        self.tables: list[int] = []
+        self._row_has_data = False
+        self._in_table = False
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "img":
+            self.images.append(attrs.get("src", ""))
+        elif tag == "a" and "href" in attrs:
+            self.links.append(attrs["href"])
+        elif tag == "table":
+            self.tables.append(0)
+            self._in_table = True
+        elif tag == "tr":
+            self._row_has_data = False
+        elif tag == "td" and self._in_table:
+            self._row_has_data = True
+
+    def handle_endtag(self, tag):
+        if tag == "tr" and self._in_table and self._row_has_data:
+            self.tables[-1] += 1
+        elif tag == "table":
+            self._in_table = False
+
+
+def _local(ref: str) -> bool:
+    parsed = urlparse(ref)
+    return not parsed.scheme and not parsed.netloc and not ref.startswith("#")
+
+
+@pytest.fixture(scope="module")
+def report(small_db, tmp_path_factory):
+    from d4sumo.results.report import build_report
+
+    index = build_report([small_db], tmp_path_factory.mktemp("report") / "out", severe=3)
+    page = _Page()
+    text = index.read_text(encoding="utf-8")
+    page.feed(text)
+    return index, text, page
+
+
+def test_every_linked_figure_and_file_exists_and_is_not_empty(report):
+    index, _, page = report
+    refs = [ref for ref in page.images + page.links if _local(ref)]
+    assert len(page.images) >= 1 + 2 * 3 + 1  # heatmaps, time-space + accelerations of 3 attacks, clusters
+    for ref in refs:
+        path = index.parent / ref
+        assert path.is_file() and path.stat().st_size > 0, ref
+    for src in page.images:
+        assert (index.parent / src).read_bytes().startswith(PNG), src
+    assert any(ref.startswith("fcd/") for ref in page.links) and "tables.txt" in page.links
+
+
+def test_every_table_has_data_rows(report):
+    _, text, page = report
+    assert len(page.tables) == 3 and all(rows >= 1 for rows in page.tables), page.tables
+    for title in ("Table 1", "Table 2", "Table 3", "Most severe attacks", "Clusters"):
+        assert title in text
+    assert "time from attack start to collision" in text
+
+
+def test_the_most_severe_attacks_come_from_different_configurations_and_say_why(report, small_db):
+    index, text, page = report
+    top = most_severe(load_records([small_db]), 3)
+    assert len(top) == 3 and len({(r.setpoint_m, r.speed_mps, r.start) for r in top}) == 3
+    assert "largest speed difference between the colliding cars at the first collision" in text
+    assert "at most one per configuration" in text
+    shown = [int(m) for m in re.findall(r"time_space_sample_(\d+)\.png", " ".join(page.images))]
+    assert shown == [r.sample_id for r in top]
+
+
+def test_the_report_never_says_one_of_something_in_the_plural(report):
+    _, text, _ = report
+    assert re.search(r"\b1 (attacks|clusters|noise points|successes|samples|panels)\b", text) is None
+    assert re.search(r"\b1 clusters\b", (report[0].parent / "tables.txt").read_text()) is None
+
+
+def test_the_report_writes_only_into_its_folder(report):
+    index, _, page = report
+    written = {p.relative_to(index.parent).as_posix() for p in index.parent.rglob("*") if p.is_file()}
+    linked = {ref for ref in page.images + page.links if _local(ref)} | {"index.html"}
+    assert written == linked  # nothing the page does not show or link

@@ -1,0 +1,364 @@
+"""Campaigns in SUMO: exact repetition, resume without loss, errored samples."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import d4sumo.search.campaign as campaign_module
+from d4sumo.search.campaign import Campaign, run_campaign
+from d4sumo.errors import ConfigError, SumoError
+from d4sumo.search.store import Store, StoreError
+
+pytestmark = pytest.mark.sumo
+
+SMALL = Campaign(optimizer="bo", samples=14, seed=3)  # past BO's 10 initial points
+
+
+class Interrupt(Exception):
+    """A kill, as the campaign sees it: raised from its on_sample."""
+
+
+def interrupt_at(index: int):
+    def on_sample(sample):
+        if sample.index == index:
+            raise Interrupt
+    return on_sample
+
+
+def signature(summary):
+    return [(s.params, s.robustness, s.outcome) for s in summary.samples]
+
+
+def test_one_seed_reproduces_a_campaign_exactly(tmp_path):
+    with Store(tmp_path / "a.sqlite") as sa, Store(tmp_path / "b.sqlite") as sb:
+        a = run_campaign(SMALL, sa)
+        b = run_campaign(SMALL, sb)
+    assert signature(a) == signature(b)
+    c = run_campaign(SMALL.replace(seed=4))
+    assert signature(c) != signature(a)
+
+
+def test_an_interrupted_campaign_resumes_with_nothing_lost_or_counted_twice(tmp_path):
+    uninterrupted = run_campaign(SMALL)
+    path = tmp_path / "r.sqlite"
+
+    with pytest.raises(Interrupt), Store(path) as store:
+        run_campaign(SMALL, store, on_sample=interrupt_at(10))
+    with Store(path) as store:
+        assert len(store.samples()) == 11
+        resumed = run_campaign(SMALL, store)
+        assert signature(resumed) == signature(uninterrupted)
+        assert [s.index for s in store.samples()] == list(range(14))
+
+
+def test_a_larger_budget_extends_the_stored_campaign(tmp_path):
+    with Store(tmp_path / "r.sqlite") as store:
+        run_campaign(SMALL.replace(optimizer="ce", samples=5), store)
+        longer = run_campaign(SMALL.replace(optimizer="ce", samples=8), store)
+        assert len(store.campaigns()) == 1 and len(store.samples()) == 8
+    assert signature(longer) == signature(run_campaign(SMALL.replace(optimizer="ce", samples=8)))
+
+
+def test_stored_samples_that_this_seed_would_not_ask_are_refused(tmp_path):
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        run_campaign(SMALL.replace(optimizer="random", samples=3), store)
+        store.db.execute("UPDATE sample SET params = '[0,0,0,0,0,0,0,0,0]' WHERE idx = 1")
+        with pytest.raises(StoreError, match="not what this seed asks for"):
+            run_campaign(SMALL.replace(optimizer="random", samples=5), store)
+        assert len(store.samples()) == 3
+
+
+def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goes_on(tmp_path, monkeypatch):
+    real = campaign_module.simulate
+    calls = {"n": 0}
+
+    def flaky(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise SumoError("SUMO failed during the episode: test")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(campaign_module, "simulate", flaky)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_campaign(SMALL.replace(optimizer="random", samples=4), store, batch=1)
+        rows = store.samples()
+    assert [r.outcome == "error" for r in rows] == [False, True, False, False]
+    assert rows[1].robustness is None and "test" in rows[1].error
+    assert summary.count("error") == 1
+
+
+def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_play_alone(tmp_path, monkeypatch):
+    """Regression: a SUMO failure errored every unfinished episode of the batch (in a sweep, of up to 32
+    campaigns), where alone only the failing one would be: the results depended on the grouping."""
+    real = campaign_module.simulate_batch
+    batches = []
+
+    def failing_after_two(config, plans, *, road=None, on_episode=None):
+        heard = []
+
+        def hear(i, episode):
+            on_episode(i, episode)
+            heard.append(i)
+            if len(heard) == 2 and len(batches) == 1:
+                raise SumoError("SUMO failed during the episode: test")
+
+        batches.append(len(plans))
+        return real(config, plans, road=road, on_episode=hear)
+
+    monkeypatch.setattr(campaign_module, "simulate_batch", failing_after_two)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=4)
+        rows = store.samples()
+    assert batches == [4, 2]
+    assert sorted(r.index for r in rows) == list(range(6))
+    assert summary.count("error") == 0
+    assert full_signature(summary) == full_signature(run_campaign(SMALL.replace(optimizer="random", samples=6), batch=1))
+
+
+def test_robustness_positive_exactly_for_successes_with_the_papers_psi():
+    summary = run_campaign(Campaign(optimizer="random", samples=20, seed=1))
+    for s in summary.samples:
+        assert (s.robustness > 0) == (s.outcome == "success"), s
+
+
+@pytest.mark.parametrize(
+    "changes, field",
+    [
+        (dict(optimizer="annealing"), "search.optimizer"),
+        (dict(attack="zigzag"), "attack.family"),
+        (dict(samples=0), "search.samples"),
+        (dict(seed=-1), "search.seed"),
+        (dict(attack_options={"delta_s": 5.0}), "attack.horizon_s"),
+    ],
+)
+def test_bad_campaigns_name_the_field(changes, field):
+    with pytest.raises(ConfigError) as info:
+        Campaign(**changes)
+    assert info.value.field == field
+
+
+class Raising:
+    """A user's follower controller with a bug: it raises on a gap below 3 m."""
+
+    from d4sumo.model.control import SwitchingParams as Params
+
+    def __init__(self, params, **kwargs):
+        from d4sumo.model.control import SwitchingController
+
+        self.inner = SwitchingController(params, **kwargs)
+
+    def command(self, gap_m, speed_mps, lead_speed_mps):
+        if gap_m < 3.0:
+            raise ZeroDivisionError("too close")
+        return self.inner.command(gap_m, speed_mps, lead_speed_mps)
+
+
+def test_a_users_controller_that_raises_is_an_errored_sample_and_the_campaign_goes_on(tmp_path):
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+
+    config = EpisodeConfig(controller=ControllerConfig(cls="test_campaign:Raising"), setpoint_m=4.0)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_campaign(Campaign(config=config, optimizer="random", samples=6, seed=0), store)
+        rows = store.samples()
+    assert len(rows) == 6 and summary.count("error") >= 1
+    errored = [r for r in rows if r.outcome == "error"]
+    assert all("ZeroDivisionError: too close" in r.error and r.robustness is None for r in errored)
+
+
+def test_an_evaluator_of_another_campaign_is_refused_before_anything_is_written(tmp_path):
+    """Regression: run_campaign stored another campaign's results under this campaign, silently."""
+    from d4sumo.search.campaign import Evaluator
+
+    path = tmp_path / "r.sqlite"
+    other = Evaluator(SMALL.replace(seed=9))
+    with Store(path) as store:
+        with pytest.raises(ValueError, match="another campaign"):
+            run_campaign(SMALL, store, evaluator=other)
+        assert store.campaigns() == [] and store.samples() == []
+
+
+def test_numpy_scalars_are_accepted_and_7_and_7_0_are_the_same_campaign():
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.search.store import campaign_key
+
+    a = Campaign(config=EpisodeConfig(setpoint_m=7, followers=np.int64(3), speed_mps=np.float32(25.0)), samples=np.int64(5),
+                 seed=np.int32(1), attack_options={"delta_s": np.float64(6)})
+    b = Campaign(config=EpisodeConfig(setpoint_m=7.0, followers=3, speed_mps=25.0), samples=5, seed=1, attack_options={"delta_s": 6})
+    assert campaign_key(a.definition()) == campaign_key(b.definition())
+    assert type(a.config.setpoint_m) is float and type(a.seed) is int
+
+
+@pytest.mark.sumo
+def test_after_a_warm_up_the_specification_is_scored_from_the_attacks_start():
+    """Regression: scored over the whole episode, the paper's psi was bounded by the warm-up's first
+    instant (every gap at the setpoint), so every attack of a warm-up campaign scored -d alike."""
+    from d4sumo.model.config import EpisodeConfig
+
+    campaign = Campaign(config=EpisodeConfig(start="warmup", setpoint_m=3.0, speed_mps=20.0), attack="persistent",
+                        optimizer="random", samples=8, seed=0)
+    assert campaign.definition()["spec"]["from_attack_start"] is True
+    scores = {r.robustness for r in run_campaign(campaign).samples}
+    assert len(scores) > 1 and -3.0 not in scores
+    # a campaign stored before (no key) keeps scoring the whole episode: its samples replay as stored
+    old = copy.deepcopy(campaign.definition())
+    del old["spec"]["from_attack_start"]
+    before = Campaign.from_definition(old, samples=8)
+    assert before.score_from_attack_start is False and before.specification().start_step == 0
+    assert {r.robustness for r in run_campaign(before).samples} == {-3.0}
+    # without a warm-up nothing changes, not even the stored definition
+    assert "from_attack_start" not in Campaign().definition()["spec"]
+
+
+def full_signature(summary):
+    return [(s.index, s.params, s.robustness, s.outcome, s.collision, s.min_gaps) for s in summary.samples]
+
+
+@pytest.mark.parametrize("optimizer, options", [
+    ("random", {}), ("halton", {}), ("ce", {"batch_size": 6}), ("cmaes", {}), ("ce-bucket", {}),
+    ("bo", {"initial_points": 6, "batch_size": 1}), ("bo", {"initial_points": 4, "batch_size": 3}),
+    ("turbo", {"initial_points": 4, "batch_size": 3, "failure_tolerance": 1}),
+])
+def test_a_campaign_played_in_batches_is_the_campaign_played_one_episode_at_a_time(optimizer, options):
+    """Issue 13: batches change the speed, never a sample."""
+    campaign = Campaign(optimizer=optimizer, optimizer_options=options, samples=14, seed=2, config=SMALL.config.__class__(setpoint_m=5.0))
+    alone = run_campaign(campaign, batch=1)
+    for batch in (4, 32):
+        assert full_signature(run_campaign(campaign, batch=batch)) == full_signature(alone), batch
+    assert {s.outcome for s in alone.samples} - {"error"}
+
+
+def test_a_campaign_interrupted_inside_a_batch_resumes_with_nothing_lost_or_counted_twice(tmp_path):
+    """A batch's samples are stored in order as their episodes end; after a kill in the middle of a batch
+    the campaign resumes and ends as if never interrupted, and the row ids follow the samples' order
+    whatever the batch size."""
+    campaign = Campaign(optimizer="ce", optimizer_options={"batch_size": 8}, samples=16, seed=1)
+    uninterrupted = run_campaign(campaign)
+    path = tmp_path / "r.sqlite"
+
+    with pytest.raises(Interrupt), Store(path) as store:
+        run_campaign(campaign, store, on_sample=interrupt_at(10))  # inside the second batch
+    with Store(path) as store:
+        assert [s.index for s in store.samples()] == list(range(11))
+        resumed = run_campaign(campaign, store, batch=3)
+        assert full_signature(resumed) == full_signature(uninterrupted)
+        rows = store.samples()
+        assert [s.index for s in rows] == list(range(16)) and [s.id for s in rows] == sorted(s.id for s in rows)
+
+
+def test_samples_missing_between_stored_ones_are_played_and_nothing_else(tmp_path, monkeypatch):
+    """A database may hold a campaign with gaps (a batch cut short by another writer): resuming plays
+    exactly the missing samples, and the campaign ends as if it had run in one piece."""
+    campaign = Campaign(optimizer="ce", optimizer_options={"batch_size": 8}, samples=16, seed=1)
+    uninterrupted = run_campaign(campaign)
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        run_campaign(campaign.replace(samples=12), store)
+        store.db.execute("DELETE FROM sample WHERE idx IN (3, 9, 10)")
+        store.db.commit()
+        played = []
+        real = campaign_module.Evaluator.batch
+
+        def spy(self, first, params, on_result=None):
+            played.extend(range(first, first + len(params)))
+            return real(self, first, params, on_result)
+
+        monkeypatch.setattr(campaign_module.Evaluator, "batch", spy)
+        resumed = run_campaign(campaign, store)
+        assert full_signature(resumed) == full_signature(uninterrupted)
+        assert sorted(s.index for s in store.samples()) == list(range(16))
+    assert sorted(played) == [3, 9, 10, 12, 13, 14, 15]
+
+
+def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats_exactly():
+    campaign = Campaign(optimizer="bo", optimizer_options={"initial_points": 5, "batch_size": 4}, samples=13, seed=0)
+    a, b = run_campaign(campaign), run_campaign(campaign)
+    assert full_signature(a) == full_signature(b)
+    proposed = [s.params for s in a.samples[5:9]]
+    assert len(set(proposed)) == 4
+    assert "batch_size" in campaign.definition()["optimizer_options"]
+
+
+@pytest.mark.parametrize("version, removed, kept", [
+    ("0.2", ("batch_size", "gp_version"), {"batch_size": 1, "gp_version": 1}),
+    ("0.3", ("gp_version",), {"batch_size": 5, "gp_version": 1})])
+def test_a_bo_campaign_an_earlier_version_stored_keeps_its_identity_and_its_options(version, removed, kept):
+    """d4sumo 0.2 stored bo campaigns without batch_size (one point per score) and 0.3 without
+    gp_version (scikit-optimize's GP): they must resume and replay as they ran, under the same key."""
+    from d4sumo.search.store import campaign_key
+
+    new = Campaign(optimizer="bo")
+    assert new.definition()["optimizer_options"]["batch_size"] == 5
+    assert new.definition()["optimizer_options"]["gp_version"] == 2
+    old = copy.deepcopy(new.definition())
+    for key in removed:
+        del old["optimizer_options"][key]
+    stored = Campaign.from_definition(old, samples=12)
+    assert {k: dict(stored.optimizer_options)[k] for k in kept} == kept
+    assert campaign_key(stored.definition()) == campaign_key(old)
+    same = Campaign(optimizer="bo", optimizer_options=kept, samples=12)
+    assert same.definition() == stored.definition()
+
+
+@pytest.mark.parametrize("where", ["a plan that fails", "SUMO failing"])
+def test_the_callers_own_exception_comes_out_of_a_batch_as_it_was_raised(monkeypatch, where):
+    """Regression: on these two paths an exception of the caller's on_result (Ctrl-C, a store error)
+    came out wrapped in a private class, so Ctrl-C ended in a traceback instead of exit 130."""
+    from d4sumo.search.campaign import Evaluator
+
+    evaluator = Evaluator(Campaign(optimizer="random", samples=4))
+    params = [np.zeros(9), np.zeros(9)]
+    if where == "a plan that fails":
+        params[0] = np.full(9, 7.0)  # outside the knots' box
+        with pytest.raises(ValueError):
+            evaluator.plan(params[0])
+    else:
+        def failing(*args, **kwargs):
+            raise SumoError("SUMO failed during the episode: test")
+
+        monkeypatch.setattr(campaign_module, "simulate_batch", failing)
+
+    def interrupted(result):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        evaluator.batch(0, params, interrupted)
+
+
+def test_a_campaign_whose_sumo_model_draws_random_numbers_is_the_same_batched_or_not():
+    """EIDM draws from SUMO's random streams (dealt out by car): its episodes play one at a time, on the
+    campaign's own road, whatever --batch says."""
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+
+    campaign = Campaign(config=EpisodeConfig(controller=ControllerConfig("sumo:EIDM"), setpoint_m=4.0), optimizer="random",
+                        samples=6, seed=1)
+    assert full_signature(run_campaign(campaign, batch=6)) == full_signature(run_campaign(campaign, batch=1))
+
+
+def test_campaigns_stepped_together_store_the_samples_each_gives_alone():
+    """Issue 13: a sweep steps several campaigns at once, their episodes side by side in one SUMO
+    (other setpoints, speeds, starts, attacks and optimisers; the paper's one-point BO among them)."""
+    from d4sumo.search.campaign import CampaignRunner, Evaluator, step_together
+    from d4sumo.model.config import EpisodeConfig
+
+    campaigns = [
+        Campaign(config=EpisodeConfig(setpoint_m=4.0, speed_mps=20.0), optimizer="bo", optimizer_options={"batch_size": 1, "initial_points": 4}, samples=9, seed=1),
+        Campaign(config=EpisodeConfig(setpoint_m=9.0, speed_mps=30.0, start="steady"), optimizer="bo", optimizer_options={"batch_size": 1, "initial_points": 4}, samples=9, seed=2),
+        Campaign(config=EpisodeConfig(setpoint_m=6.0, start="steady"), attack="persistent", optimizer="ce", optimizer_options={"batch_size": 4}, samples=9),
+        Campaign(config=EpisodeConfig(followers=4), optimizer="random", samples=9),  # another key: its own SUMO
+    ]
+    alone = [full_signature(run_campaign(c, batch=1)) for c in campaigns]
+    for batch in (3, 64):
+        runners = [CampaignRunner(c, Evaluator(c), batch=batch) for c in campaigns]
+        heard = {id(r): [] for r in runners}
+        together = {id(r): [] for r in runners}
+        while any(r.done < r.campaign.samples for r in runners):
+            going = [r for r in runners if r.done < r.campaign.samples]
+            for r, results in zip(going, step_together(going, batch, lambda r, s: heard[id(r)].append(s.index))):
+                together[id(r)] += results
+        for r, expected in zip(runners, alone):
+            assert full_signature(campaign_module.CampaignSummary(None, together[id(r)])) == expected
+            assert sorted(heard[id(r)]) == list(range(9))

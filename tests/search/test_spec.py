@@ -1,0 +1,132 @@
+"""The paper's specification psi, computed directly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d4sumo.errors import ConfigError
+from d4sumo.search.spec import paper_formula, psi_robustness
+from d4sumo.model.trace import Trace
+
+
+def trace_of(gaps):
+    gaps = np.asarray(gaps, dtype=float)
+    return Trace(np.arange(gaps.shape[0]) * 0.05, {f"gap_{i}": gaps[:, i] for i in range(gaps.shape[1])}, gaps.shape[1])
+
+
+def test_followers_colliding_with_the_attacker_clear_is_positive():
+    assert psi_robustness(trace_of([[7, 7, 7], [5, 2, 7], [4, -0.3, 6]])) == pytest.approx(0.3)
+
+
+def test_no_collision_is_negative_by_the_closest_approach():
+    assert psi_robustness(trace_of([[7, 7, 7], [5, 2, 7], [4, 1.5, 6]])) == pytest.approx(-1.5)
+
+
+def test_an_attacker_crash_is_negative_even_when_followers_collide():
+    assert psi_robustness(trace_of([[7, 7, 7], [-0.2, -1.0, 7]])) == pytest.approx(-0.2)
+
+
+def test_d_safe_shifts_the_threshold():
+    assert psi_robustness(trace_of([[7, 7], [5, 1.5]]), d_safe_m=2.0) == pytest.approx(0.5)
+
+
+def test_psi_needs_two_followers():
+    with pytest.raises(ConfigError, match="at least 2"):
+        psi_robustness(trace_of([[7], [3]]))
+    assert paper_formula(3) == "(eventually((gap_1 <= 0.0) or (gap_2 <= 0.0))) and (always(gap_0 > 0.0))"
+
+
+# --- rtamt ---------------------------------------------------------------------------------------
+
+import rtamt  # noqa: E402
+
+from d4sumo.search.spec import Specification, trace_signals  # noqa: E402
+
+
+def random_trace(seed, followers=3, n=400):
+    rng = np.random.default_rng(seed)
+    signals = {name: np.cumsum(rng.normal(0, 0.3, n)) + rng.uniform(-2, 8) for name in trace_signals(followers)}
+    return Trace(np.arange(n) * 0.05, signals, followers)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_rtamt_agrees_with_numpy_on_psi(seed):
+    trace = random_trace(seed)
+    for d_safe in (0.0, 1.5):
+        spec = Specification(followers=3, step_s=0.05, d_safe_m=d_safe)
+        assert spec.robustness(trace) == pytest.approx(psi_robustness(trace, d_safe), abs=1e-9)
+
+
+@pytest.mark.parametrize("op", ["<=", "<", ">=", ">", "==", "!=="])
+def test_our_predicate_step_gives_stock_rtamts_robustness(op):
+    formula = f"always[0:3](speed_v1 {op} 0.5 * speed_v0) or eventually(gap_1 {op} gap_2 - 1)"
+    trace = random_trace(11)
+    ours = Specification(followers=3, step_s=0.05, formula=formula).robustness(trace)
+    stock = rtamt.StlDiscreteTimeSpecification()
+    for name in ("speed_v0", "speed_v1", "gap_1", "gap_2"):
+        stock.declare_var(name, "float")
+    stock.spec = formula
+    stock.set_sampling_period(50, "ms", 0.1)
+    stock.parse()
+    data = {"time": trace.times_s.tolist(), **{n: trace[n].tolist() for n in ("speed_v0", "speed_v1", "gap_1", "gap_2")}}
+    assert ours == stock.evaluate(data)[0][1]
+
+
+def test_time_bounds_are_in_seconds():
+    times = np.arange(100) * 0.05
+    trace = Trace(times, {**random_trace(0, n=100).signals, "speed_v0": times.copy()}, 3)
+    spec = Specification(followers=3, step_s=0.05, formula="eventually[0:1](speed_v0 >= 5)")
+    assert spec.robustness(trace) == pytest.approx(1.0 - 5.0)  # speed_v0 reaches 1.0 at t = 1 s
+
+
+@pytest.mark.parametrize(
+    "formula, message",
+    [
+        ("eventually(gap_7 <= 0)", "unknown: gap_7"),
+        ("eventually(lateral_v1 <= 0)", "unknown: lateral_v1"),
+        ("eventually(gap_1 <= ", "rtamt can parse"),
+        ("   ", "STL formula"),
+    ],
+)
+def test_bad_formulas_are_refused_clearly(formula, message):
+    with pytest.raises(ConfigError, match=message):
+        Specification(followers=3, step_s=0.05, formula=formula)
+
+
+def test_nan_never_reaches_rtamt():
+    trace = random_trace(1)
+    trace.signals["gap_1"][5] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        Specification(followers=3, step_s=0.05).robustness(trace)
+
+
+@pytest.mark.sumo
+def test_rtamt_agrees_with_numpy_on_sumo_traces(road):
+    from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
+
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.engine.simulation import simulate
+
+    config = EpisodeConfig()
+    spec = Specification(followers=3, step_s=config.step_s)
+    for knots in (SUCCESS_KNOTS, ATTACKER_CRASH_KNOTS, [0.0] * 9):
+        trace = simulate(config, knots_signal(knots, config), road=road).trace
+        assert spec.robustness(trace) == pytest.approx(psi_robustness(trace), abs=1e-9)
+
+
+def test_a_window_restarts_the_clock_and_an_episode_that_ended_before_it_is_scored_at_its_collision():
+    from d4sumo.search.spec import Specification
+    from d4sumo.model.trace import Trace
+
+    times = np.arange(6) * 0.05
+    gaps = {"gap_0": np.full(6, 5.0), "gap_1": np.array([7.0, 6.0, 5.0, 4.0, 3.0, 2.0]), "gap_2": np.full(6, 7.0)}
+    trace = Trace(times, gaps, followers=3)
+    w = trace.window(2)
+    assert np.allclose(w.times_s, [0.0, 0.05, 0.1, 0.15]) and np.array_equal(w["gap_1"], [5.0, 4.0, 3.0, 2.0])
+    assert trace.window(0) is trace
+    spec = Specification(followers=3, step_s=0.05, start_step=2)
+    assert spec.robustness(trace) == pytest.approx(-2.0)  # the closest gap in the window, not the 7 m before it
+    crashed = Trace(times[:2], {"gap_0": np.array([5.0, 5.0]), "gap_1": np.array([1.0, -0.2]), "gap_2": np.array([7.0, 7.0])}, 3)
+    assert crashed.window(2) is crashed  # at least two samples (rtamt needs them)
+    assert spec.robustness(crashed) == pytest.approx(0.2)  # it ended (v1-v2 collided) before the window: scored there
