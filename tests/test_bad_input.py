@@ -261,7 +261,7 @@ def test_a_full_device_is_reported_and_leaves_no_file(good_db, tmp_path, monkeyp
 
 
 def test_an_fcd_file_cut_short_is_an_error(tmp_path):
-    from d4sumo.cli import check_fcd_written
+    from d4sumo.cli.common import check_fcd_written
     from d4sumo.errors import D4sumoError
 
     fcd = tmp_path / "f.xml"

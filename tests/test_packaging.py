@@ -40,7 +40,9 @@ def test_the_wheel_ships_every_scenario_variant(wheel):
     names = zipfile.ZipFile(wheel).namelist()
     for variant in (p.name for p in (ROOT / "sumo_scenarios").iterdir() if p.is_dir() and not p.name.startswith("_")):
         assert f"sumo_scenarios/{variant}/highway.nod.xml" in names and f"sumo_scenarios/{variant}/highway.edg.xml" in names
-    assert "d4sumo/cli.py" in names and not any(n.startswith("tests/") for n in names)
+    modules = {str(p.relative_to(ROOT)) for p in (ROOT / "d4sumo").rglob("*.py")}
+    assert len(modules) > 30 and modules <= set(names)  # every module of every subpackage
+    assert not any(n.startswith("tests/") for n in names)
 
 
 @pytest.mark.sumo

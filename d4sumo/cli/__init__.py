@@ -1,0 +1,82 @@
+"""Command line: parse flags, call the library, print. The CLI stays thin: flags become dotted keys
+laid over the config file (`inputs`), and the library checks the one resulting document.
+
+Every error a user can cause ends as one line `d4sumo: error: ...` and exit code 2.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import signal
+import sys
+import threading
+from typing import Sequence
+
+from ..errors import ConfigError, D4sumoError
+from .common import EXIT_USAGE, FLAG_KEYS, LIST_OPTIONS
+from .parser import build_parser
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM: stop as on Ctrl-C (workers stopped, nothing half-written), exit code 143."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise Terminated()
+
+
+def _join_negative_lists(argv: list[str]) -> list[str]:
+    """``--params -0.5,0.2,1`` as ``--params=-0.5,0.2,1``: argparse would take the list for an option."""
+    out = []
+    i = 0
+    while i < len(argv):
+        if argv[i] in LIST_OPTIONS and i + 1 < len(argv) and re.fullmatch(r"-[0-9.][0-9.eE+\-,\s]*", argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(_join_negative_lists(list(sys.argv[1:] if argv is None else argv)))
+    except SystemExit as exc:  # usage errors (one line, exit 2), --help, --version
+        return int(exc.code or 0)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s" if args.verbose else "d4sumo: %(message)s")
+    flags: dict[str, str] = {}
+    for dest, key in FLAG_KEYS.items():
+        if getattr(args, dest, None) is not None:
+            flags[key] = "--" + dest.replace("_", "-")
+    if getattr(args, "knots", None) is not None:
+        flags.update({"attack.params": "--knots", "attack.family": "--knots"})
+    elif getattr(args, "attack", None) is not None and args.command == "simulate":
+        flags["attack.params"] = "--params"  # named even when it is missing
+    try:
+        code = args.func(args)
+        sys.stdout.flush()  # inside the try: a closed pipe surfaces here, not at exit
+        return code
+    except ConfigError as exc:
+        flag = flags.get(exc.field) or flags.get(exc.field.split(":")[0])
+        field = f"{flag} ({exc.field})" if flag and not exc.field.startswith("--") else exc.field
+        print(f"d4sumo: error: {field}: got {exc.given!r}; allowed: {exc.allowed}", file=sys.stderr)
+        return EXIT_USAGE
+    except D4sumoError as exc:
+        print(f"d4sumo: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except BrokenPipeError:
+        # the reader went away (`d4sumo export db | head`): stop quietly, as command-line tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except KeyboardInterrupt as exc:
+        if not isinstance(exc, Terminated) and not getattr(exc, "said", False):
+            print("d4sumo: interrupted", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130

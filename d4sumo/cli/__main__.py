@@ -1,0 +1,7 @@
+"""``python -m d4sumo.cli``."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

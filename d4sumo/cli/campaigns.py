@@ -1,0 +1,135 @@
+"""The commands that search: falsify (one campaign) and sweep (a grid of them)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+
+from ..errors import ConfigError, check_number
+from ..search.optimizers import EARLIER_OPTIONS, as_set_flags
+from .common import check_batch, document
+
+
+def cmd_falsify(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..search.campaign import Evaluator, open_store, run_campaign
+    from ..inputs import campaign_of
+
+    doc, _ = document(args)
+    campaign = campaign_of(doc)
+    evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    check_batch(args.batch)
+    counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
+    best = [None]
+    with open_store(args.db) as store, contextlib.ExitStack() as stack:
+        known = store.find_campaign(campaign.definition())
+        stored = 0 if known is None else sum(s.index < campaign.samples for s in store.iter_samples(known))
+        if known is not None and not args.quiet:
+            print(f"d4sumo: campaign {known} in {args.db}: " + (
+                f"all {campaign.samples} samples stored already, nothing to run (a larger --samples extends it)"
+                if stored >= campaign.samples else f"{stored} of {campaign.samples} samples stored already: resuming"),
+                file=sys.stderr)
+        # the bar counts what this run plays; the stored samples are where it starts
+        bar = stack.enter_context(tqdm(total=campaign.samples, initial=stored, desc=f"{campaign.attack}/{campaign.optimizer}",
+                                       unit="sample", disable=args.quiet or stored >= campaign.samples, file=sys.stderr,
+                                       dynamic_ncols=True))
+        told = [0]
+
+        def progress(r) -> None:
+            counts[r.outcome] += 1
+            if r.robustness is not None and (best[0] is None or r.robustness > best[0]):
+                best[0] = r.robustness
+            told[0] += 1
+            if told[0] > stored:  # the stored samples come first, told to the optimiser again
+                bar.update(1)
+            bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
+
+        if known is None:
+            for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
+                before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
+                if before != campaign and store.find_campaign(before.definition()) is not None:
+                    bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
+                              f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)
+                    break
+        try:
+            summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
+        except KeyboardInterrupt as exc:
+            bar.close()
+            print(f"d4sumo: campaign interrupted; every sample it finished is in {args.db}: run the same command to resume",
+                  file=sys.stderr)
+            exc.said = True  # main need not say it again
+            raise
+    top = summary.best
+    result = {
+        "db": str(args.db),
+        "campaign_id": summary.campaign_id,
+        "attack": campaign.attack,
+        "optimizer": campaign.optimizer,
+        "seed": campaign.seed,
+        "samples": len(summary.samples),
+        "outcomes": counts,
+        "best": None if top is None else {
+            "sample_id": top.id, "index": top.index, "robustness": top.robustness, "outcome": top.outcome,
+            "params": list(top.params), "collision": top.collision,
+        },
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    attack = f"{campaign.config.maneuver}, {campaign.attack}" if campaign.config.maneuver_class.lateral else campaign.attack
+    print(f"campaign {summary.campaign_id} ({attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
+    print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if top is not None:
+        c = top.collision
+        hit = f", {c['pair']} at {c['time_s']:.2f} s, {c['position_m']:.1f} m, {c['speed_diff_kmh']:.1f} km/h" if c else ""
+        print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}{hit}")
+        print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
+        print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd best_fcd.xml")
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..sweep import Sweep, check_dask_address, run_sweep
+
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise ConfigError("--workers", args.workers, "a whole number in [1, 1024]")
+    if args.dask is not None:
+        check_dask_address(args.dask)
+    check_number("--dask-timeout", args.dask_timeout, 0.0, 3600.0, "seconds", low_open=True)
+    check_batch(args.batch)
+    sweep = Sweep.load(args.sweep)
+    bar = None  # made at the first progress report: an error before it stays one line
+
+    def progress(done: int, total: int, successes: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total, desc=f"sweep {sweep.name}", unit="sample", disable=args.quiet, file=sys.stderr,
+                       dynamic_ncols=True, initial=done)
+        bar.update(done - bar.n)
+        bar.set_postfix(success=successes, refresh=False)
+
+    try:
+        result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
+                           progress=progress, batch=args.batch)
+    except KeyboardInterrupt as exc:
+        if bar is not None:
+            bar.close()
+        print(f"d4sumo: sweep interrupted; every sample it finished is in {args.db}: run the same command to resume",
+              file=sys.stderr)
+        exc.said = True  # main need not say it again
+        raise
+    except BaseException:
+        if bar is not None:
+            bar.close()
+        raise
+    if bar is not None:
+        bar.close()
+    print(f"sweep {sweep.name}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
+          f"in {result.wall_s:.1f} s -> {args.db}")
+    print(f"  report: d4sumo report {args.db} --out report/")
+    return 0

@@ -1,0 +1,139 @@
+"""What every command shares: the input document from flags and config file, and checks of the files a
+command will write."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from ..engine.scenarios import MAX_COPIES
+from ..errors import ConfigError, D4sumoError
+
+EXIT_USAGE = 2
+
+#: flag dest -> the document key it sets
+FLAG_KEYS = {
+    "network": "scenario.network",
+    "followers": "scenario.followers",
+    "setpoint": "scenario.setpoint_m",
+    "speed": "scenario.speed_mps",
+    "start": "scenario.start",
+    "maneuver": "scenario.maneuver",
+    "warmup": "scenario.warmup_s",
+    "step": "scenario.step_s",
+    "duration": "scenario.duration_s",
+    "length": "vehicle.length_m",
+    "controller": "controller.class",
+    "attack": "attack.family",
+    "params": "attack.params",
+    "delta": "attack.delta_s",
+    "horizon": "attack.horizon_s",
+    "d_safe": "spec.d_safe_m",
+    "formula": "spec.formula",
+    "optimizer": "search.optimizer",
+    "samples": "search.samples",
+    "seed": "search.seed",
+}
+
+
+#: options whose value is a comma-separated list of numbers, which may start with a minus sign
+LIST_OPTIONS = ("--params", "--knots")
+
+
+def _parse_value(text: str) -> Any:
+    """A --set value as TOML would read it (number, bool, quoted string, list), else the bare string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _floats(option: str, text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise ConfigError(option, text, "comma-separated numbers, e.g. -1,1,0.5") from None
+    return values
+
+
+def document(args: argparse.Namespace) -> tuple[dict, dict]:
+    """The config file with the flags laid over it, and the flags' own keys (for error messages)."""
+    from ..inputs import read_document, with_overrides
+
+    doc = read_document(args.config) if getattr(args, "config", None) else {}
+    flags: dict[str, Any] = {}
+    for dest, key in FLAG_KEYS.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            flags[key] = _floats(f"--{dest}", value) if dest == "params" else value
+    if "," in (getattr(args, "controller", None) or ""):  # a mixed platoon
+        flags["controller"] = [name.strip() for name in flags.pop("controller.class").split(",")]
+    elif "controller.class" in flags and isinstance(doc.get("controller"), list):  # one controller for all, over a mixed file
+        flags["controller"] = flags.pop("controller.class")
+    knots, constant = getattr(args, "knots", None), getattr(args, "constant", None)
+    given = [f"--{n}" for n, v in (("knots", knots), ("constant", constant), ("attack", getattr(args, "attack", None)))
+             if v is not None]
+    if len(given) > 1 and getattr(args, "command", "") == "simulate":
+        raise ConfigError("/".join(given), "together", "one attack: --knots, --constant or --attack with --params")
+    if knots is not None:
+        values = _floats("--knots", knots)
+        delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
+        flags.update({"attack.family": "knots", "attack.params": values})
+        if "attack.horizon_s" not in flags and isinstance(delta, (int, float)):
+            flags["attack.horizon_s"] = delta * (len(values) - 1) or delta
+    if constant is not None:
+        flags.update({"attack.family": "constant", "attack.params": [constant]})
+    if "attack.params" in flags and "attack.family" not in flags and "family" not in doc.get("attack", {}):
+        raise ConfigError("--params", args.params, "an attack family with it: --attack NAME --params ...")
+    for item in getattr(args, "set", []):
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set", item, "TABLE.KEY=VALUE, e.g. scenario.setpoint_m=5")
+        flags[key.strip()] = _parse_value(value.strip())
+    return with_overrides(doc, flags), flags
+
+
+def check_output_file(option: str, path: Path | None) -> Path | None:
+    """A file the command will write: its folder must exist, and it must not be a folder itself."""
+    if path is None:
+        return None
+    if path.is_dir():
+        raise ConfigError(option, str(path), "a file name (this is a folder)")
+    if path.exists() and not path.is_file():
+        raise ConfigError(option, str(path), "a regular file or a new file name")
+    folder = path.parent
+    if not folder.is_dir():
+        raise ConfigError(option, str(path), f"a file in an existing folder ({folder} does not exist)")
+    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ConfigError(option, str(path), "a file you may write (permission denied)")
+    return path
+
+
+def check_display(gui: bool) -> None:
+    """sumo-gui needs a display: say so at once instead of a minute of retries."""
+    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ConfigError("--gui", "no display", "a graphical session (DISPLAY is not set); use --fcd and `d4sumo plot` instead")
+
+
+def check_fcd_written(path: Path | None) -> None:
+    """SUMO does not fail when its output cannot be written (a full disk): check the file is whole."""
+    if path is None:
+        return
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(max(0, path.stat().st_size - 200))
+            whole = b"</fcd-export>" in fh.read()
+    except OSError:
+        whole = False
+    if not whole:
+        raise D4sumoError(f"--fcd: {path} was not written completely (is the disk full?)")
+
+
+def check_batch(value: int) -> int:
+    if not 1 <= value <= MAX_COPIES:
+        raise ConfigError("--batch", value, f"a whole number of episodes in [1, {MAX_COPIES}]")
+    return value

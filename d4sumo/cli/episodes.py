@@ -1,0 +1,133 @@
+"""The commands about one episode: scenarios, simulate, replay."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from .. import __version__
+from ..errors import ConfigError, check_number
+from ..model.config import EpisodeConfig
+from .common import check_display, check_fcd_written, check_output_file, document
+
+
+def cmd_scenarios(args: argparse.Namespace) -> int:
+    from ..engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
+
+    names = list_scenarios()
+    if not names:
+        raise ConfigError("sumo_scenarios", str(SCENARIOS_DIR), "a folder of scenario variants")
+    print(f"{'name':24s} {'lanes':>5s} {'length_m':>9s} {'limit_mps':>9s}  net")
+    for name in names:
+        road = build_road(name)
+        print(f"{name:24s} {road.lanes:5d} {road.length_m:9.0f} {road.speed_limit_mps:9.2f}  {road.net_file}")
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from ..inputs import attack_of, episode_config
+    from ..engine.scenarios import build_road
+    from ..engine.simulation import simulate
+    from ..search.spec import Specification
+
+    doc, _ = document(args)
+    config = episode_config(doc)
+    family, params = attack_of(doc)
+    spec_table = doc.get("spec", {})
+    d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
+    formula = spec_table.get("formula")
+    spec = None
+    if formula is not None or config.followers >= 2 or config.maneuver_class.lateral:
+        spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
+                             duration_s=config.duration_s, start_step=config.attack_start_step,
+                             maneuver=config.maneuver)  # as a campaign scores
+    fcd = check_output_file("--fcd", args.fcd)
+    check_display(args.gui)
+    road = build_road(config.network)
+    episode = simulate(config, episode_plan(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
+    check_fcd_written(fcd)
+    robustness = spec.robustness(episode.trace) if spec else None
+    summary = episode_summary(config, family, params, episode, robustness, d_safe, fcd)
+    summary["formula"] = formula
+    _report(summary, road.name, args.json)
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from ..search.campaign import Campaign, Evaluator, open_store
+    from ..engine.simulation import simulate
+
+    fcd = check_output_file("--fcd", args.fcd)
+    check_display(args.gui)
+    with open_store(args.db, create=False) as store:
+        row = store.sample(args.sample)
+        campaign = Campaign.from_definition(store.campaign(row.campaign_id).definition,
+                                            where=f"{args.db}: campaign {row.campaign_id}", imports=True)
+    if row.outcome == "error":
+        print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
+    evaluator = Evaluator(campaign)
+    episode = simulate(campaign.config, evaluator.plan(row.params), road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    check_fcd_written(fcd)
+    rho = evaluator.spec.robustness(episode.trace)
+    summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
+    summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
+                   stored_robustness=row.robustness, stored_outcome=row.outcome,
+                   reproduced=(row.robustness == rho and row.outcome == episode.outcome))
+    _report(summary, evaluator.road.name, args.json)
+    if not args.json:
+        print("reproduces the stored sample exactly" if summary["reproduced"] else
+              f"differs from the stored sample (stored robustness {row.robustness}, outcome {row.outcome})")
+    return 0
+
+
+def episode_plan(family, params, config: EpisodeConfig):
+    """The attacker's command at every step's start (NaN, cruise, before the attack or with none) and its lane change."""
+    from ..model.maneuvers import attack_plan
+
+    return attack_plan(family, params, config)
+
+
+def episode_summary(config, family, params, episode, robustness, d_safe, fcd) -> dict:
+    return {
+        "d4sumo": __version__,
+        "config": config.to_dict(),
+        "attack": None if family is None else {**family.describe(), "values": [float(v) for v in params]},
+        "outcome": episode.outcome,
+        "first_collision": episode.first_collision.to_dict() if episode.first_collision else None,
+        "collisions": [c.to_dict() for c in episode.collisions],
+        "min_gaps_m": {k: round(v, 4) for k, v in episode.min_gaps_m().items()},
+        "robustness": robustness,
+        "d_safe_m": d_safe,
+        "simulated_s": float(episode.trace.times_s[-1]),
+        "fcd": str(fcd) if fcd else None,
+    }
+
+
+def _report(summary: dict, road_name: str, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_summary(summary, road_name)
+
+
+def _print_summary(s: dict, road_name: str) -> None:
+    sc = s["config"]["scenario"]
+    attack = s["attack"]
+    what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
+    maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
+    print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, start {sc['start']}{maneuver}; {what}")
+    c = s["first_collision"]
+    if c is None:
+        print(f"outcome: {s['outcome']} in {s['simulated_s']:.2f} s")
+    else:
+        print(
+            f"outcome: {s['outcome']}: {c['pair']} collided at t = {c['time_s']:.2f} s, "
+            f"{c['position_m']:.1f} m along the road, speed difference {c['speed_diff_kmh']:.1f} km/h"
+        )
+    print("min gaps: " + ", ".join(f"{k} {v:.2f} m" for k, v in s["min_gaps_m"].items()))
+    if s["robustness"] is not None:
+        what = "the formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
+        print(f"robustness of {what}: {s['robustness']:.4f}")
+    if s["fcd"]:
+        print(f"FCD written to {s['fcd']}")

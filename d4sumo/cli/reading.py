@@ -1,0 +1,79 @@
+"""The commands that read results: export, report, plot. None of them imports a user's controller to
+read a database; report and plot replay samples through SUMO, which does."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from ..errors import ConfigError, D4sumoError
+from .common import check_output_file
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from ..results.export import write_csv
+    from ..search.campaign import open_store
+
+    with open_store(args.db, create=False) as store:
+        known = [c.id for c in store.campaigns()]
+        if args.campaign is not None and args.campaign not in known:
+            raise ConfigError("--campaign", args.campaign, f"a campaign id of {args.db}: {', '.join(map(str, known)) or 'none'}")
+        out_path = check_output_file("--out", args.out)
+        if out_path is None:
+            write_csv(store, sys.stdout, args.campaign)
+            return 0
+        tmp = out_path.with_name(f".{out_path.name}.part")
+        try:
+            with open(tmp, "w", newline="") as out:
+                rows = write_csv(store, out, args.campaign)
+            os.replace(tmp, out_path)  # whole or not at all
+        except OSError as exc:
+            raise D4sumoError(f"--out: {out_path} could not be written ({exc.strerror}); nothing was written") from None
+        finally:
+            tmp.unlink(missing_ok=True)
+    print(f"{rows} samples written to {args.out}", file=sys.stderr)
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..search.campaign import open_store
+    from ..results.report import build_report
+
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")
+    if not args.out.parent.is_dir():
+        raise ConfigError("--out", str(args.out), f"a folder in an existing folder ({args.out.parent} does not exist)")
+    if not 0 <= args.severe <= 100:
+        raise ConfigError("--severe", args.severe, "a whole number in [0, 100]")
+    for db in args.db:  # every database readable and sound before any output
+        with open_store(db, create=False) as store:
+            store.campaigns()
+            for _ in store.iter_samples():
+                pass
+    try:  # a folder that can be made here (/proc's parent exists, yet nothing can be made in it)
+        (args.out / "fcd").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out", str(args.out), f"a folder that can be created and written ({exc.strerror})") from None
+    steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
+    with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
+        def progress(what: str) -> None:
+            if bar.n or what != steps[0]:
+                bar.update(1)
+            bar.set_postfix_str(what)
+
+        index = build_report(args.db, args.out, severe=args.severe, progress=progress)
+        bar.update(bar.total - bar.n)
+    print(f"report written to {index}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from ..results.report import plot_figure
+
+    print(plot_figure(args.db, args.kind, args.out, sample=args.sample, fcd_path=check_output_file("--fcd", args.fcd),
+                      attack=args.attack, optimizer=args.optimizer, start=args.start, setpoint_m=args.setpoint,
+                      speed_mps=args.speed))
+    return 0
