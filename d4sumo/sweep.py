@@ -42,8 +42,9 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable
 
-from .model.batch import batch_key
-from .search.campaign import DEFAULT_BATCH, Campaign, CampaignRunner, Evaluator, SampleResult, open_store, step_together, stored_results
+from .model.batch import DEFAULT_BATCH, batch_key
+from .search.campaign import Campaign, SampleResult, open_store
+from .search.runner import CampaignRunner, Evaluator, step_together, stored_results
 from .model.config import read_toml
 from .inputs import campaign_of, check_document, with_overrides
 from .errors import ConfigError, D4sumoError

@@ -114,7 +114,8 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
 
 def sumo_episode_seconds(repeats: int = 20) -> float:
     """One episode of d4sumo's default scenario (random knot attacks, played alone), simulation and scoring."""
-    from d4sumo.search.campaign import Campaign, Evaluator
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.search.runner import Evaluator
 
     ev = Evaluator(Campaign())
     rng = np.random.default_rng(0)

@@ -19,7 +19,8 @@ import statistics
 import time
 
 from d4sumo.model.batch import DEFAULT_BATCH
-from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.runner import Evaluator, run_campaign
 from d4sumo.model.config import EpisodeConfig
 
 

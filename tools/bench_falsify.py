@@ -25,7 +25,8 @@ import warnings
 
 import numpy as np
 
-from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.runner import Evaluator, run_campaign
 from d4sumo.search.optimizers import Optimizer
 from d4sumo.engine.simulation import simulate
 

@@ -42,7 +42,8 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
-from d4sumo.search.campaign import Campaign, Evaluator, open_store
+from d4sumo.search.campaign import Campaign, open_store
+from d4sumo.search.runner import Evaluator
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.errors import ConfigError
 from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes

@@ -15,7 +15,8 @@ from .common import check_batch, document
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from ..search.campaign import Evaluator, open_store, run_campaign
+    from ..search.campaign import open_store
+    from ..search.runner import Evaluator, run_campaign
     from ..inputs import campaign_of
 
     doc, _ = document(args)

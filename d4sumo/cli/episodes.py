@@ -55,7 +55,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from ..search.campaign import Campaign, Evaluator, open_store
+    from ..search.campaign import Campaign, open_store
+    from ..search.runner import Evaluator
     from ..engine.simulation import simulate
 
     fcd = check_output_file("--fcd", args.fcd)

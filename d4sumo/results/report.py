@@ -28,7 +28,8 @@ from .analysis import (
     table_success_statistics,
     table_systems,
 )
-from ..search.campaign import Campaign, Evaluator, open_store
+from ..search.campaign import Campaign, open_store
+from ..search.runner import Evaluator
 from ..errors import ConfigError
 from ..engine.simulation import simulate
 from ..search.store import collision_dict

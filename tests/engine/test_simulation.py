@@ -12,7 +12,8 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.results import figures
 from d4sumo.model.attacks import make_attack
-from d4sumo.search.campaign import Campaign, Evaluator, run_campaign
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.runner import Evaluator, run_campaign
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import SwitchingController, register_controller
 from d4sumo.errors import ConfigError

@@ -7,8 +7,9 @@ import copy
 import numpy as np
 import pytest
 
-import d4sumo.search.campaign as campaign_module
-from d4sumo.search.campaign import Campaign, run_campaign
+import d4sumo.search.runner as campaign_module
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.runner import run_campaign
 from d4sumo.errors import ConfigError, SumoError
 from d4sumo.search.store import Store, StoreError
 
@@ -171,7 +172,7 @@ def test_a_users_controller_that_raises_is_an_errored_sample_and_the_campaign_go
 
 def test_an_evaluator_of_another_campaign_is_refused_before_anything_is_written(tmp_path):
     """Regression: run_campaign stored another campaign's results under this campaign, silently."""
-    from d4sumo.search.campaign import Evaluator
+    from d4sumo.search.runner import Evaluator
 
     path = tmp_path / "r.sqlite"
     other = Evaluator(SMALL.replace(seed=9))
@@ -307,7 +308,7 @@ def test_a_bo_campaign_an_earlier_version_stored_keeps_its_identity_and_its_opti
 def test_the_callers_own_exception_comes_out_of_a_batch_as_it_was_raised(monkeypatch, where):
     """Regression: on these two paths an exception of the caller's on_result (Ctrl-C, a store error)
     came out wrapped in a private class, so Ctrl-C ended in a traceback instead of exit 130."""
-    from d4sumo.search.campaign import Evaluator
+    from d4sumo.search.runner import Evaluator
 
     evaluator = Evaluator(Campaign(optimizer="random", samples=4))
     params = [np.zeros(9), np.zeros(9)]
@@ -341,7 +342,7 @@ def test_a_campaign_whose_sumo_model_draws_random_numbers_is_the_same_batched_or
 def test_campaigns_stepped_together_store_the_samples_each_gives_alone():
     """Issue 13: a sweep steps several campaigns at once, their episodes side by side in one SUMO
     (other setpoints, speeds, starts, attacks and optimisers; the paper's one-point BO among them)."""
-    from d4sumo.search.campaign import CampaignRunner, Evaluator, step_together
+    from d4sumo.search.runner import CampaignRunner, Evaluator, step_together
     from d4sumo.model.config import EpisodeConfig
 
     campaigns = [

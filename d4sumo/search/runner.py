@@ -1,0 +1,376 @@
+"""Running campaigns: the evaluator plays and scores a sample, the runner owns the loop (ask, play side by
+side, score, store in order, tell), several campaigns step together in shared SUMOs, and an interrupted
+campaign resumes where it stopped."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..engine.scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
+from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
+from ..errors import SumoError
+from ..model.batch import DEFAULT_BATCH, batch_key
+from ..model.maneuvers import AttackPlan, attack_plan
+from .campaign import Campaign, CampaignSummary, SampleResult
+from .optimizers import make_optimizer
+from .store import Store, StoreError
+
+log = logging.getLogger(__name__)
+
+
+class Evaluator:
+    """Simulates and scores parameter vectors of one campaign (road built and formula parsed once):
+    one at a time, or a batch side by side in one SUMO (`simulation.simulate_batch`)."""
+
+    def __init__(self, campaign: Campaign, road: Road | None = None, *, network: NetworkSource | None = None):
+        self.campaign = campaign
+        self.family = campaign.family()
+        self.spec = campaign.specification()
+        self.network = network or campaign.config.network  # what batches' roads are built from
+        self.road = road or build_road(self.network)
+        check_episode(campaign.config, self.road)
+        self._batch_road: Road | None = None
+        self._shares_sumo = shares_sumo(campaign.config)
+        self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
+
+    def plan(self, params) -> AttackPlan:
+        """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
+        return attack_plan(self.family, params, self.campaign.config)
+
+    def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
+        t0 = time.perf_counter()
+        x = tuple(float(v) for v in params)
+        try:
+            episode = simulate(self.campaign.config, self.plan(x), road=self.road, fcd_path=fcd_path)
+        except Exception as exc:  # SUMO or a user's controller: store the sample as errored, go on
+            return self._failed(index, x, exc, time.perf_counter() - t0)
+        return self._scored(index, x, episode, t0)
+
+    def batch(self, first: int, params: Sequence[np.ndarray],
+              on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
+        """Samples ``first``, ``first`` + 1, .. played side by side in one SUMO: each result is the one
+        `__call__` gives alone. ``on_result`` hears of each as its episode ends (in any order). A
+        sample's wall time is its share of the batch's time until its episode ended, plus its scoring."""
+        return play_together([(self, first, params)], on_result and (lambda _, r: on_result(r)))[0]
+
+    def batch_road(self, episodes: int) -> Road:
+        """The road with at least this many copies side by side (built once, then grown as needed)."""
+        if self._batch_road is None or self._batch_road.copies < episodes:
+            self._batch_road = batch_road(self.network, episodes)
+        return self._batch_road
+
+    def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:
+        try:
+            rho = self.spec.robustness(episode.trace)
+            if not math.isfinite(rho):
+                raise ValueError(f"robustness is {rho}")
+        except Exception as exc:  # a user's formula
+            return self._failed(index, x, exc, time.perf_counter() - t0)
+        collision = episode.first_collision.to_dict() if episode.first_collision else None
+        return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
+
+    @staticmethod
+    def _failed(index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
+        message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
+        log.warning("sample %d failed: %s", index, message)
+        return SampleResult(index, x, None, "error", None, None, wall_s, message)
+
+
+#: consecutive samples of one campaign to play: its evaluator, the first sample's index, their points
+Job = tuple[Evaluator, int, Sequence[np.ndarray]]
+
+
+class _CallerError(Exception):
+    """Carries an exception raised by the caller's ``on_result`` out of a batch, untouched."""
+
+
+def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], None] | None = None) -> list[list[SampleResult]]:
+    """Play the jobs' samples side by side in one SUMO, whichever campaigns they belong to (their
+    configurations share one `batch.batch_key`): each result is the one `Evaluator.__call__` gives
+    alone, each job's in order. ``on_result(job, result)`` hears of each sample as its episode ends
+    (in any order; ``job``: its job's position in ``jobs``).
+    A single episode, or followers that may not share SUMO, play one at a time instead."""
+    if sum(len(params) for _, _, params in jobs) <= 1 or not all(ev._shares_sumo for ev, _, _ in jobs):
+        out = []
+        for j, (ev, first, params) in enumerate(jobs):  # alone, one after the other: the single-episode engine
+            results = []
+            for i, x in enumerate(params):
+                results.append(ev(first + i, x))
+                if on_result:
+                    on_result(j, results[-1])
+            out.append(results)
+        return out
+    t0 = time.perf_counter()
+    samples = [(ev, first + i, tuple(float(v) for v in x)) for ev, first, params in jobs for i, x in enumerate(params)]
+    job_of = [j for j, (_, _, params) in enumerate(jobs) for _ in params]
+    results: list[SampleResult | None] = [None] * len(samples)
+
+    def finish(s: int, r: SampleResult) -> None:
+        results[s] = r
+        if on_result:
+            try:
+                on_result(job_of[s], r)
+            except BaseException as exc:  # the caller's own failure (storing, say): not the episode's
+                raise _CallerError(exc) from exc
+
+    def done(j: int, episode) -> None:
+        s = playing[j]
+        ev, index, x = samples[s]
+        t = time.perf_counter()
+        if isinstance(episode, Exception):  # a user's controller failed in it
+            r = ev._failed(index, x, episode, 0.0)
+        else:
+            r = ev._scored(index, x, episode, t)
+        finish(s, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(samples)))  # plus its share so far
+
+    plans, configs, playing = [], [], []
+    try:
+        for s, (ev, index, x) in enumerate(samples):
+            try:
+                plans.append(ev.plan(x))
+                configs.append(ev.campaign.config)
+                playing.append(s)
+            except Exception as exc:
+                finish(s, ev._failed(index, x, exc, 0.0))
+        if plans:
+            try:
+                road = jobs[0][0].batch_road(len(plans))
+                simulate_batch(configs, plans, road=road, on_episode=done)
+            except _CallerError:
+                raise
+            except Exception as exc:  # SUMO failed: the samples not yet finished play alone, as they would have
+                log.warning("SUMO failed in a batch of %d episodes (%s); its unfinished ones play one at a time", len(plans), exc)
+                for s in playing:
+                    if results[s] is None:
+                        ev, index, x = samples[s]
+                        finish(s, ev(index, x))
+    except _CallerError as exc:  # the caller's own exception, as it raised it
+        raise exc.__cause__ from None
+    out, s = [], 0
+    for _, _, params in jobs:
+        out.append(results[s:s + len(params)])  # type: ignore[arg-type]
+        s += len(params)
+    return out
+
+
+def _score(result: SampleResult, history: list[float]) -> float:
+    """What the optimiser is told: the robustness, or for an errored sample the worst seen so far."""
+    if result.robustness is not None and math.isfinite(result.robustness):
+        return result.robustness
+    return min(history) if history else -1.0
+
+
+class CampaignRunner:
+    """The ask-simulate-score-tell loop of one campaign, without storage.
+
+    The optimiser is asked for as many points as it can propose before its next score
+    (`Optimizer.ready`); they are played in batches of at most ``batch`` episodes side by side and
+    told in order. Built from the samples stored so far (re-told to the optimiser, whose asks must
+    match them exactly; a sample missing in between, if a database lacks one, is played again) or
+    from the ``state`` a previous runner of the same campaign handed over; ``state`` is plain
+    picklable data (the optimiser, the scores told, the points asked and not yet played, the stored
+    samples not reached yet), so a
+    campaign can move between processes or machines between steps and still end as if it had run
+    in one piece, whatever the batch size.
+    """
+
+    def __init__(self, campaign: Campaign, evaluator: Evaluator, *, stored: Sequence[SampleResult] = (),
+                 state: tuple | None = None, where: str = "the database", batch: int = DEFAULT_BATCH):
+        if evaluator.campaign.definition() != campaign.definition():
+            raise ValueError("the evaluator was built for another campaign")
+        self.campaign = campaign
+        self.evaluate = evaluator
+        self.batch = max(1, min(int(batch), MAX_COPIES))
+        self.where = where
+        self.stored: dict[int, SampleResult] = {}
+        for r in stored:
+            if r.index in self.stored or not 0 <= r.index < campaign.samples:
+                raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} twice or out of range)")
+            self.stored[r.index] = r
+        if state is not None:
+            self.optimizer, self.scores, self.queue, stored_later = state
+            self.stored.update(stored_later)
+            return
+        rng = np.random.default_rng(campaign.seed)
+        family = evaluator.family
+        self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
+                                        options=dict(campaign.optimizer_options))
+        self.scores: list[float] = []
+        self.queue: list[np.ndarray] = []  # asked for, not played yet: samples done, done + 1, ..
+        self._replay()
+
+    @property
+    def done(self) -> int:
+        return len(self.scores)
+
+    @property
+    def state(self) -> tuple:
+        """Everything to go on with: the optimiser, the scores told, the points asked and not played, and
+        the stored samples not reached yet (a database may have a gap before them)."""
+        return self.optimizer, self.scores, self.queue, dict(self.stored)
+
+    def _fill(self) -> None:
+        if not self.queue:
+            count = min(self.optimizer.ready(), self.campaign.samples - self.optimizer.asked)
+            self.queue = [self.optimizer.ask() for _ in range(max(count, 1))]
+
+    def _replay(self) -> None:
+        """Tell the optimiser the stored samples, in order, as far as they go without a gap."""
+        while self.done < self.campaign.samples and self.done in self.stored:
+            self._fill()
+            x = self.queue.pop(0)
+            r = self.stored.pop(self.done)
+            self._check(x, r)
+            self._tell(x, r)
+
+    def _check(self, x: np.ndarray, r: SampleResult) -> None:
+        if not np.allclose(x, r.params, rtol=0, atol=1e-12):
+            raise StoreError(f"{self.where}: stored sample {r.index} is not what this seed asks for; "
+                             "it was written by another d4sumo version or changed: use a new database")
+
+    def _tell(self, x: np.ndarray, r: SampleResult) -> None:
+        score = _score(r, self.scores)
+        self.optimizer.tell(x, score)
+        self.scores.append(score)
+
+    def pending(self) -> list[tuple[int, list[np.ndarray]]]:
+        """The next batch of asked points that still has to be played: runs of consecutive samples
+        (first index, points); samples stored already are not played again."""
+        if self.done >= self.campaign.samples:
+            raise ValueError(f"the campaign's budget of {self.campaign.samples} samples is spent")
+        self._fill()
+        first, xs = self.done, self.queue[:self.batch]
+        for i, x in enumerate(xs):  # a batch interrupted before: only its missing samples play
+            if first + i in self.stored:
+                self._check(x, self.stored[first + i])
+        missing = [i for i in range(len(xs)) if first + i not in self.stored]
+        return [(first + run[0], [xs[i] for i in run]) for run in _runs(missing)]
+
+    def accept(self, played: dict[int, SampleResult]) -> list[SampleResult]:
+        """Tell the optimiser the batch `pending` gave, now played (index -> result); the new samples'
+        results in order."""
+        first, xs = self.done, self.queue[:self.batch]
+        results = []
+        for i, x in enumerate(xs):
+            r = self.stored.pop(first + i, None) or played[first + i]
+            self._tell(x, r)
+            if first + i in played:
+                results.append(r)
+        del self.queue[:len(xs)]
+        self._replay()
+        return results
+
+    def step(self, on_result: Callable[[SampleResult], None] | None = None) -> list[SampleResult]:
+        """Play the next batch of asked points (samples stored already are not played again), tell the
+        optimiser; the new samples' results in order. ``on_result`` hears of each as it finishes."""
+        played: dict[int, SampleResult] = {}
+        for first, xs in self.pending():  # consecutive missing samples play as one batch
+            for r in self.evaluate.batch(first, xs, on_result):
+                played[r.index] = r
+        return self.accept(played)
+
+
+def step_together(runners: Sequence[CampaignRunner], batch: int = DEFAULT_BATCH,
+                  on_result: Callable[[CampaignRunner, SampleResult], None] | None = None) -> list[list[SampleResult]]:
+    """One step of several campaigns at once: each runner's next batch, played side by side in as few
+    SUMO instances as hold them (at most ``batch`` episodes each); campaigns whose configurations do
+    not share a `batch.batch_key` play apart. The same samples as stepping each runner alone.
+    ``on_result(runner, result)`` hears of each sample as its episode ends."""
+    cap = max(1, min(int(batch), MAX_COPIES))
+    groups: dict[tuple, list[tuple[CampaignRunner, int, list[np.ndarray]]]] = {}
+    for runner in runners:
+        for first, xs in runner.pending():
+            key = (runner.evaluate.batch_key, runner.evaluate.network)
+            groups.setdefault(key, []).append((runner, first, xs))
+    played: dict[int, dict[int, SampleResult]] = {id(r): {} for r in runners}
+    for members in groups.values():
+        loads: list[list[tuple[CampaignRunner, int, list[np.ndarray]]]] = [[]]
+        for runner, first, xs in members:  # fill one SUMO after the other, each with at most `cap` episodes
+            for at in range(0, len(xs), cap):
+                part = xs[at:at + cap]
+                if sum(len(p) for _, _, p in loads[-1]) + len(part) > cap:
+                    loads.append([])
+                loads[-1].append((runner, first + at, part))
+        for load in loads:
+            heard = (lambda j, r, load=load: on_result(load[j][0], r)) if on_result else None
+            jobs = [(r.evaluate, first, xs) for r, first, xs in load]
+            for (runner, _, _), results in zip(load, play_together(jobs, heard)):
+                played[id(runner)].update((r.index, r) for r in results)
+    return [runner.accept(played[id(runner)]) for runner in runners]
+
+
+def _runs(indices: list[int]) -> list[list[int]]:
+    """Consecutive runs of sorted indices: [0, 1, 3] -> [[0, 1], [3]]."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and runs[-1][-1] == i - 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
+
+
+def stored_results(store: Store, campaign_id: int, limit: int) -> list[SampleResult]:
+    return [SampleResult(row.index, row.params, row.robustness, row.outcome, row.collision, row.min_gaps, row.wall_s,
+                         row.error, row.id) for row in store.samples(campaign_id) if row.index < limit]
+
+
+def run_campaign(
+    campaign: Campaign,
+    store: Store | None = None,
+    *,
+    sweep: str | None = None,
+    evaluator: Evaluator | None = None,
+    on_sample: Callable[[SampleResult], None] | None = None,
+    batch: int = DEFAULT_BATCH,
+) -> CampaignSummary:
+    """Run (or resume) a campaign; every sample is in ``store`` as soon as it and those before it have
+    finished. ``batch``: at most this many episodes side by side in one SUMO (1: one at a time); the
+    results are the same.
+
+    Pass an ``evaluator`` built beforehand to have every input checked before anything is written."""
+    evaluate = evaluator or Evaluator(campaign)
+    # read and check what is stored (and that the evaluator is this campaign's) before writing anything
+    campaign_id = store.find_campaign(campaign.definition()) if store else None
+    results = stored_results(store, campaign_id, campaign.samples) if campaign_id is not None else []
+    runner = CampaignRunner(campaign, evaluate, stored=results, where=f"{store.path if store else ''}: campaign {campaign_id}",
+                            batch=batch)
+    if store is not None:
+        campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep)
+    if results:
+        log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
+    if on_sample:
+        for r in results:
+            on_sample(r)
+
+    # A sample is stored as soon as its episode and those before it have ended: row ids then follow the
+    # samples' order whatever the batch size, and a kill loses only episodes still waiting in a batch.
+    done = {r.index for r in results}
+    waiting: dict[int, SampleResult] = {}
+    following = [0]  # the next index to store
+
+    def finished(r: SampleResult) -> None:
+        waiting[r.index] = r
+        while following[0] in waiting or following[0] in done:
+            r = waiting.pop(following[0], None)
+            following[0] += 1
+            if r is None:
+                continue
+            if store is not None:
+                r = dataclasses.replace(r, id=store.add_sample(campaign_id, r.index, r.params, r.robustness, r.outcome,
+                                                               r.collision, r.min_gaps, r.wall_s, r.error))
+            results.append(r)
+            if on_sample:
+                on_sample(r)
+
+    while runner.done < campaign.samples:
+        runner.step(finished)
+    results.sort(key=lambda r: r.index)
+    return CampaignSummary(campaign_id, results)
