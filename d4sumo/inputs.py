@@ -25,11 +25,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from .search.campaign import Campaign
-from .model.config import EpisodeConfig, VehicleParams, read_toml
 from .errors import ConfigError, is_number
+from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
+from .model.config import EpisodeConfig, VehicleParams, read_toml
 from .model.maneuvers import maneuver_of
+from .search.campaign import Campaign
 from .search.optimizers import OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-import re
 import os
+import re
 import shutil
 import signal
 import sqlite3
@@ -230,6 +230,7 @@ def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
 
     import d4sumo.sweep as sweep_module
     from d4sumo.engine.scenarios import network_source
+    from d4sumo.search.runner import CampaignRunner
 
     seen = []
 
@@ -237,7 +238,7 @@ def test_campaign_chunks_run_with_one_blas_thread(tmp_path, monkeypatch):
         seen.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
         raise StopIteration
 
-    monkeypatch.setattr(sweep_module.CampaignRunner, "pending", fake_pending)
+    monkeypatch.setattr(CampaignRunner, "pending", fake_pending)
     campaign = Sweep.load(write(tmp_path, TINY)).campaigns[0]
     with pytest.raises(StopIteration):
         sweep_module.run_chunks((sweep_module.Chunk(campaign, network_source("highway_4lane"), (), None),))

@@ -30,8 +30,8 @@ import statistics
 import time
 
 import numpy as np
-
 from bench_falsify import optimizer_of  # tools/ is on the path of a script run from it
+
 from d4sumo.search.optimizers import make_optimizer
 
 DT, DURATION, SEGMENTS = 0.1, 100.0, 20

@@ -19,9 +19,9 @@ import statistics
 import time
 
 from d4sumo.model.batch import DEFAULT_BATCH
+from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
-from d4sumo.model.config import EpisodeConfig
 
 
 def timed(campaign: Campaign, evaluator: Evaluator, batch: int) -> tuple[float, list]:

@@ -18,10 +18,10 @@ import time
 import libsumo
 import numpy as np
 
-from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.engine.scenarios import build_road
-from d4sumo.engine.sumo import load_platoon, sumo_command
 from d4sumo.engine.simulation import check_episode, simulate
+from d4sumo.engine.sumo import load_platoon, sumo_command
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
 
 
 def bare(config: EpisodeConfig, road) -> float:

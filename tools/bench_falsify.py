@@ -25,10 +25,10 @@ import warnings
 
 import numpy as np
 
-from d4sumo.search.campaign import Campaign
-from d4sumo.search.runner import Evaluator, run_campaign
-from d4sumo.search.optimizers import Optimizer
 from d4sumo.engine.simulation import simulate
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.optimizers import Optimizer
+from d4sumo.search.runner import Evaluator, run_campaign
 
 
 class SkoptDefaults(Optimizer):
@@ -133,8 +133,8 @@ def optimizer_of(spec: str) -> tuple[str, dict]:
 
 
 def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:
-    from d4sumo.results.analysis import distinct_count
     from d4sumo.model.config import EpisodeConfig
+    from d4sumo.results.analysis import distinct_count
 
     table: dict[str, dict[str, float]] = {o: {} for o in optimizers}
     own: dict[str, list[float]] = {o: [] for o in optimizers}

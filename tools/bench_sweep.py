@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-import tomllib
 import time
+import tomllib
 from pathlib import Path
 
+from d4sumo.inputs import with_overrides
 from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import read_toml
-from d4sumo.inputs import with_overrides
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 

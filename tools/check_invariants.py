@@ -40,15 +40,15 @@ from pathlib import Path
 import numpy as np
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.model.attacks import FAMILIES
-from d4sumo.model.batch import batch_key
-from d4sumo.search.campaign import Campaign, open_store
-from d4sumo.search.runner import Evaluator
-from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
-from d4sumo.errors import ConfigError
-from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
+from d4sumo.errors import ConfigError
+from d4sumo.model.attacks import FAMILIES
+from d4sumo.model.batch import batch_key
+from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
+from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
+from d4sumo.search.campaign import Campaign, open_store
+from d4sumo.search.runner import Evaluator
 from d4sumo.search.spec import psi_robustness
 from d4sumo.search.store import Store
 

@@ -15,9 +15,9 @@ from .common import check_batch, document
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from ..inputs import campaign_of
     from ..search.campaign import open_store
     from ..search.runner import Evaluator, run_campaign
-    from ..inputs import campaign_of
 
     doc, _ = document(args)
     campaign = campaign_of(doc)

@@ -26,9 +26,9 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from ..inputs import attack_of, episode_config
     from ..engine.scenarios import build_road
     from ..engine.simulation import simulate
+    from ..inputs import attack_of, episode_config
     from ..search.spec import Specification
 
     doc, _ = document(args)
@@ -55,9 +55,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    from ..engine.simulation import simulate
     from ..search.campaign import Campaign, open_store
     from ..search.runner import Evaluator
-    from ..engine.simulation import simulate
 
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)

@@ -39,8 +39,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from ..search.campaign import open_store
     from ..results.report import build_report
+    from ..search.campaign import open_store
 
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")

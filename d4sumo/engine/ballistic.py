@@ -9,8 +9,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..model.config import EpisodeConfig
 from ..errors import ConfigError
+from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, initial_state
 from ..model.trace import Episode
 from .loop import DETACH_AT, play

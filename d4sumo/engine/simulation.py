@@ -15,15 +15,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import ConfigError, SumoError
 from ..model.batch import episode_configs
 from ..model.config import EpisodeConfig
-from .loop import DETACH_AT, play
-from .sumo import followers_file, load_platoon, open_world, sumo_command
-from ..errors import ConfigError, SumoError
 from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
 from ..model.platoon import followers_of, road_needed_m
-from .scenarios import MAX_COPIES, Road, batch_road, build_road
 from ..model.trace import Episode
+from .loop import DETACH_AT, play
+from .scenarios import MAX_COPIES, Road, batch_road, build_road
+from .sumo import followers_file, load_platoon, open_world, sumo_command
 
 log = logging.getLogger(__name__)
 

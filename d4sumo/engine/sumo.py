@@ -21,8 +21,8 @@ from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
-from ..model.config import ControllerConfig, EpisodeConfig
 from ..errors import ConfigError, SumoError
+from ..model.config import ControllerConfig, EpisodeConfig
 from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
 from ..model.platoon import SumoFollower, followers_of
 from ..sumohome import sumo_binary

@@ -22,10 +22,8 @@ import numpy as np
 from .config import EpisodeConfig
 from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl, per_row
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import (Platoon, PythonFollower, assemble_trace, checked_command, cruise_params,
-                      followers_of)
+from .platoon import Platoon, PythonFollower, assemble_trace, checked_command, cruise_params, followers_of
 from .trace import Collision, Episode
-
 
 #: episodes of a campaign played side by side at most, by default (the results never depend on it, only the speed)
 DEFAULT_BATCH = 64

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from . import carfollowing
-from .maneuvers import MANEUVERS as MANEUVER_CLASSES
-from .control import ControllerImportError, NotImported, VehicleParams, build_params, resolve_controller, user_module
 from ..errors import ConfigError, check_int, check_number
+from . import carfollowing
+from .control import ControllerImportError, NotImported, VehicleParams, build_params, resolve_controller, user_module
+from .maneuvers import MANEUVERS as MANEUVER_CLASSES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
 #: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);

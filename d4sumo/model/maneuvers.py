@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .attacks import AttackFamily, Parameter
 from ..errors import ConfigError
+from .attacks import AttackFamily, Parameter
 
 if TYPE_CHECKING:
     from .config import EpisodeConfig

@@ -16,10 +16,10 @@ import numbers
 
 import numpy as np
 
+from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
-from ..errors import D4sumoError
 from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 

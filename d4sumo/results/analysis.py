@@ -12,9 +12,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.control import names_only
-from ..errors import ConfigError
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
 
 #: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart

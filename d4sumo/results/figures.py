@@ -12,8 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .analysis import FEW_ATTACKS, Clustering, Record, count_noun, runs, success_grid
 from ..errors import ConfigError
+from .analysis import FEW_ATTACKS, Clustering, Record, count_noun, runs, success_grid
 
 SPEED_CMAP = "turbo"
 SUCCESS_CMAP = "viridis"

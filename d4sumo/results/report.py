@@ -14,25 +14,14 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .. import __version__
-from . import figures, paper
-from .analysis import (
-    Record,
-    Table,
-    cluster_knots,
-    count_noun,
-    load_records,
-    most_severe,
-    richest_conditions,
-    table_attacker_crashes,
-    table_by_speed,
-    table_success_statistics,
-    table_systems,
-)
+from ..engine.simulation import simulate
+from ..errors import ConfigError
 from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
-from ..errors import ConfigError
-from ..engine.simulation import simulate
 from ..search.store import collision_dict
+from . import figures, paper
+from .analysis import (Record, Table, cluster_knots, count_noun, load_records, most_severe, richest_conditions,
+                       table_attacker_crashes, table_by_speed, table_success_statistics, table_systems)
 
 log = logging.getLogger(__name__)
 

@@ -397,6 +397,14 @@ class Store:
         return self._sample_row(row)
 
     @_guarded
+    def sweep_counts(self, sweep: str) -> tuple[int, int]:
+        """(samples stored, successes stored) of a sweep's campaigns."""
+        row = self.db.execute(
+            "SELECT COUNT(*), COALESCE(SUM(s.outcome = 'success'), 0) FROM sample s JOIN campaign c ON s.campaign_id = c.id "
+            "WHERE c.sweep = ?", (sweep,)).fetchone()
+        return int(row[0]), int(row[1])
+
+    @_guarded
     def count_samples(self, campaign_id: int) -> int:
         return int(self.db.execute("SELECT COUNT(*) FROM sample WHERE campaign_id = ?", (campaign_id,)).fetchone()[0])
 

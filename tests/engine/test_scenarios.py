@@ -6,8 +6,8 @@ import shutil
 
 import pytest
 
-from d4sumo.errors import ConfigError, SumoError
 from d4sumo.engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
+from d4sumo.errors import ConfigError, SumoError
 
 
 def test_at_least_three_variants_ship():

@@ -10,17 +10,17 @@ import pytest
 from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.results import figures
-from d4sumo.model.attacks import make_attack
-from d4sumo.search.campaign import Campaign
-from d4sumo.search.runner import Evaluator, run_campaign
-from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.control import SwitchingController, register_controller
-from d4sumo.errors import ConfigError
 from d4sumo.engine.ballistic import integrate
-from d4sumo.model.maneuvers import AttackPlan, attack_plan, maneuver_of
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import simulate
+from d4sumo.errors import ConfigError
+from d4sumo.model.attacks import make_attack
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.control import SwitchingController, register_controller
+from d4sumo.model.maneuvers import AttackPlan, attack_plan, maneuver_of
+from d4sumo.results import figures
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.runner import Evaluator, run_campaign
 from d4sumo.search.spec import Specification
 
 pytestmark = pytest.mark.sumo
@@ -390,9 +390,10 @@ def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, nam
     """Issue 13: many platoons in one SUMO, each on its own copy of the road, never meet; followers whose
     SUMO model draws random numbers (which SUMO deals out by car) play one at a time instead."""
     from conftest import assert_same_episode, random_plans
+
+    from d4sumo.engine.simulation import simulate_batch
     from d4sumo.model.carfollowing import SHARE_SUMO
     from d4sumo.model.platoon import followers_of
-    from d4sumo.engine.simulation import simulate_batch
 
     config = BATCH_CONFIGS[name]
     register_controller("test_simulation:FlakyController", FlakyController)
@@ -433,6 +434,7 @@ def test_several_campaigns_episodes_in_one_sumo_are_each_the_episode_played_alon
     """Issue 13: a sweep's campaigns of other setpoints, target speeds and starts share one SUMO
     (SUMO's models keep one target speed: it is their vehicle type's)."""
     from conftest import assert_same_episode, random_plans
+
     from d4sumo.engine.simulation import simulate_batch
 
     shared, speeds, starts = MIXED_CASES[case]
@@ -524,6 +526,7 @@ def test_a_platoon_that_starts_beyond_the_first_edge_is_refused(tmp_path):
                                                  ("lane_drop", {"maneuver": "cutin", "cutin_follower": 2})])
 def test_a_batch_on_a_road_of_several_edges_is_bit_for_bit_each_episode_alone(road_name, maneuver):
     from conftest import assert_same_episode, random_plans
+
     from d4sumo.engine.simulation import simulate_batch
 
     config = EpisodeConfig(network=str(ROADS / road_name), start="steady", speed_mps=30.0, followers=4,

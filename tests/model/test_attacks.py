@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d4sumo.model.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, make_attack
 from d4sumo.errors import ConfigError
+from d4sumo.model.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, make_attack
 
 TIMES = np.arange(1200) * 0.05
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from d4sumo.errors import ConfigError
 from d4sumo.model import carfollowing
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.errors import ConfigError
 
 LISTED = ("ACC", "CACC", "CC", "IDM", "EIDM", "Krauss")
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from d4sumo.model.config import EpisodeConfig
 from d4sumo.errors import ConfigError
+from d4sumo.model.config import EpisodeConfig
 
 
 def test_defaults_are_the_specs():

@@ -6,21 +6,11 @@ import math
 
 import pytest
 
-from d4sumo.model.config import ControllerConfig
-from d4sumo.model.control import (
-    MODE_ACC,
-    MODE_CC,
-    Actuator,
-    CruiseControl,
-    SwitchingController,
-    SwitchingParams,
-    VehicleParams,
-    acceleration_to_command,
-    command_to_acceleration,
-    register_controller,
-    resolve_controller,
-)
 from d4sumo.errors import ConfigError
+from d4sumo.model.config import ControllerConfig
+from d4sumo.model.control import (MODE_ACC, MODE_CC, Actuator, CruiseControl, SwitchingController, SwitchingParams,
+                                  VehicleParams, acceleration_to_command, command_to_acceleration, register_controller,
+                                  resolve_controller)
 
 VEHICLE = VehicleParams()
 DT = 0.05
@@ -179,8 +169,8 @@ def test_bad_controller_configs_name_the_field(name, params, field):
 def test_the_time_gap_controller_keeps_its_desired_gap_at_steady_state(time_gap_s):
     import numpy as np
 
-    from d4sumo.model.config import EpisodeConfig
     from d4sumo.engine.ballistic import integrate
+    from d4sumo.model.config import EpisodeConfig
 
     config = EpisodeConfig(controller=ControllerConfig("timegap", (("time_gap_s", time_gap_s),)), duration_s=120.0)
     episode = integrate(config, np.full(config.steps, np.nan))  # the attacker only cruises

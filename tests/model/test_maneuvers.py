@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d4sumo.model.attacks import make_attack
-from d4sumo.search.campaign import Campaign
-from d4sumo.model.config import EpisodeConfig
 from d4sumo.errors import ConfigError
+from d4sumo.model.attacks import make_attack
+from d4sumo.model.config import EpisodeConfig
 from d4sumo.model.maneuvers import (CAR_WIDTH_M, FREE_ROAD_GAP_M, CutIn, CutOut, Maneuver, attack_plan, maneuver_of,
-                              occupied_lanes)
+                                    occupied_lanes)
 from d4sumo.model.platoon import Platoon, collisions_at
-from d4sumo.search.spec import Specification, trace_signals
 from d4sumo.model.trace import Episode
+from d4sumo.search.campaign import Campaign
+from d4sumo.search.spec import Specification, trace_signals
 
 W = 3.2  # lane width [m]
 

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from d4sumo.engine.ballistic import integrate
 from d4sumo.model.attacks import attack_signal, make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import MODE_ACC, CruiseControl, SwitchingParams, acceleration_to_command, register_controller
 from d4sumo.model.maneuvers import Maneuver
-from d4sumo.engine.ballistic import integrate
 from d4sumo.model.platoon import ControllerError, Platoon, collisions_at, initial_state
 
 ALTERNATING = [1, -1, 1, -1, 1, -1, 1, -1, 1]

@@ -8,22 +8,11 @@ import itertools
 import numpy as np
 import pytest
 
-from d4sumo.results.analysis import (
-    Record,
-    cluster_knots,
-    count_noun,
-    elbow,
-    load_records,
-    most_severe,
-    relevant_knots,
-    richest_conditions,
-    success_grid,
-    table_attacker_crashes,
-    table_by_speed,
-    table_success_statistics,
-)
 from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import EpisodeConfig
+from d4sumo.results.analysis import (Record, cluster_knots, count_noun, elbow, load_records, most_severe,
+                                     relevant_knots, richest_conditions, success_grid, table_attacker_crashes,
+                                     table_by_speed, table_success_statistics)
 
 
 @pytest.mark.sumo

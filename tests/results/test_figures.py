@@ -12,9 +12,9 @@ import tempfile
 import numpy as np
 import pytest
 
+from d4sumo.errors import ConfigError
 from d4sumo.results import figures
 from d4sumo.results.analysis import Record, cluster_knots, load_records, most_severe, richest_conditions
-from d4sumo.errors import ConfigError
 
 PNG = b"\x89PNG\r\n\x1a\n"
 PLURAL_AFTER_ONE = re.compile(r"\b1 (attacks|clusters|noise points|successes|samples|panels)\b")

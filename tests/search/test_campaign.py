@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import d4sumo.search.runner as campaign_module
+from d4sumo.errors import ConfigError, SumoError
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import run_campaign
-from d4sumo.errors import ConfigError, SumoError
 from d4sumo.search.store import Store, StoreError
 
 pytestmark = pytest.mark.sumo
@@ -342,8 +342,8 @@ def test_a_campaign_whose_sumo_model_draws_random_numbers_is_the_same_batched_or
 def test_campaigns_stepped_together_store_the_samples_each_gives_alone():
     """Issue 13: a sweep steps several campaigns at once, their episodes side by side in one SUMO
     (other setpoints, speeds, starts, attacks and optimisers; the paper's one-point BO among them)."""
-    from d4sumo.search.runner import CampaignRunner, Evaluator, step_together
     from d4sumo.model.config import EpisodeConfig
+    from d4sumo.search.runner import CampaignRunner, Evaluator, step_together
 
     campaigns = [
         Campaign(config=EpisodeConfig(setpoint_m=4.0, speed_mps=20.0), optimizer="bo", optimizer_options={"batch_size": 1, "initial_points": 4}, samples=9, seed=1),

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from d4sumo.errors import ConfigError
-from d4sumo.search.spec import paper_formula, psi_robustness
 from d4sumo.model.trace import Trace
+from d4sumo.search.spec import paper_formula, psi_robustness
 
 
 def trace_of(gaps):
@@ -105,8 +105,8 @@ def test_nan_never_reaches_rtamt():
 def test_rtamt_agrees_with_numpy_on_sumo_traces(road):
     from conftest import ATTACKER_CRASH_KNOTS, SUCCESS_KNOTS, knots_signal
 
-    from d4sumo.model.config import EpisodeConfig
     from d4sumo.engine.simulation import simulate
+    from d4sumo.model.config import EpisodeConfig
 
     config = EpisodeConfig()
     spec = Specification(followers=3, step_s=config.step_s)
@@ -116,8 +116,8 @@ def test_rtamt_agrees_with_numpy_on_sumo_traces(road):
 
 
 def test_a_window_restarts_the_clock_and_an_episode_that_ended_before_it_is_scored_at_its_collision():
-    from d4sumo.search.spec import Specification
     from d4sumo.model.trace import Trace
+    from d4sumo.search.spec import Specification
 
     times = np.arange(6) * 0.05
     gaps = {"gap_0": np.full(6, 5.0), "gap_1": np.array([7.0, 6.0, 5.0, 4.0, 3.0, 2.0]), "gap_2": np.full(6, 7.0)}

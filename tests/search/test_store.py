@@ -191,8 +191,8 @@ def test_a_campaign_of_a_controller_not_importable_here_is_still_readable(tmp_pa
     with Store(tmp_path / "m.sqlite", create=False) as store:
         assert store.campaigns()[0].definition["config"]["controller"][1]["class"] == "gone_package.module:MyController"
     # while a bad value of a follower's controller is damage, named by its follower
-    from d4sumo.model.config import EpisodeConfig
     from d4sumo.errors import ConfigError
+    from d4sumo.model.config import EpisodeConfig
 
     with pytest.raises(ConfigError) as err:
         EpisodeConfig.from_dict({"controller": ["switching", {"class": "switching", "acc_kp": -1}, "timegap"]})

@@ -1,0 +1,82 @@
+"""Sweeps on a Dask distributed cluster: the client connects, sends tasks, and stays the only writer."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import re
+
+from ..errors import ConfigError, D4sumoError
+from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
+
+log = logging.getLogger(__name__)
+
+def check_dask_address(address: str) -> str:
+    """``local``, or a scheduler address such as tcp://10.0.0.5:8786; anything else is a ConfigError."""
+    if address == "local":
+        return address
+    m = _DASK_ADDRESS.match(address.strip()) if isinstance(address, str) else None
+    if not m or not 1 <= int(m.group(3)) <= 65535:
+        raise ConfigError("--dask", address, "'local' or a scheduler address PROTOCOL://HOST:PORT, e.g. tcp://10.0.0.5:8786")
+    return address.strip() if m.group(1) else f"tcp://{address.strip()}"
+
+_DASK_ADDRESS = re.compile(r"^(?:(tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
+
+
+
+@contextlib.contextmanager
+def _dask_client(address: str, timeout_s: float, workers: int):
+    """A Dask client of the scheduler at ``address``, or of a local cluster of ``workers`` processes."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:  # pragma: no cover - a core dependency
+        raise D4sumoError("--dask needs the distributed package (pip install 'dask[distributed]')") from None
+    with contextlib.ExitStack() as stack:
+        if address == "local":
+            logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
+            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       host="127.0.0.1", dashboard_address=":0", silence_logs=logging.WARNING))
+            log.warning("local Dask cluster of %d workers; dashboard at %s", workers, cluster.dashboard_link)
+            address = cluster.scheduler_address
+        try:
+            client = Client(address, timeout=timeout_s)
+        except (OSError, TimeoutError) as exc:
+            raise D4sumoError(f"--dask: no Dask scheduler answered at {address} within {timeout_s:g} s ({exc})") from None
+        with client:
+            yield client
+
+
+def _run_dask(todo: list[_Active], store_results, client) -> None:
+    from distributed import as_completed
+
+    queue = _gangs(todo, max(1, sum(client.nthreads().values())))
+    running: dict = {}
+    futures = as_completed()
+
+    def slots() -> int:
+        return max(1, sum(client.nthreads().values())) + 1
+
+    def submit(gang: list[_Active]) -> None:
+        # pure=False: the same chunk sent again after a failure is run again, not looked up
+        future = client.submit(run_chunks, _task(gang), pure=False)
+        running[future] = gang
+        futures.add(future)
+
+    while queue and len(running) < slots():
+        submit(queue.pop(0))
+    for future in futures:
+        gang = running.pop(future)
+        if future.status == "error":
+            exc = future.exception()
+            if isinstance(exc, D4sumoError):
+                raise exc
+            for part in _after_failure(gang, f"{type(exc).__name__}: {exc}"):
+                submit(part)
+            continue
+        result = future.result()
+        future.release()
+        gang = _accept_gang(gang, result, store_results)
+        if gang:
+            submit(_share(gang, queue, len(running) + 1, slots() - 1))
+        while queue and len(running) < slots():
+            submit(queue.pop(0))

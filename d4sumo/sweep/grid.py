@@ -1,0 +1,120 @@
+"""A sweep file: the grid of campaigns it describes, each built and checked before anything runs."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..engine.scenarios import build_road
+from ..engine.simulation import check_episode
+from ..errors import ConfigError
+from ..inputs import campaign_of, check_document, with_overrides
+from ..model.config import read_toml
+from ..model.maneuvers import MANEUVERS
+from ..search.campaign import Campaign
+from ..search.store import campaign_key
+
+log = logging.getLogger(__name__)
+
+SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start",
+                      *dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings))  # maneuver, cutin_follower, ...
+GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "attack", "optimizer", "seed")
+#: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
+#: table, or a list of them for a mixed platoon)
+GRID_TO_KEY = {**{k: f"scenario.{k}" for k in SCENARIO_GRID_KEYS}, "controller": "controller", "attack": "attack.family",
+               "optimizer": "search.optimizer", "seed": "search.seed"}
+
+
+def _unused_settings_only(a: dict, b: dict, campaign: Campaign) -> bool:
+    """Whether two grid points differ only in maneuver settings the campaign's maneuver does not read
+    (a cut-in's offset for the in-lane attack): the same campaign, counted once."""
+    used = set(campaign.config.maneuver_class.settings)
+    settings = {f"scenario.{k}" for m in MANEUVERS.values() for k in m.settings}
+    differ = {k for k in a if a[k] != b[k]}
+    return bool(differ) and all(k in settings and k.removeprefix("scenario.") not in used for k in differ)
+
+
+@dataclass(frozen=True)
+class Sweep:
+    name: str
+    campaigns: tuple[Campaign, ...]
+
+    @property
+    def samples(self) -> int:
+        return sum(c.samples for c in self.campaigns)
+
+    def fingerprint(self) -> str:
+        """Identifies the grid (not the budget): the same sweep may be resumed or extended."""
+        keys = sorted(campaign_key(c.definition()) for c in self.campaigns)
+        return hashlib.sha256(json.dumps(keys).encode()).hexdigest()[:20]
+
+    def as_run_before(self, optimizer: str, earlier: dict) -> "Sweep":
+        """The sweep with ``earlier`` options (`optimizers.EARLIER_OPTIONS`) for every ``optimizer`` campaign."""
+        return dataclasses.replace(self, campaigns=tuple(
+            c.replace(optimizer_options=tuple({**dict(c.optimizer_options), **earlier}.items()))
+            if c.optimizer == optimizer else c for c in self.campaigns))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Sweep":
+        path = Path(path)
+        doc = read_toml(path, "SWEEP")
+        return cls.from_dict(doc, default_name=path.stem, source=path.name)
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], default_name: str = "sweep", source: str = "sweep") -> "Sweep":
+        check_document(doc, source, extra_keys=("name", "grid"))
+        name = doc.get("name", default_name)
+        if not isinstance(name, str) or not name.strip():
+            raise ConfigError(f"{source}: name", name, "a non-empty string")
+        grid = doc.get("grid")
+        if not isinstance(grid, dict) or not grid:
+            raise ConfigError(f"{source}: [grid]", grid, f"a table of lists over {', '.join(GRID_KEYS)}")
+        for key, values in grid.items():
+            if key not in GRID_KEYS:
+                raise ConfigError(f"grid.{key}", values, f"a key of [grid]: {', '.join(GRID_KEYS)}")
+            if not isinstance(values, list) or not values:
+                raise ConfigError(f"grid.{key}", values, "a non-empty list")
+            if len(set(map(repr, values))) != len(values):
+                raise ConfigError(f"grid.{key}", values, "a list without repeated values")
+        base = {k: v for k, v in doc.items() if k not in ("name", "grid")}
+        if "controller" in grid and "controller" in base:
+            raise ConfigError(f"{source}: [controller]", base["controller"],
+                              "no [controller] beside grid.controller: give each controller's values in the grid")
+        campaigns, points, merged = [], {}, []
+        for values in itertools.product(*grid.values()):
+            point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
+            campaign = campaign_of(with_overrides(base, point))
+            key = campaign_key(campaign.definition())
+            if key in points:
+                if _unused_settings_only(points[key], point, campaign):  # inlane x cutin_offset_m: one inlane campaign
+                    merged.append((points[key], point))
+                    continue
+                # e.g. a controller's defaults written out, or one table per follower alike
+                raise ConfigError(f"{source}: [grid]", f"{points[key]} and {point}", "grid points that are different campaigns")
+            points[key] = point
+            campaigns.append(campaign)
+        read = {f"scenario.{k}" for c in campaigns for k in c.config.maneuver_class.settings}
+        for a, b in merged:  # an axis no maneuver of the grid reads changes nothing at all: a mistake
+            if any(a[k] != b[k] and k not in read for k in a):
+                raise ConfigError(f"{source}: [grid]", f"{a} and {b}", "grid points that are different campaigns")
+        return cls(name=name.strip(), campaigns=tuple(campaigns))
+
+    def check(self) -> None:
+        """Build every road and check every campaign fits it, and every formula parses: before running."""
+        roads = {}
+        for c in self.campaigns:
+            if c.config.network not in roads:
+                roads[c.config.network] = build_road(c.config.network)
+            check_episode(c.config, roads[c.config.network])
+        seen = set()
+        for c in self.campaigns:
+            key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m, c.config.maneuver)
+            if key not in seen:
+                seen.add(key)
+                c.specification()

@@ -1,0 +1,240 @@
+"""Running a sweep: the client alone writes the database; workers (local processes, or Dask's) play
+chunks of campaigns and send their samples back."""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Callable
+
+from ..engine.scenarios import NetworkSource, network_source
+from ..model.batch import DEFAULT_BATCH
+from ..search.campaign import SampleResult, open_store
+from ..search.optimizers import EARLIER_OPTIONS
+from ..search.runner import stored_results
+from ..search.store import Store, StoreError
+from .dask_cluster import _dask_client, _run_dask, check_dask_address
+from .grid import Sweep
+from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
+
+log = logging.getLogger(__name__)
+
+# --- running ---------------------------------------------------------------------------------
+#
+# The client (the process that runs `d4sumo sweep`) is the only process that opens the database.
+# Workers, local processes or Dask workers, run campaigns a chunk of samples at a time, up to
+# GANG_SIZE campaigns in one task whose episodes share SUMO instances: a task carries, per campaign,
+# the campaign, its road's XML and the optimiser's state, and returns each one's chunk of samples and
+# new state. The client stores each chunk in one transaction and sends the next task. A worker that
+# dies loses only its unfinished task, which the client sends again (split in two, so that a campaign
+# that kills its worker every time is found alone); workers need nothing but the installed package.
+
+def claim(store: Store, sweep: Sweep) -> None:
+    """Mark the database as this sweep's, refusing one written by anything else."""
+    meta = store.meta()
+    mine = {"name": sweep.name, "fingerprint": sweep.fingerprint()}
+    if "sweep" in meta:
+        try:
+            theirs = json.loads(meta["sweep"])
+            theirs["name"], theirs["fingerprint"]
+        except (ValueError, TypeError, KeyError):
+            raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
+        if theirs != mine:
+            hint = "Use another --db, or the sweep file that wrote it"
+            names = list(EARLIER_OPTIONS)
+            # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
+            for choice in itertools.product(*[(None, *EARLIER_OPTIONS[o]) for o in names]):
+                changed = [(o, e) for o, e in zip(names, choice) if e is not None]
+                before = sweep
+                for optimizer, earlier in changed:
+                    before = before.as_run_before(optimizer, earlier)
+                if changed and theirs["name"] == sweep.name and theirs["fingerprint"] == before.fingerprint():
+                    tables = "; ".join(", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed)
+                    hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
+                    break
+            raise StoreError(
+                f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
+                f"(grid {mine['fingerprint']}); nothing was changed. {hint}"
+            )
+    else:
+        others = store.campaigns()
+        if others:
+            held = f"{len(others)} campaign{'s' if len(others) != 1 else ''}"
+            raise StoreError(f"{store.path}: holds {held} not run by this sweep; nothing was changed. Use another --db")
+        store.set_meta("sweep", json.dumps(mine))
+
+
+@dataclass
+class SweepResult:
+    campaigns: int
+    samples: int
+    successes: int
+    wall_s: float
+
+
+def run_sweep(
+    sweep: Sweep,
+    db_path: str | Path,
+    *,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    dask_timeout_s: float = 30.0,
+    progress: Callable[[int, int, int], None] | None = None,
+    batch: int = DEFAULT_BATCH,
+) -> SweepResult:
+    """Run every campaign of the sweep not yet complete in ``db_path``. ``progress(done, total, successes)``
+    is called as samples are stored. ``dask_address``: a scheduler's address, or "local" for a local
+    Dask cluster of ``workers`` processes. ``batch``: at most this many episodes of a campaign side by
+    side in one SUMO (1: one at a time); the results do not depend on it."""
+    sweep.check()
+    if dask_address is not None:
+        dask_address = check_dask_address(dask_address)
+    workers = workers or os.cpu_count() or 1
+    t0 = time.perf_counter()
+    sources: dict[str, NetworkSource] = {}
+    with contextlib.ExitStack() as stack:
+        # the cluster first: an unreachable scheduler leaves no database behind
+        client = stack.enter_context(_dask_client(dask_address, dask_timeout_s, workers)) if dask_address else None
+        store = stack.enter_context(open_store(db_path))
+        claim(store, sweep)
+        todo: list[_Active] = []
+        for c in sweep.campaigns:
+            cid = store.open_campaign(c.definition(), c.samples, sweep.name)
+            stored = stored_results(store, cid, c.samples)
+            if len(stored) < c.samples:
+                if c.config.network not in sources:
+                    sources[c.config.network] = network_source(c.config.network)
+                todo.append(_Active(c, cid, sources[c.config.network], tuple(stored), done=len(stored), batch=batch))
+        total = sweep.samples
+        counts = list(store.sweep_counts(sweep.name))
+
+        def store_results(active: _Active, results: list[SampleResult]) -> None:
+            store.add_samples(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
+                                                    r.wall_s, r.error) for r in results])
+            active.done += len(results)
+            counts[0] += len(results)
+            counts[1] += sum(r.outcome == "success" for r in results)
+            if progress:
+                progress(min(counts[0], total), total, counts[1])
+
+        if progress:
+            progress(min(counts[0], total), total, counts[1])
+        if todo:
+            log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
+            if client is not None:
+                _run_dask(todo, store_results, client)
+            elif workers == 1:
+                _run_inline(todo, store_results)
+            else:
+                _run_local(todo, store_results, workers)
+    return SweepResult(len(sweep.campaigns), counts[0], counts[1], time.perf_counter() - t0)
+
+
+def _run_inline(todo: list[_Active], store_results) -> None:
+    for gang in _gangs(todo, 1):
+        while gang:
+            gang = _accept_gang(gang, run_chunks(_task(gang)), store_results)
+
+
+def _run_local(todo: list[_Active], store_results, workers: int) -> None:
+    """Chunks on local worker processes (spawned clean: libsumo keeps one simulation per process).
+    Campaigns run a few tasks at a time, so an interrupted sweep leaves few of them half done.
+
+    A worker that dies breaks the whole pool, and every task in flight fails with it: which one killed
+    it is unknown. Those tasks are suspects and run again one at a time, alone in the pool, until each
+    has either finished (cleared) or died alone (`_after_failure`: a gang splits, a single campaign
+    counts a failure)."""
+    queue = _gangs(todo, workers)
+    suspects: list[list[_Active]] = []
+    running: dict[Future, list[_Active]] = {}
+    pool = _new_pool(workers)
+    try:
+        while queue or running or suspects:
+            if suspects:
+                if not running:
+                    running[pool.submit(run_chunks, _task(suspects[0]))] = suspects[0]
+            else:
+                while queue and len(running) < workers + 1:
+                    gang = queue.pop(0)
+                    running[pool.submit(run_chunks, _task(gang))] = gang
+            finished, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
+            for future in finished:
+                gang = running.pop(future)
+                alone = bool(suspects) and gang is suspects[0]  # it ran by itself
+                try:
+                    chunk_results = future.result()
+                except BrokenProcessPool:
+                    # a worker died (killed, out of memory): the tasks in flight run again
+                    if alone:
+                        suspects[:1] = _after_failure(gang, "its worker process died")
+                    else:
+                        suspects[:0] = [gang, *running.values()]
+                    running.clear()
+                    _kill_pool(pool)
+                    pool = _new_pool(workers)
+                    break
+                if alone:
+                    suspects.pop(0)
+                gang = _accept_gang(gang, chunk_results, store_results)
+                if gang and alone:
+                    queue.insert(0, gang)
+                elif gang:
+                    gang = _share(gang, queue, len(running) + 1, workers)
+                    running[pool.submit(run_chunks, _task(gang))] = gang
+    finally:
+        _kill_pool(pool)
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                               initargs=(os.getpid(),))
+
+
+def _kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool now: queued chunks are dropped and running ones killed (workers never write, so
+    nothing half-written is left); waits until the processes are gone."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        if p.is_alive():
+            p.kill()
+    for p in processes:
+        p.join(timeout=5)
+
+
+def _worker_init(parent_pid: int) -> None:
+    """A local worker: Ctrl-C is the client's to handle, and the worker dies with the client."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:  # Linux: the kernel kills the worker when its parent dies, even by kill -9
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+    def watch() -> None:  # everywhere else: notice within a second
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+# --- Dask --------------------------------------------------------------------------------------
+
