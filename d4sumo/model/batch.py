@@ -20,7 +20,8 @@ from typing import Sequence
 import numpy as np
 
 from .config import EpisodeConfig
-from .control import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, CruiseControl, per_row
+from .arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per_row
+from .control import CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
 from .platoon import Platoon, PythonFollower, assemble_trace, checked_command, cruise_params, followers_of
 from .trace import Collision, Episode

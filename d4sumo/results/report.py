@@ -19,7 +19,7 @@ from ..errors import ConfigError
 from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
-from . import figures, paper
+from . import figures, paper, timespace
 from .analysis import (Record, Table, cluster_knots, count_noun, load_records, most_severe, richest_conditions,
                        table_attacker_crashes, table_by_speed, table_success_statistics, table_systems)
 
@@ -36,7 +36,7 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
     campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
     evaluator = Evaluator(campaign)
     simulate(campaign.config, evaluator.plan(record.params), road=evaluator.road, fcd_path=fcd_path)
-    return figures.read_fcd(fcd_path)
+    return timespace.read_fcd(fcd_path)
 
 
 def collision_of(record: Record) -> dict | None:
@@ -62,8 +62,8 @@ def _sample_figure(record: Record, kind: str, fcd: dict, out: Path, speed_max_mp
     title = describe(record)
     moments = dict(attack_start_s=record.attack_start_s, lane_change_s=record.lane_change_at_s)
     if kind == "time-space":
-        return figures.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps, **moments)
-    return figures.accelerations(fcd, title, out, collision_of(record), **moments)
+        return timespace.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps, **moments)
+    return timespace.accelerations(fcd, title, out, collision_of(record), **moments)
 
 
 def _check_kind(kind: str, allowed: Sequence[str]) -> None:

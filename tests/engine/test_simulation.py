@@ -18,7 +18,7 @@ from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import SwitchingController, register_controller
 from d4sumo.model.maneuvers import AttackPlan, attack_plan, maneuver_of
-from d4sumo.results import figures
+from d4sumo.results import timespace
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
 from d4sumo.search.spec import Specification
@@ -483,10 +483,10 @@ def test_a_two_edge_road_has_no_collision_at_its_join_and_moves_the_cars_as_comm
     for name in episode.trace.names:
         assert np.allclose(episode.trace[name], reference.trace[name], atol=1e-6), name
     # SUMO's FCD, read as positions along the route (start plus odometer)
-    traces = figures.read_fcd(fcd)
+    traces = timespace.read_fcd(fcd)
     for vid in config.vehicle_ids:
         assert np.max(np.abs(traces[vid]["pos"] - episode.trace[f"pos_{vid}"])) < 1.1e-6
-    assert set(figures.lanes(traces)) == {"0"}  # one lane across both edges: one panel
+    assert set(timespace.lanes(traces)) == {"0"}  # one lane across both edges: one panel
 
 
 def test_every_collision_of_a_campaign_on_a_three_edge_road_is_in_sumos_fcd(tmp_path):
@@ -501,7 +501,7 @@ def test_every_collision_of_a_campaign_on_a_three_edge_road_is_in_sumos_fcd(tmp_
     for s in collided:
         again = evaluator(s.index, np.array(s.params), fcd_path=fcd)
         assert (again.outcome, again.collision) == (s.outcome, s.collision)
-        traces = figures.read_fcd(fcd)
+        traces = timespace.read_fcd(fcd)
         lead, follower = s.collision["pair"].split("-")
         gaps = traces[lead]["pos"] - config.vehicle.length_m - traces[follower]["pos"]
         assert gaps[-1] < 0 and np.all(gaps[:-1] > -2.5e-6), s.index  # overlapping first at the end

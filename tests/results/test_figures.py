@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from d4sumo.errors import ConfigError
-from d4sumo.results import figures
+from d4sumo.results import figures, timespace
 from d4sumo.results.analysis import Record, cluster_knots, load_records, most_severe, richest_conditions
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -73,7 +73,7 @@ def _labels_overlap(fig) -> list[tuple[str, str]]:
 
 def test_time_space_with_two_lanes_has_a_panel_per_lane_one_speed_scale_and_one_colour_bar():
     fcd = _platoon_fcd(lane_change=True)
-    fig = figures.time_space_figure(fcd, "two lanes", COLLISION)
+    fig = timespace.time_space_figure(fcd, "two lanes", COLLISION)
     panels = [ax for ax in fig.axes if _speed_collections(ax)]
     assert [ax.get_title(loc="left") for ax in panels] == ["lane 1 (highway_1)", "lane 0 (highway_0)"]  # leftmost on top
     assert panels[0].get_shared_x_axes().joined(*panels) and panels[0].get_shared_y_axes().joined(*panels)
@@ -94,7 +94,7 @@ def test_time_space_with_two_lanes_has_a_panel_per_lane_one_speed_scale_and_one_
 
 
 def test_time_space_labels_do_not_overprint_where_the_lines_end_together():
-    fig = figures.time_space_figure(_platoon_fcd(lane_change=False), "one lane", COLLISION)
+    fig = timespace.time_space_figure(_platoon_fcd(lane_change=False), "one lane", COLLISION)
     (panel,) = [ax for ax in fig.axes if _speed_collections(ax)]
     assert sorted(t.get_text() for t in panel.texts) == ["v0 attacker", "v1", "v2", "v3"]
     assert _labels_overlap(fig) == []
@@ -102,7 +102,7 @@ def test_time_space_labels_do_not_overprint_where_the_lines_end_together():
 
 
 def test_time_space_uses_a_given_speed_scale():
-    fig = figures.time_space_figure(_platoon_fcd(lane_change=False), "one lane", speed_max_mps=40.0)
+    fig = timespace.time_space_figure(_platoon_fcd(lane_change=False), "one lane", speed_max_mps=40.0)
     assert {(c.norm.vmin, c.norm.vmax) for ax in fig.axes for c in _speed_collections(ax)} == {(0.0, 40.0)}
 
 
@@ -123,15 +123,15 @@ FCD_TEXT = """<?xml version="1.0" encoding="UTF-8"?>
 def test_read_fcd_reads_lanes_in_sumo_attribute_order(tmp_path):
     path = tmp_path / "fcd.xml"
     path.write_text(FCD_TEXT)
-    fcd = figures.read_fcd(path)
+    fcd = timespace.read_fcd(path)
     assert list(fcd) == ["v0", "v1"]
     assert fcd["v0"]["lane"].tolist() == ["highway_0", "highway_1"]
     assert fcd["v0"]["time"].tolist() == [0.0, 0.05] and fcd["v0"]["pos"].tolist() == [49.0, 49.1]
     assert fcd["v0"]["speed"].tolist() == [1.0, 1.5] and fcd["v0"]["acceleration"].tolist() == [0.5, -0.5]
-    assert figures.lanes(fcd) == ["highway_1", "highway_0"]
+    assert timespace.lanes(fcd) == ["highway_1", "highway_0"]
     without_lanes = tmp_path / "old.xml"
     without_lanes.write_text(re.sub(r' lane="[^"]*"', "", FCD_TEXT))
-    assert figures.read_fcd(without_lanes)["v0"]["pos"].tolist() == [49.0, 49.1]
+    assert timespace.read_fcd(without_lanes)["v0"]["pos"].tolist() == [49.0, 49.1]
 
 
 MANY_EDGES_FCD = """<?xml version="1.0" encoding="UTF-8"?>
@@ -154,10 +154,10 @@ def test_read_fcd_gives_positions_along_a_route_of_many_edges_and_lanes_by_index
     the start plus SUMO's odometer; a junction's internal lane is the lane the car came from."""
     path = tmp_path / "fcd.xml"
     path.write_text(MANY_EDGES_FCD)
-    fcd = figures.read_fcd(path)
+    fcd = timespace.read_fcd(path)
     assert fcd["v0"]["pos"].tolist() == [1999.0, 2000.0, 2001.0]
     assert fcd["v0"]["lane"].tolist() == ["1", "1", "1"]
-    assert figures.lanes(fcd) == ["1"]
+    assert timespace.lanes(fcd) == ["1"]
 
 
 # --- heatmaps -----------------------------------------------------------------------------------------
@@ -328,11 +328,11 @@ def test_time_space_and_accelerations_from_a_replayed_fcd(small_db, tmp_path):
     r = most_severe(load_records([small_db]), 1)[0]
     fcd = replay_to_fcd(r, tmp_path / "fcd.xml")
     assert set(fcd) == {"v0", "v1", "v2", "v3"}
-    assert figures.lanes(fcd) == ["highway_0"]  # today every car stays in lane 0
+    assert timespace.lanes(fcd) == ["highway_0"]  # today every car stays in lane 0
     last = fcd["v0"]["time"][-1]
     assert last == pytest.approx(r.time_s)  # the replay ends at the stored collision
-    assert is_image(figures.time_space(fcd, describe(r), tmp_path / "ts.png", collision_of(r)))
-    assert is_image(figures.accelerations(fcd, "acc", tmp_path / "acc.png", collision_of(r)))
+    assert is_image(timespace.time_space(fcd, describe(r), tmp_path / "ts.png", collision_of(r)))
+    assert is_image(timespace.accelerations(fcd, "acc", tmp_path / "acc.png", collision_of(r)))
 
 
 @pytest.mark.sumo
@@ -356,7 +356,7 @@ def test_plot_sample_writes_the_figure_only_and_the_fcd_only_when_asked(small_db
     fcd = tmp_path / "replay.xml"
     plot_figure([small_db], "accel", tmp_path / "acc.png", sample=1, fcd_path=fcd)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["acc.png", "fig.png", "replay.xml"]
-    assert set(figures.read_fcd(fcd)) == {"v0", "v1", "v2", "v3"}
+    assert set(timespace.read_fcd(fcd)) == {"v0", "v1", "v2", "v3"}
     with pytest.raises(ConfigError) as err:
         plot_figure([small_db], "accel", tmp_path / "acc2.png", sample=1, fcd_path=tmp_path / "nope" / "f.xml")
     assert err.value.field == "--fcd" and not (tmp_path / "nope").exists()

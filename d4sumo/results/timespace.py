@@ -1,0 +1,245 @@
+"""Figures of one episode from SUMO's FCD: the time-space diagram (every car's position along the route over
+time, coloured by speed, a panel per lane) and every car's acceleration; and the FCD read as positions
+along the route."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_path, wrap_title
+
+
+def read_fcd(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
+    """SUMO FCD as {vehicle id: {time, pos, speed, acceleration, lane}}; ``pos`` is the position along
+    the route, ``lane`` the lane the car drives in.
+
+    parse_fast_nested matches attributes in the order SUMO writes them (id x y angle type speed pos
+    lane slope acceleration odometer); an FCD without lanes reads as all in one lane "". On a route of
+    many edges SUMO's lane position starts again at 0 on each edge: the position along the route is
+    then where the car started plus its odometer, and a lane is named by its index across the road
+    (a junction's internal lane counts as the lane the car came from).
+    """
+    from sumolib.xml import parse_fast_nested
+
+    rows: dict[str, list[tuple]] = {}
+    attributes = ["id", "speed", "pos", "lane", "acceleration", "odometer"]
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", attributes):
+        rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), v.lane,
+                                          float(v.odometer)))
+    if not rows:  # written before d4sumo asked SUMO for the odometer: a road of one edge
+        for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", attributes[:-1]):
+            rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), v.lane,
+                                              np.nan))
+    if not rows:
+        for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "speed", "pos", "acceleration"]):
+            rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), "",
+                                              np.nan))
+    edges = {lane.rpartition("_")[0] for r in rows.values() for *_, lane, _ in r if lane and not lane.startswith(":")}
+    many_edges = len(edges) > 1
+    out = {}
+    for vid in sorted(rows, key=_vehicle_order):
+        time, pos, speed, accel, lane, odometer = zip(*rows[vid])
+        pos = np.array(pos)
+        if many_edges:
+            pos = pos[0] + np.array(odometer)  # every car starts on the route's first edge
+            lane = _lane_indices(lane)
+        out[vid] = {"time": np.array(time), "pos": pos, "speed": np.array(speed),
+                    "acceleration": np.array(accel), "lane": np.array(lane, dtype=str)}
+    return out
+
+
+def _lane_indices(lane_ids: Sequence[str]) -> list[str]:
+    """Lane ids as their index across the road; a junction's internal lane as the lane before it."""
+    out, last = [], ""
+    for lane in lane_ids:
+        if not lane.startswith(":"):
+            last = lane.rpartition("_")[2]
+        out.append(last)
+    return out
+
+
+def _vehicle_order(vid: str):
+    return (0, int(vid[1:]), "") if vid[1:].isdigit() else (1, 0, vid)
+
+
+def _vehicle_label(vid: str) -> str:
+    return vid + " attacker" if vid == "v0" else vid
+
+
+def lanes(fcd: dict) -> list[str]:
+    """The lanes the cars use, leftmost first (SUMO counts lanes from the right: lane 0 is the
+    rightmost), so that stacked panels look like the road seen from above."""
+    used = {str(lane) for d in fcd.values() for lane in d.get("lane", [""])}
+
+    def key(lane: str):
+        edge, _, index = lane.rpartition("_")
+        return (edge, -int(index)) if index.isdigit() else (lane, 0)
+
+    return sorted(used, key=key)
+
+
+def _lane_title(lane: str) -> str:
+    edge, _, index = lane.rpartition("_")
+    return f"lane {index} ({lane})" if edge and index.isdigit() else f"lane {lane}"
+
+
+def _runs(inside: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges where ``inside`` is True."""
+    edges = np.diff(np.concatenate([[0], inside.astype(int), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+
+
+def _spread(anchors: Sequence[float], gap: float) -> list[float]:
+    """Positions at least ``gap`` apart, as close to ``anchors`` (ascending) as possible: labels that
+    would overlap are stacked as a group centred on their anchors."""
+    groups = [[a] for a in anchors]  # each group's labels are stacked around its anchors' mean
+
+    def bottom(g):
+        return float(np.mean(g)) - (len(g) - 1) * gap / 2
+
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(groups) - 1):
+            if bottom(groups[i + 1]) - (bottom(groups[i]) + (len(groups[i]) - 1) * gap) < gap:
+                groups[i:i + 2] = [groups[i] + groups[i + 1]]
+                merged = True
+                break
+    return [bottom(g) + j * gap for g in groups for j in range(len(g))]
+
+
+def _place_labels(fig, ax, labels: list[tuple[str, float, float]]) -> list:
+    """Label each line just right of its end, stacked so that no two labels overprint, with a thin
+    leader line to the end when a label had to move. ``labels``: (text, time, position) in data units.
+    Needs the final layout (call after drawing, with the layout frozen): positions are worked out in
+    pixels, then kept in data units so that they scale with the saved file's dpi."""
+    if not labels:
+        return []
+    to_pixels, to_data = ax.transData.transform, ax.transData.inverted().transform
+    gap_px = LABEL_FONT_PT * fig.dpi / 72.0 * 1.3
+    offset_px = 8.0 * fig.dpi / 72.0
+    ends = sorted(((to_pixels((t, p)), text, (t, p)) for text, t, p in labels), key=lambda e: e[0][1])
+    ys = _spread([xy[1] for xy, _, _ in ends], gap_px)
+    box = ax.get_window_extent()
+    shift = max(0.0, box.y0 + gap_px / 2 - min(ys)) - max(0.0, max(ys) - (box.y1 - gap_px / 2))
+    texts = []
+    for (xy, text, end), y in zip(ends, ys):
+        at = to_data((xy[0] + offset_px, y + shift))
+        if abs(y + shift - xy[1]) > 1.0:  # moved: leaders under every label, so none crosses a text
+            ax.plot([end[0], at[0]], [end[1], at[1]], color="0.35", linewidth=0.6, zorder=2.5)
+        texts.append(ax.text(at[0], at[1], text, va="center", ha="left", fontsize=LABEL_FONT_PT, zorder=6,
+                             bbox=dict(boxstyle="square,pad=0.1", facecolor="white", edgecolor="none", alpha=0.85)))
+    return texts
+
+
+def _collision_lane(fcd: dict, collision: dict, lane_ids: list[str]) -> str:
+    """The lane in which the pair collided: the lane of the pair's first car at the collision time."""
+    for vid in str(collision.get("pair", "")).split("-"):
+        d = fcd.get(vid)
+        if d is not None and len(d["time"]) and "lane" in d:
+            i = int(np.argmin(np.abs(d["time"] - float(collision["time_s"]))))
+            return str(d["lane"][i])
+    return lane_ids[0]
+
+
+def _mark_moments(ax, attack_start_s: float, lane_change_s: float | None) -> None:
+    """The attack's start after a warm-up, and the moment the attacker began its lane change."""
+    if attack_start_s > 0:
+        ax.axvline(attack_start_s, color="0.3", linestyle=":", linewidth=1, label=f"attack starts at {attack_start_s:g} s")
+    if lane_change_s is not None:
+        ax.axvline(lane_change_s, color="0.1", linestyle="-.", linewidth=1,
+                   label=f"attacker changes lane at {lane_change_s:.2f} s")
+
+
+def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, speed_max_mps: float | None = None,
+                      attack_start_s: float = 0.0, lane_change_s: float | None = None):
+    """Position over time of every car, coloured by speed on one scale for the whole figure (0 to
+    ``speed_max_mps``, default the fastest car), one panel per lane when the cars use several, the
+    collision marked; returns the laid-out Figure."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import Normalize
+
+    lane_ids = lanes(fcd)
+    vmax = speed_max_mps or max((float(d["speed"].max()) for d in fcd.values() if len(d["speed"])), default=0.0) or 1.0
+    norm = Normalize(0.0, vmax)
+    fig = _figure(figsize=(8.0, 1.6 + 3.0 * len(lane_ids)) if len(lane_ids) > 1 else (8.0, 4.6))
+    axes = fig.subplots(len(lane_ids), 1, sharex=True, sharey=True, squeeze=False)[:, 0]
+    crash_lane = _collision_lane(fcd, collision, lane_ids) if collision else None
+    ends: dict[int, list[tuple[str, float, float]]] = {i: [] for i in range(len(lane_ids))}
+    for i, (ax, lane) in enumerate(zip(axes, lane_ids)):
+        for vid, d in fcd.items():
+            inside = np.asarray(d.get("lane", np.full(len(d["time"]), "")), dtype=str) == lane
+            for a, b in _runs(inside):
+                points = np.column_stack([d["time"][a:b], d["pos"][a:b]]).reshape(-1, 1, 2)
+                if b - a >= 2:
+                    lines = LineCollection(np.concatenate([points[:-1], points[1:]], axis=1), cmap=SPEED_CMAP, norm=norm,
+                                           linewidths=2.4 if vid == "v0" else 1.5)
+                    lines.set_array(d["speed"][a:b - 1])
+                    ax.add_collection(lines)
+                else:
+                    ax.scatter(d["time"][a:b], d["pos"][a:b], c=d["speed"][a:b], cmap=SPEED_CMAP, norm=norm, s=4)
+            last = np.flatnonzero(inside)
+            if last.size:
+                ends[i].append((_vehicle_label(vid), float(d["time"][last[-1]]), float(d["pos"][last[-1]])))
+        _mark_moments(ax, attack_start_s, lane_change_s)
+        if collision and lane == crash_lane:
+            ax.plot([collision["time_s"]], [collision["position_m"]], marker="X", color="red", markeredgecolor="white",
+                    markersize=10, linestyle="none", zorder=4,
+                    label=f"collision {collision['pair']}: {collision['speed_diff_kmh']:.1f} km/h at {collision['time_s']:.1f} s")
+        if len(lane_ids) > 1:
+            ax.set_title(_lane_title(lane), fontsize=9, loc="left")
+        ax.set_ylabel("position along the road [m]")
+        ax.grid(alpha=0.25)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left", fontsize=8)
+    times = np.concatenate([d["time"] for d in fcd.values()])
+    positions = np.concatenate([d["pos"] for d in fcd.values()])
+    t0, t1 = float(times.min()), float(times.max())
+    p0, p1 = float(positions.min()), float(positions.max())
+    axes[0].set_xlim(t0, t1 + 0.16 * (t1 - t0 or 1.0))  # room on the right for the vehicle labels
+    axes[0].set_ylim(p0 - 0.04 * (p1 - p0 or 1.0), p1 + 0.06 * (p1 - p0 or 1.0))
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(wrap_title(title), fontsize=9)
+    fig.colorbar(ScalarMappable(norm, SPEED_CMAP), ax=list(axes), label="speed [m/s]", shrink=0.9 if len(axes) > 1 else 1.0)
+    fig.canvas.draw()  # lay out, then freeze it so the labels placed in pixels stay put
+    fig.set_layout_engine("none")
+    for i, ax in enumerate(axes):
+        _place_labels(fig, ax, ends[i])
+    return fig
+
+
+def time_space(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *,
+               speed_max_mps: float | None = None, attack_start_s: float = 0.0, lane_change_s: float | None = None) -> Path:
+    """Position over time of every car, coloured by speed, the collision marked (see time_space_figure)."""
+    check_figure_path(path)
+    return _save(time_space_figure(fcd, title, collision, speed_max_mps=speed_max_mps, attack_start_s=attack_start_s,
+                                   lane_change_s=lane_change_s), path)
+
+
+def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *, attack_start_s: float = 0.0,
+                         lane_change_s: float | None = None):
+    """Every car's acceleration over time."""
+    fig = _figure(figsize=(8.0, 3.8))
+    ax = fig.subplots()
+    for vid, d in fcd.items():
+        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" else 1.1,
+                color="black" if vid == "v0" else None, zorder=3 if vid == "v0" else 2)
+    _mark_moments(ax, attack_start_s, lane_change_s)
+    if collision:
+        ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("acceleration [m/s²]")
+    ax.set_title(wrap_title(title), fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    return fig
+
+
+def accelerations(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *, attack_start_s: float = 0.0,
+                  lane_change_s: float | None = None) -> Path:
+    check_figure_path(path)
+    return _save(accelerations_figure(fcd, title, collision, attack_start_s=attack_start_s, lane_change_s=lane_change_s), path)
