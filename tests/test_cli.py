@@ -214,9 +214,59 @@ def test_output_piped_into_head_ends_quietly(tmp_path):
     assert result.stderr == ""
 
 
-def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
+ROOT = Path(__file__).resolve().parent.parent
+GUIDE = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def documented_commands() -> list[tuple[str, str]]:
+    """(page, command) for every d4sumo and tools/ command the README and the guide show: each line of a
+    code block, and each inline `d4sumo ...` with arguments (a synopsis with alternatives, a|b, is not one)."""
     import re
-    from pathlib import Path
+
+    found = []
+    for page in GUIDE:
+        text = page.read_text()
+        for block in re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S):
+            for line in block.splitlines():
+                for part in re.sub(r"\s+#.*$", "", line.strip()).split("&&"):
+                    part = part.strip().removeprefix("$ ").removeprefix(".venv/bin/")
+                    if part.startswith(("d4sumo ", "python tools/")):
+                        found.append((page.name, part))
+        for span in re.findall(r"`([^`\n]+)`", re.sub(r"```.*?```", "", text, flags=re.S)):
+            if span.startswith(("d4sumo ", "python tools/")) and "|" not in span and len(span.split()) > 2:
+                found.append((page.name, span))
+    return found
+
+
+def test_every_command_in_the_readme_and_the_guide_is_valid():
+    """Each d4sumo command parses as shown; each tools/ script exists and has the flags shown."""
+    import shlex
+
+    from d4sumo.cli import _join_negative_lists, build_parser
+
+    commands = documented_commands()
+    assert len(commands) > 30 and {page for page, _ in commands} >= {"README.md", "campaigns.md", "sweeps.md", "roads.md"}
+    helps: dict[str, str] = {}
+    for page, command in commands:
+        argv = shlex.split(command)
+        if argv[0] == "d4sumo":
+            try:
+                build_parser().parse_args(_join_negative_lists(argv[1:]))
+            except SystemExit as exc:
+                raise AssertionError(f"{page}: `{command}` does not parse (exit {exc.code})") from None
+            continue
+        script = ROOT / argv[1]
+        assert script.is_file(), f"{page}: {argv[1]} does not exist"
+        if argv[1] not in helps:
+            done = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120)
+            assert done.returncode == 0, done.stderr
+            helps[argv[1]] = done.stdout
+        for flag in (a.split("=")[0] for a in argv[2:] if a.startswith("--")):
+            assert flag in helps[argv[1]], f"{page}: {argv[1]} has no {flag}"
+
+
+def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_documented(capsys):
+    import re
 
     from d4sumo.cli import build_parser
 
@@ -226,14 +276,14 @@ def test_every_flag_in_the_readme_exists_and_the_main_ones_are_documented():
         for name, sub in getattr(action, "choices", None).items() if isinstance(getattr(action, "choices", None), dict) else []:
             for a in sub._actions:
                 known.update(a.option_strings)
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    in_readme = set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", readme))
-    not_d4sumo = {"--nthreads", "--port", "--runs", "--baseline"}  # the dask scheduler's and worker's; tools/paper_page.py's, bench_sweep.py's
-    assert in_readme - known - not_d4sumo == set()
+    text = "\n".join(page.read_text() for page in GUIDE)
+    mentioned = set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", text))
+    tools = {"--nthreads", "--port", "--runs", "--baseline", "--repeats", "--batch", "--db", "--benchmark"}  # dask's, tools/'
+    assert mentioned - known - tools == set()
     main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",
                   "--json", "--gui", "--workers", "--dask", "--out", "--sample"}
-    assert main_flags - in_readme == set()
+    assert main_flags - mentioned == set()
 
 
 @pytest.mark.sumo
