@@ -198,6 +198,68 @@ class Spline(Knots):
         return CubicSpline(tk, x)(np.clip(t, tk[0], tk[-1]))
 
 
+# --- the attacks as the authors' code played them (the paper's tables came from it) --------------
+#
+# From the code the paper links (its line 75; ../PAPER-AS-RUN facts): the persistent attack at commit
+# d458f6c, the intermittent one with it, the knot attack at its HEAD. Their time is the episode's, which
+# starts with the attack (the code starts from rest and attacks from its first step or t_a).
+
+
+class PersistentCoded(AttackFamily):
+    """The persistent attack as coded: from t_a on, u = sign(sin(f t)) c, with f in rad/s and t the time
+    since the episode's start (not since t_a); the paper's text has a square wave in Hz from t_a."""
+
+    name = "persistent-coded"
+    parameters = (
+        Parameter("c", 0.0, 1.0),
+        Parameter("f_rad_s", 0.0, 10.0, "rad/s"),
+        Parameter("t_a_s", 0.0, 10.0, "s"),
+    )
+
+    def _signal(self, x, t):
+        c, f, t_a = x
+        return np.where(t >= t_a, np.sign(np.sin(f * t)) * c, np.nan)
+
+
+class IntermittentCoded(AttackFamily):
+    """The intermittent attack as coded: throttle (never brake) c1 on [t1, t2] and c2 on [t3, t4], each
+    time rounded to a whole second (Python's round), the windows' ranges apart so every point is ordered;
+    the attacker cruises outside them."""
+
+    name = "intermittent-coded"
+    parameters = (
+        Parameter("t1_s", 10.0, 20.0, "s"),
+        Parameter("t2_s", 21.0, 30.0, "s"),
+        Parameter("t3_s", 31.0, 40.0, "s"),
+        Parameter("t4_s", 41.0, 50.0, "s"),
+        Parameter("c1", 0.0, 1.0),
+        Parameter("c2", 0.0, 1.0),
+    )
+
+    def _signal(self, x, t):
+        t1, t2, t3, t4 = (float(round(float(v))) for v in x[:4])
+        u = np.full_like(t, np.nan)
+        u[(t >= t1) & (t <= t2)] = x[4]
+        u[(t >= t3) & (t <= t4)] = x[5]
+        return u
+
+
+class KnotsCoded(AttackFamily):
+    """The knot attack as coded: 8 knots at linspace(0, 40, 8) s (one every 5.71 s), joined by scipy's
+    interpolating cubic B-spline (splrep/splev; not PCHIP as the paper's text says), clipped to [-1, 1],
+    played from the episode's first step; after the last knot its value is held."""
+
+    name = "knots-coded"
+    parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(8))
+    knot_times_s = np.linspace(0.0, 40.0, 8)
+
+    def _signal(self, x, t):
+        from scipy.interpolate import splev, splrep
+
+        tk = self.knot_times_s
+        return splev(np.clip(t, tk[0], tk[-1]), splrep(tk, x))
+
+
 #: every attack family by name; a new family is a class above and a line here
 FAMILY_CLASSES: dict[str, type[AttackFamily]] = {
     "constant": Constant,
@@ -206,6 +268,9 @@ FAMILY_CLASSES: dict[str, type[AttackFamily]] = {
     "sine": Sine,
     "knots": Knots,
     "spline": Spline,
+    "persistent-coded": PersistentCoded,
+    "intermittent-coded": IntermittentCoded,
+    "knots-coded": KnotsCoded,
 }
 FAMILIES = tuple(FAMILY_CLASSES)
 #: every family's options: the keys an [attack] table may hold besides family and params

@@ -109,3 +109,40 @@ def test_a_family_owns_its_options_and_leaves_other_families_options_out():
     with pytest.raises(ConfigError, match="attack.delta_s: got -1"):  # checked even where not read
         make_attack("persistent", {"delta_s": -1})
     assert set(FAMILY_CLASSES) == set(FAMILIES) and all(FAMILY_CLASSES[n].name == n for n in FAMILIES)
+
+
+# --- the attacks as the authors' code played them ------------------------------------------------
+
+
+def test_the_coded_persistent_attack_is_sign_of_sin_of_f_t_in_rad_per_s_on_the_episodes_clock():
+    """u = sign(sin(f t)) c from t_a, t since the episode's start: with f = 1 rad/s, sin(1) > 0, sin(3.5) < 0."""
+    family = make_attack("persistent-coded")
+    u = family.signal([0.6, 1.0, 1.0], np.array([0.0, 0.5, 1.0, 2.0, 3.5, 4.0]))
+    assert np.isnan(u[:2]).all() and u[2:].tolist() == [0.6, 0.6, -0.6, -0.6]
+    # t, not t - t_a: at t = 4 s with t_a = 3.5 s, sin(4) < 0 although sin(4 - 3.5) > 0
+    assert family.signal([1.0, 1.0, 3.5], np.array([4.0])).tolist() == [-1.0]
+    assert family.names == ("c", "f_rad_s", "t_a_s") and family.upper.tolist() == [1.0, 10.0, 10.0]
+
+
+def test_the_coded_intermittent_attack_has_whole_second_edges_and_throttles_only():
+    family = make_attack("intermittent-coded")
+    assert family.lower.tolist() == [10, 21, 31, 41, 0, 0] and family.upper.tolist() == [20, 30, 40, 50, 1, 1]
+    # 10.4 -> 10, 21.5 -> 22 (half to even, as Python's round), 31.5 -> 32, 42.6 -> 43
+    t = np.array([9.9, 10.0, 21.9, 22.0, 22.1, 30.0, 32.0, 43.0, 43.1])
+    u = family.signal([10.4, 21.5, 31.5, 42.6, 0.3, 0.7], t)
+    assert np.isnan(u[[0, 4, 5, 8]]).all() and u[[1, 2, 3]].tolist() == [0.3] * 3 and u[[6, 7]].tolist() == [0.7] * 2
+
+
+def test_the_coded_knot_attack_is_an_interpolating_cubic_spline_through_8_knots_over_40_s():
+    from scipy.interpolate import CubicSpline
+
+    family = make_attack("knots-coded")
+    assert family.dimension == 8 and np.allclose(np.diff(family.knot_times_s), 40 / 7)
+    x = np.array([0.0, 0.4, -0.2, 0.5, 0.2, -0.3, 0.6, -0.5])
+    assert np.allclose(family.signal(x, family.knot_times_s), x, atol=1e-12)  # through its knots
+    t = np.linspace(0.0, 40.0, 81)
+    # scipy's splrep/splev interpolating spline is the not-a-knot cubic spline
+    assert np.allclose(family.signal(x, t), np.clip(CubicSpline(family.knot_times_s, x)(t), -1, 1), atol=1e-9)
+    assert family.signal(x, np.array([45.0])).tolist() == [-0.5]  # held after the last knot
+    wild = np.array([0.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+    assert np.abs(family.signal(wild, t)).max() == 1.0  # its overshoot clipped, as the code clips each pedal
