@@ -30,6 +30,7 @@ from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, 
 from .model.config import EpisodeConfig, VehicleParams, read_toml
 from .model.maneuvers import maneuver_of
 from .search.campaign import Campaign
+from .presets import PRESETS, apply_preset
 from .search.optimizers import OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
@@ -54,6 +55,10 @@ def read_document(path, field: str = "--config", extra_keys: tuple[str, ...] = (
 def check_document(doc: Mapping[str, Any], source: str = "config", extra_keys: tuple[str, ...] = ()) -> None:
     for key, value in doc.items():
         if key in extra_keys:
+            continue
+        if key == "preset":
+            if value not in PRESETS:
+                raise ConfigError("preset", _short(value), f"one of {', '.join(PRESETS)}")
             continue
         if key not in SECTIONS:
             raise ConfigError(f"{source}: {key}", _short(value), f"the tables {', '.join(SECTIONS)}"
@@ -121,7 +126,7 @@ def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
-    return EpisodeConfig.from_dict(doc)
+    return EpisodeConfig.from_dict(apply_preset(doc))
 
 
 def _family(doc: Mapping[str, Any], choices=FAMILIES) -> AttackFamily:
@@ -144,6 +149,7 @@ def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
 
 def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
     """The one attack an episode plays: (family, parameter vector), or (None, None) for no attack."""
+    doc = apply_preset(doc)
     attack = doc.get("attack", {})
     resolve_attack_options("constant", _attack_options(doc))  # every option given is checked, read or not
     if "family" not in attack:
@@ -161,6 +167,7 @@ def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray |
 
 def campaign_of(doc: Mapping[str, Any]) -> Campaign:
     """The campaign a document describes (the optimiser chooses the attack's parameters)."""
+    doc = apply_preset(doc)
     if "params" in doc.get("attack", {}):
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
     config = episode_config(doc)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from d4sumo.errors import ConfigError
@@ -105,3 +107,32 @@ def test_controller_flags_reach_one_follower_of_a_mixed_platoon():
     # a whole [controller] at once (a sweep grid's controller axis): a name, a table or a list
     assert episode_config(with_overrides(doc, {"controller": "timegap"})).controller.cls == "timegap"
     assert episode_config(with_overrides({}, {"controller": {"class": "sumo:ACC", "tau": 0.5}})).controller.label == "sumo:ACC(tau=0.5)"
+
+
+def test_the_paper_as_run_preset_lays_the_authors_options_under_the_document_and_maps_the_family():
+    from d4sumo.inputs import campaign_of
+
+    c = campaign_of({"preset": "paper-as-run", "attack": {"family": "persistent"}, "scenario": {"setpoint_m": 2.0}})
+    assert c.attack == "persistent-coded" and c.d_safe_m == 0.05
+    cfg = c.config
+    assert (cfg.start, cfg.speed_mps, cfg.duration_s, cfg.attacker_cruise_offset_mps, cfg.end_distance_m, cfg.setpoint_m) == \
+        ("rest", 20.0, 25.0, -5.0, 760.0, 2.0)
+    params = dict(cfg.controller.params)
+    assert (params["switching_rule"], params["low_level"], params["low_kp"], params["control_period_s"]) == ("code", "pid", 0.1, 0.1)
+    # the document's own values win; knots take the HEAD's low-level gains
+    k = campaign_of({"preset": "paper-as-run", "scenario": {"speed_mps": 30.0, "start": "steady"}})
+    assert k.attack == "knots-coded" and k.config.speed_mps == 30.0 and k.config.start == "steady"
+    assert dict(k.config.controller.params)["low_ki"] == 0.35 and k.config.attacker_cruise_offset_mps == 0.0
+    # stored resolved: the definition holds the options, not the preset's name
+    assert "preset" not in str(k.definition()) and k.definition()["config"]["controller"]["low_level"] == "pid"
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"preset": "paper"}, "preset: got 'paper'; allowed: one of paper-as-run"),
+    ({"preset": "paper-as-run", "attack": {"family": "sine"}}, "attack.family: got 'sine'; allowed: one of persistent, intermittent, knots"),
+])
+def test_a_bad_preset_is_one_line(doc, message):
+    from d4sumo.inputs import campaign_of
+
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        campaign_of(doc)

@@ -1,7 +1,8 @@
 """Verdict invariants over many random episodes, checked against SUMO's own FCD output.
 
 Plays N random episodes (on the shipped 4-lane highway and on roads of several edges: a speed change,
-a lane drop, a curve; every attack family, every start mode, setpoints with and without fractional
+a lane drop, a curve; one in five with the paper-as-run preset, its controllers, families and scenario,
+some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
 target follower, offset, obstacle and lane change duration), each scored and stored exactly as a
@@ -43,6 +44,7 @@ from sumolib.xml import parse_fast_nested
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.errors import ConfigError
+from d4sumo.inputs import campaign_of
 from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
@@ -75,6 +77,8 @@ def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
 def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     setpoint = float(rng.choice([rng.integers(2, 16), round(rng.uniform(2, 15), 1), rng.uniform(2, 15)]))
     followers = int(rng.integers(1, 11))
+    if rng.random() < 0.2:  # the paper as its authors ran it, sometimes with a coasting car
+        return _as_run_episode(rng, setpoint, followers)
     systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
     maneuver = lane_change(rng, followers) if rng.random() < 0.25 else {}
     config = EpisodeConfig(
@@ -91,6 +95,16 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     # with one follower the paper's psi is undefined: score the attacker's gap instead
     formula = None if config.followers >= 2 or config.maneuver != "inlane" else "always(gap_0 > 0)"
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
+    f = campaign.family()
+    return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
+
+
+def _as_run_episode(rng: np.random.Generator, setpoint: float, followers: int) -> tuple[Campaign, np.ndarray]:
+    """An episode of the paper-as-run preset: the authors' controllers, attack families and scenario."""
+    doc = {"preset": "paper-as-run", "attack": {"family": str(rng.choice(["persistent", "intermittent", "knots"]))},
+           "scenario": {"setpoint_m": setpoint, "followers": max(2, followers), "network": str(rng.choice(STRAIGHT))},
+           "vehicle": {"coast_decel_mps2": float(rng.choice([0.0, 0.0, 1.0, 2.0]))}, "search": {"optimizer": "random"}}
+    campaign = campaign_of(doc)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
 
@@ -154,7 +168,7 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     # an independent look: SUMO's FCD file
     episode = simulate(config, evaluator.plan(row.params), road=evaluator.road)
     if (config.followers >= 2 and config.maneuver == "inlane"
-            and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step)) - row.robustness) > 1e-9):
+            and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step), campaign.d_safe_m) - row.robustness) > 1e-9):
         broken.append("rtamt/numpy psi")
     road = evaluator.road
     positions, y = read_fcd(fcd, config.vehicle_ids, road.one_edge)
@@ -174,7 +188,9 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         if last.get(c["pair"], np.inf) > FCD_TOLERANCE_M or row.min_gaps[c["pair"]] >= 0:
             broken.append("collision pair/gap")
     elif len(episode.trace) != config.steps + 1:
-        broken.append("no collision but the episode ended early")
+        x = episode.trace["pos_v0"]  # only the end distance may end it early: the attacker there, not before
+        if not (config.end_distance_m and x[-1] - x[0] >= config.end_distance_m > x[-2] - x[0]):
+            broken.append("no collision but the episode ended early")
     return broken
 
 

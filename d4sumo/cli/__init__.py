@@ -55,6 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for dest, key in FLAG_KEYS.items():
         if getattr(args, dest, None) is not None:
             flags[key] = "--" + dest.replace("_", "-")
+    if getattr(args, "preset", None) is not None:
+        flags["preset"] = "--preset"
     if getattr(args, "knots", None) is not None:
         flags.update({"attack.params": "--knots", "attack.family": "--knots"})
     elif getattr(args, "attack", None) is not None and args.command == "simulate":

@@ -65,6 +65,8 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
     from ..inputs import read_document, with_overrides
 
     doc = read_document(args.config) if getattr(args, "config", None) else {}
+    if getattr(args, "preset", None) is not None:
+        doc["preset"] = args.preset
     flags: dict[str, Any] = {}
     for dest, key in FLAG_KEYS.items():
         value = getattr(args, dest, None)

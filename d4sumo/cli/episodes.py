@@ -31,7 +31,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ..inputs import attack_of, episode_config
     from ..search.spec import Specification
 
-    doc, _ = document(args)
+    from ..presets import apply_preset
+
+    doc = apply_preset(document(args)[0])  # the spec's values too
     config = episode_config(doc)
     family, params = attack_of(doc)
     spec_table = doc.get("spec", {})

@@ -26,6 +26,8 @@ class Parser(argparse.ArgumentParser):
 def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scenario (flags override the config file)")
     g.add_argument("--config", type=Path, help="TOML config file ([scenario], [vehicle], [controller], [attack], [spec], [search])")
+    g.add_argument("--preset", help="a bundle of options under the file and the flags: paper-as-run (the paper as its "
+                                    "authors' code ran it, with --attack persistent, intermittent or knots)")
     g.add_argument("--network", help="scenario variant (see `d4sumo scenarios`) or a folder [highway_4lane]")
     g.add_argument("--followers", type=int, help="followers behind the attacker, 1..10 [3]")
     g.add_argument("--setpoint", type=float, help="bumper-to-bumper setpoint distance d in m [7]")

@@ -73,7 +73,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         return pairs
 
     batch = None
-    if m > detach_at and detach_at_step != 0:
+    end_m = config.end_distance_m  # an episode also ends once its attacker is this far from its start
+    if m > detach_at and detach_at_step != 0 and not config.as_run:  # the arrays play the model as printed
         batch = PlatoonBatch(configs, np.array([p.u for p in plans]), attacker_max_speed_mps=max_speed)
         arrayed = list(range(m))  # still commanded by the batch's arrays
         active = np.ones(m, dtype=bool)
@@ -171,6 +172,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             collisions = collisions_at(time_s, pairs, x, v, names)
             if collisions:
                 end(alone.e, k + 1, collisions)
+            elif end_m and x[0] - alone.xs[0][0] >= end_m:
+                end(alone.e, k + 1, ())
         if arrayed:
             if len(arrayed) == m:
                 rows_x[k + 1] = np.array([get_position(v) for v in sensed]).reshape(m, n)

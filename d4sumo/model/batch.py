@@ -84,7 +84,7 @@ class PlatoonBatch:
         episode_followers = [rows_followers[id(c)] for c in configs]
         gains = cruise_params(config)
         speeds = [c.speed_mps for c in configs]  # the target speed of each episode
-        self.attacker_cruise = CruiseArray(gains, per_row(speeds, (m,)), dt, (m,))
+        self.attacker_cruise = CruiseArray(gains, per_row([c.attacker_cruise_mps for c in configs], (m,)), dt, (m,))
         self._command = CommandArray(vehicle)
         self._attacking = np.zeros(m, dtype=bool)
         others = list(range(n, len(self.ids)))

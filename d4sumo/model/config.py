@@ -7,6 +7,7 @@ from SPEC section 1); `inputs` reads the whole file, flags included.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +15,7 @@ from typing import Any, Mapping
 
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
-from .control import ControllerImportError, NotImported, VehicleParams, build_params, resolve_controller, user_module
+from .control import AS_RUN_DEFAULTS, ControllerImportError, NotImported, SwitchingParams, VehicleParams, build_params, resolve_controller, user_module
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
@@ -72,7 +73,12 @@ class ControllerConfig:
         return build_params(self.controller_class(), dict(self.params))
 
     def to_dict(self) -> dict:
-        return {"class": self.cls, **dict(self.params)}
+        """As a definition stores it: the authors' code's options only where they differ from the paper's
+        text (`control.AS_RUN_DEFAULTS`), so campaigns stored before them keep their identity."""
+        params = dict(self.params)
+        if not self.sumo_model:
+            params = {k: v for k, v in params.items() if not (k in AS_RUN_DEFAULTS and v == AS_RUN_DEFAULTS[k])}
+        return {"class": self.cls, **params}
 
     @property
     def label(self) -> str:
@@ -121,6 +127,12 @@ class EpisodeConfig:
     lane_change_s: float = 2.0  # cutin/cutout: how long SUMO takes to move the attacker across (0: in one step)
     obstacle_distance_m: float = 150.0  # cutout: bumper gap from the attacker to the car ahead of it at t = 0
     obstacle_speed_mps: float = 0.0  # cutout: the constant speed of that car (0: stopped)
+    #: the attacker cruises (before its attack and between windows) at the target speed plus this; the
+    #: authors' parametric scenarios: -5 m/s
+    attacker_cruise_offset_mps: float = 0.0
+    #: the episode ends, without a collision, once the attacker is this far from its start (0: never);
+    #: the authors' scenarios: 760 m
+    end_distance_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -168,6 +180,9 @@ class EpisodeConfig:
                                                 "metres", low_open=True))
         fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,
                                                f"m/s (at most the target speed, {self.speed_mps:g})"))
+        fix("attacker_cruise_offset_mps", check_number("scenario.attacker_cruise_offset_mps", self.attacker_cruise_offset_mps,
+                                                       -self.speed_mps, 30.0, f"m/s (the attacker cruises at {self.speed_mps:g} + this, at least 0)"))
+        fix("end_distance_m", check_number("scenario.end_distance_m", self.end_distance_m, 0.0, 1e5, "metres (0: never)"))
         self.maneuver_class.check(self)
 
     @property
@@ -187,6 +202,19 @@ class EpisodeConfig:
     @property
     def total_s(self) -> float:
         return self.steps * self.step_s
+
+    @property
+    def attacker_cruise_mps(self) -> float:
+        """The speed the attacker cruises at where it does not attack."""
+        return self.speed_mps + self.attacker_cruise_offset_mps if self.attacker_cruise_offset_mps else self.speed_mps
+
+    @functools.cached_property
+    def as_run(self) -> bool:
+        """Whether the episode runs any of the authors' code's options that the batch's arrays do not play
+        (its controllers, a coasting car, a slower attacker, an end distance): its platoons are then
+        commanded one by one, side by side in one SUMO all the same."""
+        return (any(isinstance(p := c.build_params(), SwitchingParams) and p.as_run for c in self.controllers if not c.sumo_model)
+                or bool(self.vehicle.coast_decel_mps2 or self.attacker_cruise_offset_mps or self.end_distance_m))
 
     @property
     def controllers(self) -> tuple[ControllerConfig, ...]:
@@ -229,9 +257,12 @@ class EpisodeConfig:
             del scenario["attacker_declared_decel_mps2"]
         for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
             del scenario[key]  # a maneuver's settings have no effect on another
+        for key in ("attacker_cruise_offset_mps", "end_distance_m"):  # stored where set: earlier campaigns keep their identity
+            if not scenario[key]:
+                del scenario[key]
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
-        return {"scenario": scenario, "vehicle": dataclasses.asdict(self.vehicle), "controller": controller}
+        return {"scenario": scenario, "vehicle": self.vehicle.to_dict(), "controller": controller}
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":

@@ -42,11 +42,24 @@ class VehicleParams:
     max_accel_mps2: float = 3.5  # at full throttle, u = +1
     max_decel_mps2: float = 8.0  # at full brake, u = -1 (a positive number)
     actuator_lag_s: float = 0.5  # first-order lag between command and acceleration
+    #: a moving car's deceleration with no pedal (engine braking, drag, rolling resistance), added to what
+    #: the pedal asks for; 0: none (the model as printed). Not a calibration of any car: CARLA's figures
+    #: are not in the authors' code.
+    coast_decel_mps2: float = 0.0
 
     def __post_init__(self) -> None:
         for name, low, high, unit in (("length_m", 0.5, 30.0, "metres"), ("max_accel_mps2", 0.1, 20.0, "m/s^2"),
-                                      ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds")):
+                                      ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds"),
+                                      ("coast_decel_mps2", 0.0, 5.0, "m/s^2 (positive)")):
             object.__setattr__(self, name, check_number(f"vehicle.{name}", getattr(self, name), low, high, unit))
+
+    def to_dict(self) -> dict:
+        """As a definition stores it: the coasting deceleration only where there is one (campaigns stored
+        before it keep their identity)."""
+        d = dataclasses.asdict(self)
+        if not d["coast_decel_mps2"]:
+            del d["coast_decel_mps2"]
+        return d
 
 
 def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:
@@ -67,7 +80,7 @@ class Actuator:
     the sensed speed, so the simulator stays the single source of the car's state.
     """
 
-    __slots__ = ("accel_max", "decel_max", "alpha", "step_s", "max_speed_mps", "accel_mps2")
+    __slots__ = ("accel_max", "decel_max", "alpha", "step_s", "max_speed_mps", "accel_mps2", "coast")
 
     def __init__(self, vehicle: VehicleParams, step_s: float, max_speed_mps: float = math.inf):
         self.accel_max = vehicle.max_accel_mps2
@@ -77,12 +90,14 @@ class Actuator:
         self.step_s = step_s
         self.max_speed_mps = max_speed_mps
         self.accel_mps2 = 0.0
+        self.coast = vehicle.coast_decel_mps2
 
     def apply(self, u: float, speed_mps: float) -> float:
         """Hold command u for one step from ``speed_mps``; return the speed at the step's end [m/s]."""
         target = u * self.accel_max if u >= 0.0 else u * self.decel_max
         self.accel_mps2 += (target - self.accel_mps2) * self.alpha
-        v = speed_mps + self.accel_mps2 * self.step_s
+        drag = self.coast if speed_mps > 0.0 else 0.0  # a standing car does not roll back
+        v = speed_mps + (self.accel_mps2 - drag) * self.step_s if drag else speed_mps + self.accel_mps2 * self.step_s
         if v < 0.0:  # brakes stop the car, they never reverse it
             v = 0.0
         elif v > self.max_speed_mps:
@@ -91,13 +106,23 @@ class Actuator:
             return v
         # Clamped: the drivetrain's acceleration is what the car actually did, so the lag does not
         # wind up while the car stands still or rides the speed limit.
-        self.accel_mps2 = (v - speed_mps) / self.step_s
+        self.accel_mps2 = (v - speed_mps) / self.step_s + drag
         return v
+
+
+SWITCHING_RULES = ("eq1", "code")
+CRUISE_PIDS = ("d4sumo", "code")
+LOW_LEVELS = ("exact", "pid")
 
 
 @dataclass(frozen=True)
 class SwitchingParams:
-    """Gains of the paper's switching controller; defaults from the authors' public code."""
+    """Gains of the paper's switching controller; defaults from the authors' public code.
+
+    The options after the gains are how the authors' code ran it where it differs from the paper's text
+    (their defaults: the text, as d4sumo always ran it). A campaign's definition holds them only where
+    they differ from the defaults (`AS_RUN_DEFAULTS`), so campaigns stored before them keep their identity.
+    """
 
     cruise_kp: float = 0.4  # [1/s] (m/s^2 per m/s of speed error)
     cruise_ki: float = 0.01  # [1/s^2]
@@ -108,11 +133,61 @@ class SwitchingParams:
     acc_kv: float = 2.1599  # [1/s] (m/s^2 per m/s of speed difference)
     eps_x_m: float = 1.0  # hysteresis on the gap
     eps_v_mps: float = 1.0  # hysteresis on the speed
+    #: "eq1": the paper's Eq. 1; "code": ACC engages within d + engage_margin_m when the car ahead is
+    #: slower than the target speed, and lets go beyond d + engage_margin_m + release_margin_m or when
+    #: the car ahead is faster than the target speed + eps_v_mps
+    switching_rule: str = "eq1"
+    engage_margin_m: float = 25.0
+    release_margin_m: float = 10.0
+    #: "d4sumo": rectangle-rule integral, derivative of the raw error; "code": the authors' PID, a
+    #: trapezoid-rule integral and the derivative of the error filtered with time constant cruise_filter_s
+    cruise_pid: str = "d4sumo"
+    cruise_filter_s: float = 1.0
+    #: from the wanted acceleration to the pedal: "exact" (its inverse map); "pid": the authors' second PID
+    #: on (wanted - measured acceleration), its integral starting at low_integral_init, clamped at
+    #: low_integral_clamp, its output at [-1, 1]
+    low_level: str = "exact"
+    low_kp: float = 0.1
+    low_ki: float = 0.1
+    low_kd: float = 0.005
+    low_integral_init: float = 5.0
+    low_integral_clamp: float = 10.0
+    control_period_s: float = 0.0  # the controller acts this often, holding its command between (0: every step)
+    first_command_zero: bool = False  # the authors' controllers return no pedal at their first call
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            low = 1e-3 if f.name in ("eps_x_m", "eps_v_mps") else 0.0  # hysteresis wider than the tolerances
-            object.__setattr__(self, f.name, check_number(f"controller.{f.name}", getattr(self, f.name), low, 1e6))
+            value = getattr(self, f.name)
+            field = f"controller.{f.name}"
+            if f.name in _CHOICES:
+                if value not in _CHOICES[f.name]:
+                    raise ConfigError(field, value, f"one of {', '.join(_CHOICES[f.name])}")
+            elif f.name == "first_command_zero":
+                if not isinstance(value, bool):
+                    raise ConfigError(field, value, "true or false")
+            else:
+                low = 1e-3 if f.name in ("eps_x_m", "eps_v_mps") else 0.0  # hysteresis wider than the tolerances
+                object.__setattr__(self, f.name, check_number(field, value, low, 1e6))
+        for choice, chosen, options in (("switching_rule", "code", ("engage_margin_m", "release_margin_m")),
+                                        ("cruise_pid", "code", ("cruise_filter_s",)),
+                                        ("low_level", "pid", ("low_kp", "low_ki", "low_kd", "low_integral_init", "low_integral_clamp"))):
+            for option in options:  # an option the chosen rule does not read is a mistake, not a no-op
+                if getattr(self, choice) != chosen and getattr(self, option) != AS_RUN_DEFAULTS[option]:
+                    raise ConfigError(f"controller.{option}", getattr(self, option),
+                                      f"an option of {choice} = \"{chosen}\" (this controller's {choice} is \"{getattr(self, choice)}\")")
+
+    @property
+    def as_run(self) -> bool:
+        """Whether any of the authors' code's options differs from the paper's text."""
+        return any(getattr(self, k) != v for k, v in AS_RUN_DEFAULTS.items())
+
+
+_CHOICES = {"switching_rule": SWITCHING_RULES, "cruise_pid": CRUISE_PIDS, "low_level": LOW_LEVELS}
+#: the authors' code's options and their defaults (the paper's text): stored only where they differ
+AS_RUN_DEFAULTS = {f.name: f.default for f in dataclasses.fields(SwitchingParams)
+                   if f.name in ("switching_rule", "engage_margin_m", "release_margin_m", "cruise_pid", "cruise_filter_s",
+                                 "low_level", "low_kp", "low_ki", "low_kd", "low_integral_init", "low_integral_clamp",
+                                 "control_period_s", "first_command_zero")}
 
 
 class CruiseControl:
@@ -145,6 +220,44 @@ class CruiseControl:
         self.prev_error = e
         a = self.kp * e + self.ki * i + self.kd * d
         return self.limit if a > self.limit else (-self.limit if a < -self.limit else a)
+
+
+class CodePID:
+    """The authors' PID (their controllers/pid.py), for their cruise control and their low-level control.
+
+    Each call: the error is filtered (first order, time constant ``filter_s``; 0: unfiltered); from the
+    second call on the integral adds the trapezoid of the last two errors (clamped at +/- ``clamp``) and
+    the derivative is the filtered error's difference over the period; at the first call the derivative
+    is 0 and the integral is its initial value. Output: Kp e + Kd de + Ki ie, clipped to +/- ``limit``.
+    """
+
+    __slots__ = ("kp", "ki", "kd", "period_s", "filter_s", "clamp", "limit", "integral", "prev_error", "filtered",
+                 "prev_filtered")
+
+    def __init__(self, kp: float, ki: float, kd: float, period_s: float, *, filter_s: float = 0.0,
+                 clamp: float = 20.0, limit: float = 1.0, integral: float = 0.0):
+        self.kp, self.ki, self.kd, self.period_s = kp, ki, kd, period_s
+        self.filter_s, self.clamp, self.limit = filter_s, clamp, limit
+        self.integral = integral
+        self.prev_error: float | None = None
+        self.filtered = 0.0
+        self.prev_filtered = 0.0
+
+    def step(self, error: float) -> float:
+        self.prev_filtered = self.filtered
+        if self.filter_s > 0.0:
+            self.filtered = self.period_s / self.filter_s * (error - self.filtered) + self.filtered
+        else:
+            self.filtered = error
+        if self.prev_error is None:
+            de = 0.0
+        else:
+            de = (self.filtered - self.prev_filtered) / self.period_s
+            i = self.integral + (error + self.prev_error) * self.period_s / 2.0
+            self.integral = self.clamp if i > self.clamp else (-self.clamp if i < -self.clamp else i)
+        self.prev_error = error
+        out = self.kp * error + self.kd * de + self.ki * self.integral
+        return self.limit if out > self.limit else (-self.limit if out < -self.limit else out)
 
 
 class FollowerController(Protocol):
@@ -191,6 +304,29 @@ class SwitchingController:
         self._acc_speed = target_speed_mps + SPEED_TOLERANCE_MPS
         self._acc_kp, self._acc_kv = params.acc_kp, params.acc_kv
         self._accel_max, self._decel_max = vehicle.max_accel_mps2, vehicle.max_decel_mps2
+        self._as_run = params.as_run
+        if self._as_run:
+            self._as_run_setup(params, target_speed_mps, step_s)
+
+    def _as_run_setup(self, params: SwitchingParams, target_speed_mps: float, step_s: float) -> None:
+        """The authors' code's options (`SwitchingParams`): its rule, its PIDs, its control period."""
+        period = params.control_period_s or step_s
+        self._every = max(1, int(round(period / step_s)))  # steps between two actions
+        self._period_s = self._every * step_s
+        self._calls = 0
+        self._held = 0.0
+        self._prev_speed: float | None = None
+        if params.cruise_pid == "code":
+            self._code_cruise = CodePID(params.cruise_kp, params.cruise_ki, params.cruise_kd, self._period_s,
+                                        filter_s=params.cruise_filter_s, clamp=params.cruise_integral_clamp,
+                                        limit=params.cruise_output_limit_mps2)
+        else:
+            self.cruise = CruiseControl(params, target_speed_mps, self._period_s)
+        if params.low_level == "pid":
+            self._low = CodePID(params.low_kp, params.low_ki, params.low_kd, self._period_s,
+                                clamp=params.low_integral_clamp, limit=1.0, integral=params.low_integral_init)
+        self._engage_m = params.engage_margin_m
+        self._release_m = params.engage_margin_m + params.release_margin_m
 
     def desired_gap_m(self, speed_mps: float) -> float:
         """The gap the ACC keeps: the setpoint d (Eq. 1)."""
@@ -219,10 +355,68 @@ class SwitchingController:
         return self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        if self._as_run:
+            return self.command_as_run(gap_m, speed_mps, lead_speed_mps)
         # acceleration_to_command inlined: this runs for every follower at every step
         a = self.desired_acceleration(gap_m, speed_mps, lead_speed_mps)
         u = a / self._accel_max if a >= 0.0 else a / self._decel_max
         return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+
+    # --- as the authors' code ran it ----------------------------------------------------------------
+
+    def _select_mode_code(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        """The code's rule (comparisons within the tolerances count as at the threshold, not past it)."""
+        d = self.desired_gap_m(speed_mps)
+        if self.mode == MODE_CC:
+            if gap_m < d + self._engage_m - GAP_TOLERANCE_M and lead_speed_mps < self.target_speed_mps - SPEED_TOLERANCE_MPS:
+                self.mode = MODE_ACC
+        elif gap_m > d + self._release_m + GAP_TOLERANCE_M or lead_speed_mps > self._cc_speed + 2 * SPEED_TOLERANCE_MPS:
+            self.mode = MODE_CC
+        self._mode_known = True
+        return self.mode
+
+    def command_as_run(self, gap_m: float, speed_mps: float, lead_speed_mps: float, act: bool = True) -> float | None:
+        """One call of the authors' controller (every step; it acts once a control period and holds its
+        pedal between). ``act`` False: at a control step whose pedal someone else sets (their attacker
+        attacking), it only measures and returns None; the caller then sets ``held``."""
+        calls = self._calls
+        self._calls = calls + 1
+        if calls % self._every:
+            return self._held  # between two actions the pedal holds
+        p = self.params
+        # the measured acceleration: the speed's change over the last control period
+        measured = 0.0 if self._prev_speed is None else (speed_mps - self._prev_speed) / self._period_s
+        self._prev_speed = speed_mps
+        if calls == 0 and p.first_command_zero:
+            self._held = 0.0
+            return 0.0
+        if not act:
+            return None
+        if p.switching_rule == "code":
+            mode = self._select_mode_code(gap_m, speed_mps, lead_speed_mps)
+        else:
+            mode = self.select_mode(gap_m, speed_mps)
+        if mode == MODE_ACC:
+            a = self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps)
+        elif p.cruise_pid == "code":
+            a = self._code_cruise.step(self.target_speed_mps - speed_mps)
+        else:
+            a = self.cruise.acceleration(speed_mps)
+        if p.low_level == "pid":
+            u = self._low.step(a - measured)
+        else:
+            u = a / self._accel_max if a >= 0.0 else a / self._decel_max
+            u = 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
+        self._held = u
+        return u
+
+    @property
+    def held(self) -> float:
+        return self._held
+
+    @held.setter
+    def held(self, u: float) -> None:
+        self._held = u
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
-from .control import Actuator, CruiseControl, SwitchingParams, acceleration_to_command
+from .control import Actuator, CruiseControl, SwitchingController, SwitchingParams, acceleration_to_command
 from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 
@@ -129,7 +129,13 @@ class Platoon:
         vehicle, dt = config.vehicle, config.step_s
         self.followers = followers or followers_of(config)  # given: an episode carried on from a batch
         gains = cruise_params(config)  # the attacker is the same kind of car
-        self.attacker_cruise = CruiseControl(gains, config.speed_mps, dt)
+        self.attacker_cruise = CruiseControl(gains, config.attacker_cruise_mps, dt)
+        #: with the authors' code's options the attacker cruises as their code has it: their follower
+        #: controller with nobody ahead (its own PIDs, never reset)
+        self._attacker_as_run = (SwitchingController(gains, setpoint_m=config.setpoint_m, target_speed_mps=config.attacker_cruise_mps,
+                                                     vehicle=vehicle, step_s=dt) if gains.as_run else None)
+        # ... and plays its attack as their controller does: a new pedal each control period
+        self._attacker_every = max(1, int(round((gains.control_period_s or dt) / dt)))
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
         n = config.followers + 1
         #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
@@ -151,7 +157,12 @@ class Platoon:
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
         u = self.attack_u[k]
-        if u != u:  # NaN: no attack here, the attacker cruises like everyone else
+        if self._attacker_as_run is not None:  # the authors' attacker: their controller on a free road, or its attack
+            attack = self.attack_u[k - k % self._attacker_every]  # the attack's pedal at this control period's start
+            u = self._attacker_as_run.command_as_run(FREE_ROAD_GAP_M, speeds[0], speeds[0], act=attack != attack)
+            if u is None:  # attacking: the attack sets the pedal, and holds it for the period
+                u = self._attacker_as_run.held = attack
+        elif u != u:  # NaN: no attack here, the attacker cruises like everyone else
             if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
                 self.attacker_cruise.reset()
                 self._attacking = False

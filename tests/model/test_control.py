@@ -201,3 +201,94 @@ def test_the_time_gap_controller_wants_more_room_the_faster_it_goes():
     assert c.command(7.0, 20.0, 20.0) < 0.0 and c.mode == MODE_ACC
     assert c.desired_gap_m(20.0) == pytest.approx(27.0)
     assert ControllerConfig("timegap", (("time_gap_s", 1.5),)).label == "timegap(time_gap_s=1.5)"
+
+
+# --- the controller as the authors' code ran it (its options; values computed by hand) ------------
+
+
+def test_the_authors_pid_starts_with_its_initial_integral_and_integrates_by_trapezoids():
+    """Low-level PID at commit d458f6c: Kp 0.1, Ki 0.1, Kd 0.005, integral from 5, clamped at 10."""
+    from d4sumo.model.control import CodePID
+
+    pid = CodePID(0.1, 0.1, 0.005, 0.1, clamp=10.0, limit=1.0, integral=5.0)
+    assert pid.step(0.0) == pytest.approx(0.5)  # Ki x 5 of throttle before any error
+    pid = CodePID(0.1, 0.1, 0.005, 0.1, clamp=10.0, limit=1.0, integral=5.0)
+    assert pid.step(2.0) == pytest.approx(0.1 * 2 + 0.1 * 5)  # first call: no derivative, the integral as it starts
+    # then de = (1 - 2) / 0.1 = -10, integral 5 + (1 + 2) 0.1 / 2 = 5.15
+    assert pid.step(1.0) == pytest.approx(0.1 * 1 + 0.005 * -10 + 0.1 * 5.15)
+    saturated = CodePID(0.0, 1.0, 0.0, 0.1, clamp=10.0, limit=100.0, integral=9.9)
+    saturated.step(5.0)
+    assert saturated.step(5.0) == pytest.approx(10.0)  # 9.9 + 0.5, clamped at 10
+
+
+def test_the_authors_cruise_pid_takes_the_derivative_of_the_error_filtered_over_1_s():
+    from d4sumo.model.control import CodePID
+
+    pid = CodePID(0.4, 0.01, 0.1, 0.1, filter_s=1.0, clamp=20.0, limit=3.0)
+    assert pid.step(5.0) == pytest.approx(2.0)  # filtered 0.5, no derivative yet
+    # filtered 0.1 (5 - 0.5) + 0.5 = 0.95; de = (0.95 - 0.5) / 0.1 = 4.5; integral (5 + 5) 0.1 / 2 = 0.5
+    assert pid.step(5.0) == pytest.approx(0.4 * 5 + 0.1 * 4.5 + 0.01 * 0.5)
+    assert pid.step(50.0) == 3.0  # the output clipped at 3 m/s^2
+
+
+def _code_controller(**options):
+    from d4sumo.model.control import SwitchingController, SwitchingParams, VehicleParams
+
+    params = SwitchingParams(switching_rule="code", **options)
+    return SwitchingController(params, setpoint_m=7.0, target_speed_mps=20.0, vehicle=VehicleParams(), step_s=0.05)
+
+
+@pytest.mark.parametrize("mode, gap, lead, expected", [
+    (MODE_CC, 31.9, 19.0, MODE_ACC),   # within d + 25 and the car ahead slower than 20 m/s: ACC
+    (MODE_CC, 32.0, 19.0, MODE_CC),    # d + 25 is not within
+    (MODE_CC, 10.0, 20.0, MODE_CC),    # the car ahead at the target speed is not slower
+    (MODE_CC, 10.0, 25.0, MODE_CC),
+    (MODE_ACC, 42.0, 19.0, MODE_ACC),  # hysteresis: ACC holds up to d + 25 + 10
+    (MODE_ACC, 42.1, 19.0, MODE_CC),
+    (MODE_ACC, 20.0, 21.0, MODE_ACC),  # the car ahead at v_d + 1 does not release it
+    (MODE_ACC, 20.0, 21.1, MODE_CC),
+    (MODE_ACC, 35.0, 20.5, MODE_ACC),  # between the edges the mode stays
+])
+def test_the_authors_switching_rule_engages_and_releases_at_its_edges(mode, gap, lead, expected):
+    c = _code_controller()
+    c.mode = mode
+    assert c._select_mode_code(gap, 15.0, lead) == expected
+
+
+def test_the_authors_controller_gives_no_pedal_first_and_acts_once_a_control_period():
+    c = _code_controller(first_command_zero=True, control_period_s=0.1, cruise_pid="code", low_level="pid")
+    assert c.command(100.0, 0.0, 0.0) == 0.0  # its first call
+    assert c.command(100.0, 0.0, 0.0) == 0.0  # held for the second step of the period
+    u = c.command(100.0, 0.0, 0.0)  # cruising from rest: cruise PID 0.4 x 20 clipped at 3 m/s^2, low-level PID
+    assert u == pytest.approx(0.1 * 3.0 + 0.1 * 5.0) and c.command(100.0, 0.05, 0.0) == u  # acts, then holds
+
+
+def test_an_option_the_chosen_rule_does_not_read_is_refused():
+    from d4sumo.model.control import SwitchingParams
+
+    with pytest.raises(ConfigError, match='controller.engage_margin_m: got 30.0; allowed: an option of switching_rule = "code"'):
+        SwitchingParams(engage_margin_m=30.0)
+    with pytest.raises(ConfigError, match='controller.low_ki: got 0.35; allowed: an option of low_level = "pid"'):
+        SwitchingParams(low_ki=0.35)
+    with pytest.raises(ConfigError, match="controller.switching_rule: got 'eq2'; allowed: one of eq1, code"):
+        SwitchingParams(switching_rule="eq2")
+    assert not SwitchingParams().as_run and SwitchingParams(low_level="pid").as_run
+
+
+def test_the_authors_options_are_stored_only_where_they_differ_from_the_paper():
+    """A campaign stored before them keeps its identity: its definition has none of them."""
+    from d4sumo.model.config import ControllerConfig
+
+    assert set(ControllerConfig("switching").to_dict()) == {"class", "cruise_kp", "cruise_ki", "cruise_kd", "cruise_integral_clamp",
+                                                           "cruise_output_limit_mps2", "acc_kp", "acc_kv", "eps_x_m", "eps_v_mps"}
+    assert ControllerConfig("switching", (("low_level", "pid"),)).to_dict()["low_level"] == "pid"
+
+
+def test_a_coasting_car_slows_with_no_pedal_and_a_standing_one_does_not_roll_back():
+    from d4sumo.model.control import VehicleParams
+
+    actuator = Actuator(VehicleParams(coast_decel_mps2=2.0, actuator_lag_s=0.0), 0.05)
+    assert actuator.apply(0.0, 10.0) == pytest.approx(10.0 - 2.0 * 0.05)
+    assert actuator.apply(0.0, 0.0) == 0.0
+    assert actuator.apply(1.0, 10.0) == pytest.approx(10.0 + (3.5 - 2.0) * 0.05)  # the drag acts under throttle too
+    assert "coast_decel_mps2" not in VehicleParams().to_dict() and VehicleParams(coast_decel_mps2=1.0).to_dict()["coast_decel_mps2"] == 1.0

@@ -1,0 +1,67 @@
+"""Presets: named bundles of options laid under an input document (`preset = "paper-as-run"` in a config
+or sweep file, `--preset` on the command line). What the document itself sets wins; a campaign stores
+the options resolved, so it never depends on what a preset means in a later version.
+
+``paper-as-run`` is the paper as its authors' code ran it (the paper's tables came from that code,
+which differs from its text; `SwitchingParams` and the ``*-coded`` attack families say how): their
+switching rule, cruise PID and low-level PID, a 0.1 s control period and no pedal at the first call;
+starts from rest; the attack families as coded; their episode lengths and end at 760 m; their scoring
+distance (5 m between centres of 4.95 m cars: a 0.05 m bumper gap). With ``--attack persistent`` or
+``intermittent`` (their parametric scenarios, commit d458f6c) the followers' target speed is 20 m/s and
+the attacker cruises 5 m/s slower until it attacks; with ``knots`` (their HEAD) the attack plays from
+the first step and the low-level gains are HEAD's.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, Mapping
+
+from .errors import ConfigError
+
+#: the authors' follower controller at commit d458f6c (the parametric attacks)
+_CODE_CONTROLLER = {"switching_rule": "code", "cruise_pid": "code", "low_level": "pid", "control_period_s": 0.1,
+                    "first_command_zero": True, "low_kp": 0.1, "low_ki": 0.1, "low_kd": 0.005}
+_COMMON = {"scenario": {"start": "rest", "end_distance_m": 760.0}, "spec": {"d_safe_m": 0.05}}
+#: per attack family named: the family as coded and what its scenario files set
+PAPER_AS_RUN = {
+    "persistent": {"attack": {"family": "persistent-coded"}, "controller": _CODE_CONTROLLER,
+                   "scenario": {"speed_mps": 20.0, "duration_s": 25.0, "attacker_cruise_offset_mps": -5.0}},
+    "intermittent": {"attack": {"family": "intermittent-coded"}, "controller": _CODE_CONTROLLER,
+                     "scenario": {"speed_mps": 20.0, "duration_s": 40.0, "attacker_cruise_offset_mps": -5.0}},
+    "knots": {"attack": {"family": "knots-coded"}, "controller": {**_CODE_CONTROLLER, "low_kp": 0.06, "low_ki": 0.35, "low_kd": 0.006},
+              "scenario": {"duration_s": 40.0}},
+}
+PRESETS = ("paper-as-run",)
+
+
+def apply_preset(doc: Mapping[str, Any]) -> dict:
+    """The document with its preset's options laid under it (the document's own values win), its attack
+    family mapped to the family as coded; a document without a preset, unchanged."""
+    doc = copy.deepcopy(dict(doc))
+    name = doc.pop("preset", None)
+    if name is None:
+        return doc
+    if name not in PRESETS:
+        raise ConfigError("preset", name, f"one of {', '.join(PRESETS)}")
+    family = doc.get("attack", {}).get("family", "knots")
+    if family not in PAPER_AS_RUN:
+        coded = tuple(f"{f}-coded" for f in PAPER_AS_RUN)
+        if family in coded:  # named as coded already
+            family = family.removesuffix("-coded")
+        else:
+            raise ConfigError("attack.family", family, f"one of {', '.join(PAPER_AS_RUN)} with preset {name} "
+                                                       "(the families the authors' code played)")
+    layers = {**_COMMON}
+    for table, values in PAPER_AS_RUN[family].items():
+        layers[table] = {**layers.get(table, {}), **values}
+    for table, values in layers.items():
+        if table == "controller" and isinstance(doc.get("controller"), list):  # a mixed platoon: each follower
+            doc["controller"] = [{**values, **(t if isinstance(t, Mapping) else {"class": t})} for t in doc["controller"]]
+            continue
+        mine = doc.get(table, {})
+        if table == "controller" and isinstance(mine, str):
+            mine = {"class": mine}
+        doc[table] = {**values, **mine}
+    doc["attack"]["family"] = PAPER_AS_RUN[family]["attack"]["family"]  # the family as coded, whatever was named
+    return doc
