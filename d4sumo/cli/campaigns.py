@@ -88,7 +88,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         hit = f", {c['pair']} at {c['time_s']:.2f} s, {c['position_m']:.1f} m, {c['speed_diff_kmh']:.1f} km/h" if c else ""
         print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}{hit}")
         print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
-        print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd best_fcd.xml")
+        print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
     return 0
 
 

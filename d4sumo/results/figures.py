@@ -37,8 +37,10 @@ def check_figure_path(path: str | Path, option: str = "--out") -> Path:
     from matplotlib.backend_bases import FigureCanvasBase
 
     path = Path(path)
-    if not path.parent.is_dir() or path.is_dir():
-        raise ConfigError(option, str(path), "a file in an existing folder")
+    if path.is_dir():
+        raise ConfigError(option, str(path), "a file name (this is a folder)")
+    if not path.parent.is_dir():
+        raise ConfigError(option, str(path), f"a file in an existing folder ({path.parent} does not exist)")
     formats = FigureCanvasBase.get_supported_filetypes()
     if path.suffix.lower().lstrip(".") not in formats:
         raise ConfigError(option, str(path), "an image file: " + ", ".join(f".{f}" for f in sorted(formats)))

@@ -74,7 +74,7 @@ class Sweep:
             raise ConfigError(f"{source}: name", name, "a non-empty string")
         grid = doc.get("grid")
         if not isinstance(grid, dict) or not grid:
-            raise ConfigError(f"{source}: [grid]", grid, f"a table of lists over {', '.join(GRID_KEYS)}")
+            raise ConfigError(f"{source}: [grid]", "missing" if grid is None else grid, f"a table of lists over {', '.join(GRID_KEYS)}")
         for key, values in grid.items():
             if key not in GRID_KEYS:
                 raise ConfigError(f"grid.{key}", values, f"a key of [grid]: {', '.join(GRID_KEYS)}")

@@ -308,7 +308,7 @@ def test_a_figure_in_a_missing_folder_is_refused_and_the_folder_not_created(tmp_
     for kind, extra in [("heatmap", {}), ("time-space", {"sample": 1})]:
         with pytest.raises(ConfigError) as err:  # before any work: the database does not even exist
             plot_figure([tmp_path / "no.sqlite"], kind, out, **extra)
-        assert err.value.field == "--out" and err.value.allowed == "a file in an existing folder"
+        assert err.value.field == "--out" and err.value.allowed == f"a file in an existing folder ({out.parent} does not exist)"
     with pytest.raises(ConfigError):
         figures.heatmap([_record(0)], "successes", out)
     assert not (tmp_path / "missing").exists()
