@@ -167,7 +167,7 @@ def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray |
 
 def campaign_of(doc: Mapping[str, Any]) -> Campaign:
     """The campaign a document describes (the optimiser chooses the attack's parameters)."""
-    doc = apply_preset(doc)
+    doc = apply_preset(doc, campaign=True)
     if "params" in doc.get("attack", {}):
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
     config = episode_config(doc)

@@ -35,16 +35,19 @@ PAPER_AS_RUN = {
 PRESETS = ("paper-as-run",)
 
 
-def apply_preset(doc: Mapping[str, Any]) -> dict:
+def apply_preset(doc: Mapping[str, Any], *, campaign: bool = False) -> dict:
     """The document with its preset's options laid under it (the document's own values win), its attack
-    family mapped to the family as coded; a document without a preset, unchanged."""
+    family mapped to the family as coded; a document without a preset, unchanged. ``campaign``: a
+    campaign's document, whose family is knots when it names none (an episode without one has no attack,
+    in the knot attack's scenario)."""
     doc = copy.deepcopy(dict(doc))
     name = doc.pop("preset", None)
     if name is None:
         return doc
     if name not in PRESETS:
         raise ConfigError("preset", name, f"one of {', '.join(PRESETS)}")
-    family = doc.get("attack", {}).get("family", "knots")
+    named = doc.get("attack", {}).get("family")
+    family = named or "knots"
     if family not in PAPER_AS_RUN:
         coded = tuple(f"{f}-coded" for f in PAPER_AS_RUN)
         if family in coded:  # named as coded already
@@ -63,5 +66,10 @@ def apply_preset(doc: Mapping[str, Any]) -> dict:
         if table == "controller" and isinstance(mine, str):
             mine = {"class": mine}
         doc[table] = {**values, **mine}
-    doc["attack"]["family"] = PAPER_AS_RUN[family]["attack"]["family"]  # the family as coded, whatever was named
+    if named or campaign:
+        doc["attack"]["family"] = PAPER_AS_RUN[family]["attack"]["family"]  # the family as coded, whatever was named
+    else:
+        doc["attack"].pop("family")  # no attack: the attacker cruises
+        if not doc["attack"]:
+            doc.pop("attack")
     return doc
