@@ -71,48 +71,90 @@ def list_scenarios(root: Path | None = None) -> list[str]:
 
 
 def scenario_folder(name: str, root: Path | None = None) -> Path:
-    """The folder of a named variant, or of a path given directly."""
+    """The folder of a named variant, or the folder or ``.net.xml`` file given directly."""
     root = root or SCENARIOS_DIR
     candidates = [root / name] if "/" not in name and os.sep not in name else []
     candidates.append(Path(name))
     for folder in candidates:
+        if folder.is_file() and folder.name.endswith(".net.xml"):
+            return folder.resolve()
         if folder.is_dir() and _inputs(folder, strict=False):
             return folder.resolve()
     names = list_scenarios(root)
-    raise ConfigError("scenario.network", name, f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, or a folder with *.nod.xml and *.edg.xml")
+    raise ConfigError("scenario.network", name, f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, "
+                                                "a folder with *.nod.xml and *.edg.xml, or a *.net.xml")
 
 
-def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | None:
+def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | Path | None:
+    """A variant's node and edge files, or its lone network file."""
     nodes = sorted(folder.glob("*.nod.xml"))
     edges = sorted(folder.glob("*.edg.xml"))
     if len(nodes) == 1 and len(edges) == 1:
         return nodes[0], edges[0]
+    nets = sorted(folder.glob("*.net.xml"))
+    if not nodes and not edges and len(nets) == 1:
+        return nets[0]
     if strict:
-        raise ConfigError("scenario.network", str(folder), "a folder with exactly one *.nod.xml and one *.edg.xml")
+        raise ConfigError("scenario.network", str(folder), "a folder with exactly one *.nod.xml and one *.edg.xml, or one *.net.xml")
     return None
 
 
 @dataclass(frozen=True)
 class NetworkSource:
-    """A variant's node and edge XML, by value: what a road is built from, anywhere."""
+    """A variant's plain XML (nodes, edges, and the connections and types a network file had), by value:
+    what a road is built from, anywhere."""
 
     name: str
     nodes_xml: bytes
     edges_xml: bytes
+    connections_xml: bytes = b""
+    types_xml: bytes = b""
 
     @property
     def digest(self) -> str:
-        return hashlib.sha256(self.nodes_xml + b"\0" + self.edges_xml).hexdigest()[:16]
+        parts = [self.nodes_xml, self.edges_xml] + ([self.connections_xml, self.types_xml]
+                                                   if self.connections_xml or self.types_xml else [])
+        return hashlib.sha256(b"\0".join(parts)).hexdigest()[:16]
 
 
 def network_source(name: str, root: Path | None = None) -> NetworkSource:
-    """The XML of a named variant, or of a folder given directly."""
+    """The XML of a named variant, of a folder given directly, or of a lone network file (netgenerate's,
+    an OSM import's, netconvert's), taken back to plain XML by netconvert."""
     folder = scenario_folder(name, root)
-    nodes, edges = _inputs(folder)
+    found = folder if folder.is_file() else _inputs(folder)
     try:
+        if isinstance(found, Path):
+            return _plain_source(found, folder.name.removesuffix(".net.xml") if folder.is_file() else folder.name)
+        nodes, edges = found
         return NetworkSource(folder.name, nodes.read_bytes(), edges.read_bytes())
     except OSError as exc:
         raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
+
+
+_PLAIN: dict[tuple[str, int, int], NetworkSource] = {}  # a network file, by path, size and time -> its plain XML
+
+
+def _plain_source(net_file: Path, name: str) -> NetworkSource:
+    """A network file as plain node, edge, connection and type XML (netconvert --plain-output-prefix)."""
+    stat = net_file.stat()
+    key = (str(net_file), stat.st_size, stat.st_mtime_ns)
+    if key in _PLAIN:
+        return dataclasses.replace(_PLAIN[key], name=name)
+    binary = sumo_binary("netconvert")
+    with tempfile.TemporaryDirectory() as tmp:
+        prefix = Path(tmp) / "plain"
+        cmd = [binary, "--sumo-net-file", str(net_file), "--plain-output-prefix", str(prefix)]
+        try:
+            result = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        except OSError as exc:
+            raise SumoError(f"netconvert could not run ({binary}): {exc}") from None
+        if result.returncode != 0:
+            raise ConfigError("scenario.network", name, "a network file SUMO loads (netconvert: "
+                              f"{_netconvert_errors(result.stderr or result.stdout, {str(net_file): net_file.name})})")
+        read = lambda ext: prefix.with_suffix(ext).read_bytes() if prefix.with_suffix(ext).is_file() else b""  # noqa: E731
+        source = NetworkSource(name, read(".nod.xml"), read(".edg.xml"), read(".con.xml"), read(".typ.xml"))
+    _PLAIN[key] = source
+    return source
 
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
@@ -148,7 +190,13 @@ def _build_net(source: NetworkSource, net_file: Path, netconvert: str | None = N
         nodes, edges = Path(tmp) / "road.nod.xml", Path(tmp) / "road.edg.xml"
         nodes.write_bytes(source.nodes_xml)
         edges.write_bytes(source.edges_xml)
-        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name)
+        extra = []
+        for data, ext, option in ((source.connections_xml, ".con.xml", "--connection-files"), (source.types_xml, ".typ.xml", "--type-files")):
+            if data:
+                path = Path(tmp) / f"road{ext}"
+                path.write_bytes(data)
+                extra += [option, str(path)]
+        _netconvert(sumo_binary("netconvert", netconvert), nodes, edges, net_file, source.name, extra)
 
 
 #: the largest batch of episodes one SUMO instance plays side by side
@@ -167,20 +215,21 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     if copies == 1:
         return road
     copies = 1 << (copies - 1).bit_length()
-    nodes, edges = _side_by_side(source, copies)
-    copied = NetworkSource(f"{source.name}-x{copies}", nodes, edges)
+    nodes, edges, connections = _side_by_side(source, copies)
+    copied = NetworkSource(f"{source.name}-x{copies}", nodes, edges, connections, source.types_xml)
     net_file = road.net_file.parent / f"{copied.name}-{copied.digest}.net.xml"
     if not net_file.is_file():
         _build_net(copied, net_file)
     return dataclasses.replace(road, net_file=net_file, copies=copies)
 
 
-def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes]:
-    """Node and edge XML of ``copies`` copies of a variant, each shifted in y past the one before."""
+def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes, bytes]:
+    """Node, edge and connection XML of ``copies`` copies of a variant, each shifted in y past the one before."""
     from xml.etree import ElementTree as ET
 
     try:
         nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
+        connections = ET.fromstring(source.connections_xml) if source.connections_xml else None
     except ET.ParseError as exc:
         raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
     ys = [float(n.get("y", 0.0)) for n in nodes.iter("node")]
@@ -191,6 +240,7 @@ def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes]:
         return " ".join(",".join([p[0], repr(float(p[1]) + dy), *p[2:]]) for p in points)
 
     out_nodes, out_edges = ET.Element(nodes.tag, nodes.attrib), ET.Element(edges.tag, edges.attrib)
+    out_connections = ET.Element(connections.tag, connections.attrib) if connections is not None else None
     for j in range(copies):
         prefix, dy = copy_prefix(j), j * spacing
         for node in nodes.iter("node"):
@@ -206,7 +256,12 @@ def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes]:
             if edge.get("shape"):
                 copy.set("shape", shifted(edge.get("shape"), dy))
             copy.extend(list(edge))
-    return ET.tostring(out_nodes), ET.tostring(out_edges)
+        for connection in (connections.iter("connection") if connections is not None else ()):
+            copy = ET.SubElement(out_connections, "connection", dict(connection.attrib))
+            for key in ("from", "to"):
+                copy.set(key, prefix + connection.get(key))
+    return (ET.tostring(out_nodes), ET.tostring(out_edges),
+            ET.tostring(out_connections) if out_connections is not None else b"")
 
 
 def _read_info(path: Path) -> dict | None:
@@ -218,11 +273,12 @@ def _read_info(path: Path) -> dict | None:
     return info if isinstance(info, dict) and "first_edge_m" in info else None
 
 
-def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str) -> None:
+def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str, extra: list[str] | None = None) -> None:
     # Build into a temporary file and rename, so parallel workers never read a half-written net.
     fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".net.xml")
     os.close(fd)
-    cmd = [binary, "--node-files", str(nodes), "--edge-files", str(edges), "--output-file", tmp, "--no-turnarounds", "true"]
+    cmd = [binary, "--node-files", str(nodes), "--edge-files", str(edges), "--output-file", tmp, "--no-turnarounds", "true",
+           *(extra or [])]
     log.info("building %s with netconvert", out.name)
     try:
         result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)

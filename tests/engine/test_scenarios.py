@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -68,3 +69,47 @@ def test_a_road_of_several_edges_counts_only_the_lanes_that_lead_on_through_ever
                                              '<edge id="e2" from="b" to="c" numLanes="1" speed="40"/>')
     with pytest.raises(ConfigError, match="rightmost lane .* leads on through every junction; lane 0 of e1 ends there"):
         build_road(str(right), cache_dir=tmp_path / "cache")
+
+
+@pytest.mark.sumo
+def test_a_lone_net_xml_is_a_road_and_plays_as_its_node_and_edge_files(tmp_path):
+    """A network file (netconvert's, netgenerate's, an OSM import's) is taken back to plain XML by
+    netconvert; its connections go with it, into every side-by-side copy of a batch."""
+    import numpy as np
+    from conftest import assert_same_episode, random_plans
+
+    from d4sumo.engine.simulation import simulate, simulate_batch
+    from d4sumo.model.config import EpisodeConfig
+
+    plain = Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges"
+    folder = tmp_path / "lone"
+    folder.mkdir()
+    shutil.copy(build_road(str(plain), cache_dir=tmp_path / "cache").net_file, folder / "highway.net.xml")
+    roads = [build_road(name, cache_dir=tmp_path / "cache") for name in (str(folder), str(folder / "highway.net.xml"))]
+    assert roads[0].name == "lone" and roads[1].name == "highway"
+    for road in roads:
+        assert (road.route_edges, road.lanes, road.speed_limit_mps) == (("e1", "e2", "e3"), 4, 35.0)
+    config = EpisodeConfig(network=str(plain), start="steady", speed_mps=30.0, duration_s=90.0)
+    u = np.full(config.steps, np.nan)
+    reference = simulate(config, u)
+    lone = EpisodeConfig(network=str(folder / "highway.net.xml"), start="steady", speed_mps=30.0, duration_s=90.0)
+    assert_same_episode(simulate(lone, u), reference)
+    plans = random_plans(lone, 6, seed=2)
+    for batched, plan in zip(simulate_batch(lone, plans), plans):
+        assert_same_episode(batched, simulate(lone, plan))
+
+
+@pytest.mark.sumo
+def test_a_network_file_sumo_cannot_load_or_with_no_one_chain_is_one_line(tmp_path):
+    import subprocess
+
+    from d4sumo.sumohome import sumo_binary
+
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge id=")
+    with pytest.raises(ConfigError, match=r"scenario.network: got 'bad'; allowed: a network file SUMO loads \(netconvert: "):
+        build_road(str(bad), cache_dir=tmp_path / "cache")
+    grid = tmp_path / "grid.net.xml"  # netgenerate's grid: two-way streets, no one chain of edges to drive
+    subprocess.run([sumo_binary("netgenerate"), "--grid", "--grid.number", "3", "-o", str(grid)], check=True, capture_output=True)
+    with pytest.raises(ConfigError, match="a network with exactly one road start"):
+        build_road(str(grid), cache_dir=tmp_path / "cache")
