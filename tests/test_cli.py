@@ -278,7 +278,8 @@ def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_doc
                 known.update(a.option_strings)
     text = "\n".join(page.read_text() for page in GUIDE)
     mentioned = set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", text))
-    tools = {"--nthreads", "--port", "--runs", "--baseline", "--repeats", "--batch", "--db", "--benchmark"}  # dask's, tools/'
+    tools = {"--nthreads", "--port", "--runs", "--baseline", "--repeats", "--batch", "--db", "--benchmark",
+             "--grid"}  # dask's, netgenerate's, tools/'
     assert mentioned - known - tools == set()
     main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",

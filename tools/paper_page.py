@@ -50,7 +50,7 @@ FACTORS = {
     "10 Hz control, no pedal at first": {"controller.control_period_s": 0.0, "controller.first_command_zero": False},
     "start from rest, attacker 5 m/s slower": {"scenario.start": "steady", "scenario.attacker_cruise_offset_mps": 0.0},
     "attacks as coded": {"attack.family": None},  # the family as printed
-    "25/40 s episodes ending at 760 m": {"scenario.duration_s": 60.0, "scenario.end_distance_m": 0.0},
+    "25/100 s episodes ending at 760 m": {"scenario.duration_s": 60.0, "scenario.end_distance_m": 0.0},
     "scoring at 5 m between centres": {"spec.d_safe_m": 0.0},
 }
 SWEEPS = {  # name -> (sweep file, grid values replaced, fixed values set)
@@ -403,10 +403,13 @@ def main() -> None:
         "acceleration whose integral starts at 5, a cruise PID with a filtered derivative, 10 Hz control, a start from "
         "rest with the attacker cruising 5 m/s slower, the attacks as coded (a square wave in rad/s on the episode's "
         "clock, throttle-only windows with whole-second edges, 8 knots over 40 s joined by a cubic spline), 25 s and "
-        "40 s episodes ending at 760 m, and scoring at 5 m between the cars' centres. d4sumo runs both: the paper as "
+        "100 s episodes ending at 760 m, and scoring at 5 m between the cars' centres. d4sumo runs both: the paper as "
         "printed (its equations, d4sumo's defaults) and as run (`--preset paper-as-run`; each difference is its own "
         "option, see docs/model.md). Neither is CARLA: our cars are SUMO's, with a first-order drivetrain lag, and "
-        "CARLA's own dynamics (engine, gears, tyres, drag) are not in the authors' code, so they are not modelled.",
+        "CARLA's own dynamics (engine, gears, tyres, drag) are not in the authors' code, so they are not modelled. "
+        "Our episodes end at the first collision; the code's parametric scenarios drove on and scored the whole "
+        "trace, so a later attacker crash could turn one of our successes into theirs: as run we can only count more "
+        "successes than they did.",
         "",
         "## Claim by claim",
         "",
@@ -426,7 +429,7 @@ def main() -> None:
         "## With no attack",
         "",
         "The as-run platoons with the attacker only cruising: the parametric scenario (from rest at 20 m/s, the "
-        "attacker at 15 m/s, 25 s) and the knot scenario (from rest, 40 s). The authors' low-level PID starts with its "
+        "attacker at 15 m/s, 25 s) and the knot scenario (from rest, 100 s). The authors' low-level PID starts with its "
         "integral at 5, so a follower's first commands are throttle whatever its controller wants (half throttle with "
         "the parametric gains, full with the knots' Ki 0.35); on our plant that can crash the platoon before any "
         "attack, and a collision there is no attack's doing:",

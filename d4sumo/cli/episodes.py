@@ -46,7 +46,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                              maneuver=config.maneuver)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
-    road = build_road(config.network)
+    road = build_road(config.network, route=config.route)
     episode = simulate(config, episode_plan(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
     check_fcd_written(fcd)
     robustness = spec.robustness(episode.trace) if spec else None

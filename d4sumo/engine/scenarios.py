@@ -117,9 +117,48 @@ class NetworkSource:
         return hashlib.sha256(b"\0".join(parts)).hexdigest()[:16]
 
 
-def network_source(name: str, root: Path | None = None) -> NetworkSource:
+def network_source(name: str, root: Path | None = None, route: tuple[str, ...] = ()) -> NetworkSource:
     """The XML of a named variant, of a folder given directly, or of a lone network file (netgenerate's,
-    an OSM import's, netconvert's), taken back to plain XML by netconvert."""
+    an OSM import's, netconvert's), taken back to plain XML by netconvert; with a ``route``, only its
+    edges (the road the platoon drives, and each copy of it in a batch)."""
+    source = _network_source(name, root)
+    return _restrict(source, tuple(route)) if route else source
+
+
+def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
+    """The route's edges alone, with their nodes and the connections from each to the next."""
+    from xml.etree import ElementTree as ET
+
+    try:
+        nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
+        connections = ET.fromstring(source.connections_xml) if source.connections_xml else None
+    except ET.ParseError as exc:
+        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+    by_id = {e.get("id"): e for e in edges.iter("edge")}
+    for edge in route:
+        if edge not in by_id:
+            raise ConfigError("scenario.route", list(route), f"edges of {source.name} (it has no edge {edge!r})")
+    if len(set(route)) != len(route):
+        raise ConfigError("scenario.route", list(route), "each edge once")
+    used = {by_id[e].get(k) for e in route for k in ("from", "to")}
+    out_nodes, out_edges = ET.Element(nodes.tag, nodes.attrib), ET.Element(edges.tag, edges.attrib)
+    for node in nodes.iter("node"):
+        if node.get("id") in used:
+            out_nodes.append(node)
+    for edge in route:
+        out_edges.append(by_id[edge])
+    out_connections = b""
+    if connections is not None:
+        follows = set(zip(route, route[1:]))
+        kept = ET.Element(connections.tag, connections.attrib)
+        for c in connections.iter("connection"):
+            if (c.get("from"), c.get("to")) in follows:
+                kept.append(c)
+        out_connections = ET.tostring(kept)
+    return NetworkSource(source.name, ET.tostring(out_nodes), ET.tostring(out_edges), out_connections, source.types_xml)
+
+
+def _network_source(name: str, root: Path | None = None) -> NetworkSource:
     folder = scenario_folder(name, root)
     found = folder if folder.is_file() else _inputs(folder)
     try:
@@ -158,16 +197,24 @@ def _plain_source(net_file: Path, name: str) -> NetworkSource:
 
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
-               netconvert: str | None = None) -> Road:
-    """Build (or take from the cache) the network of a variant and describe its road."""
-    source = name if isinstance(name, NetworkSource) else network_source(name, root)
+               netconvert: str | None = None, route: tuple[str, ...] = ()) -> Road:
+    """Build (or take from the cache) the network of a variant and describe its road (with a ``route``:
+    the road of those edges, which must lead on one to the next)."""
+    source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     net_file = cache / f"{source.name}-{source.digest}.net.xml"
     info_file = net_file.with_suffix(".json")
     info = _read_info(info_file) if net_file.is_file() else None
     if info is None:
         _build_net(source, net_file, netconvert)
-        info = _describe(net_file)
+        try:
+            info = _describe(net_file)
+        except ConfigError as exc:
+            if not route:
+                raise
+            raise ConfigError("scenario.route", list(route), "edges that lead on one to the next") from None
+        if route and info["route_edges"] != list(route):
+            raise ConfigError("scenario.route", list(route), f"edges that lead on one to the next (they drive as {info['route_edges']})")
         _write_atomic(info_file, json.dumps(info))
     return Road(
         name=source.name,
@@ -203,15 +250,16 @@ def _build_net(source: NetworkSource, net_file: Path, netconvert: str | None = N
 MAX_COPIES = 64
 
 
-def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None) -> Road:
+def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None,
+               route: tuple[str, ...] = ()) -> Road:
     """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
     named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
     rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
     with its y coordinates shifted, so a car drives exactly as on the road alone."""
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
-    source = name if isinstance(name, NetworkSource) else network_source(name, root)
-    road = build_road(source, cache_dir=cache_dir)
+    source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
+    road = build_road(source, cache_dir=cache_dir, route=route)
     if copies == 1:
         return road
     copies = 1 << (copies - 1).bit_length()
@@ -318,14 +366,16 @@ def _describe(net_file: Path) -> dict:
     edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
     starts = [e for e in edges if not e.getIncoming()]
     if len(starts) != 1:
-        raise ConfigError("scenario.network", net_file.name, "a network with exactly one road start (a straight one-way chain of edges)")
+        raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+                          "a network with exactly one road start (a straight one-way chain of edges), or a scenario.route")
     chain = [starts[0]]
     while True:
         nxt = list(chain[-1].getOutgoing())
         if not nxt:
             break
         if len(nxt) > 1 or nxt[0] in chain:
-            raise ConfigError("scenario.network", net_file.name, "a straight chain of edges without branches")
+            raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+                              "a straight chain of edges without branches, or a scenario.route")
         chain.append(nxt[0])
     lanes = _through_lanes(chain)
     if lanes == 0:

@@ -69,7 +69,7 @@ def simulate(
     """Play one episode in SUMO. ``attack``: the attacker's plan (`maneuvers.attack_plan`), or only its
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
-    road = road or build_road(config.network)
+    road = road or build_road(config.network, route=config.route)
     types_file = check_episode(config, road)
     plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
     if plan.u.shape != (config.steps,):
@@ -90,7 +90,7 @@ def shares_sumo(config: EpisodeConfig) -> bool:
 
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
-    road = road or build_road(config.network)
+    road = road or build_road(config.network, route=config.route)
     check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):
@@ -136,7 +136,7 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
             results += _one_at_a_time(c, [plan], alone, on_episode and (lambda _, r, i=i: on_episode(i, r)))
         return results
     if road is None or road.copies < len(plans):
-        road = batch_road(config.network, len(plans))
+        road = batch_road(config.network, len(plans), route=config.route)
     types_file = check_episode(config, road)
     for c in distinct[1:]:
         check_episode(c, road)

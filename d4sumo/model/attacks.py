@@ -218,7 +218,22 @@ class PersistentCoded(AttackFamily):
 
     def _signal(self, x, t):
         c, f, t_a = x
+        if t_a == 0.0:  # the code tests `elif attack_time:`, false at 0: no attack at all
+            return np.full_like(t, np.nan)
         return np.where(t >= t_a, np.sign(np.sin(f * t)) * c, np.nan)
+
+
+#: the authors' control period: their controllers' clock adds it at every call
+CODE_PERIOD_S = 0.1
+
+
+def code_clock(t: np.ndarray) -> np.ndarray:
+    """The authors' clock at times ``t`` (on their 0.1 s grid): ``self.t += dt`` summed call by call, which
+    drifts from n x 0.1 (the 100th call reads 9.99999999999998, the 210th 21.00000000000003), so a window
+    edge at a whole second starts or ends a call later or earlier than exact arithmetic would."""
+    n = np.rint(np.asarray(t, dtype=float) / CODE_PERIOD_S).astype(int)
+    sums = np.concatenate([[0.0], np.cumsum(np.full(int(n.max(initial=0)), CODE_PERIOD_S))])  # sums[k]: k additions
+    return sums[np.clip(n, 0, None)]
 
 
 class IntermittentCoded(AttackFamily):
@@ -238,6 +253,7 @@ class IntermittentCoded(AttackFamily):
 
     def _signal(self, x, t):
         t1, t2, t3, t4 = (float(round(float(v))) for v in x[:4])
+        t = code_clock(t)  # the windows compare the code's own clock, a running sum of 0.1 s
         u = np.full_like(t, np.nan)
         u[(t >= t1) & (t <= t2)] = x[4]
         u[(t >= t3) & (t <= t4)] = x[5]
@@ -247,7 +263,7 @@ class IntermittentCoded(AttackFamily):
 class KnotsCoded(AttackFamily):
     """The knot attack as coded: 8 knots at linspace(0, 40, 8) s (one every 5.71 s), joined by scipy's
     interpolating cubic B-spline (splrep/splev; not PCHIP as the paper's text says), clipped to [-1, 1],
-    played from the episode's first step; after the last knot its value is held."""
+    played from the episode's first step; after the last knot the spline goes on (splev extrapolates)."""
 
     name = "knots-coded"
     parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(8))
@@ -256,8 +272,7 @@ class KnotsCoded(AttackFamily):
     def _signal(self, x, t):
         from scipy.interpolate import splev, splrep
 
-        tk = self.knot_times_s
-        return splev(np.clip(t, tk[0], tk[-1]), splrep(tk, x))
+        return splev(t, splrep(self.knot_times_s, x))
 
 
 #: every attack family by name; a new family is a class above and a line here

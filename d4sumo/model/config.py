@@ -108,6 +108,7 @@ class EpisodeConfig:
     """One episode of the paper's scenario: road, platoon, start mode, step and duration."""
 
     network: str = "highway_4lane"  # a folder of sumo_scenarios/ or a path to one
+    route: tuple[str, ...] = ()  # the edges the platoon drives (none: the network's one chain of edges)
     followers: int = 3  # N followers behind the attacker: ids v1..vN
     setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
     speed_mps: float = 25.0  # target speed v_d of every car
@@ -138,6 +139,9 @@ class EpisodeConfig:
         if not isinstance(self.network, str) or not self.network:
             raise ConfigError("scenario.network", self.network, "a scenario name (see `d4sumo scenarios`) or a folder")
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        if not isinstance(self.route, (list, tuple)) or not all(isinstance(e, str) and e for e in self.route):
+            raise ConfigError("scenario.route", self.route, "a list of edge ids, e.g. [\"e1\", \"e2\"]")
+        fix("route", tuple(self.route))
         fix("followers", check_int("scenario.followers", self.followers, 1, MAX_FOLLOWERS))
         fix("setpoint_m", check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True))
         fix("speed_mps", check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True))
@@ -160,10 +164,13 @@ class EpisodeConfig:
             raise ConfigError("controller", self.controller, "a [controller] table")
         if len(set(controllers)) == 1 and isinstance(self.controller, tuple):  # the same for all: one table
             fix("controller", controllers[0])
-        for c in controllers:  # SUMO rounds an action step to whole steps, silently
+        for c in controllers:  # SUMO rounds an action step to whole steps, silently; so would the control period
             step = dict(c.params).get("actionStepLength") if c.sumo_model else None
             if step is not None and not (step >= self.step_s and _on_grid(step, self.step_s)):
                 raise ConfigError(f"{c.where}.actionStepLength", step, f"a whole number of steps of {self.step_s:g} s")
+            period = dict(c.params).get("control_period_s") if not c.sumo_model else None
+            if period and not (period >= self.step_s and _on_grid(period, self.step_s)):
+                raise ConfigError(f"{c.where}.control_period_s", period, f"0, or a whole number of steps of {self.step_s:g} s")
         declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
                                                          "m/s^2 (positive)", low_open=True))
@@ -257,9 +264,11 @@ class EpisodeConfig:
             del scenario["attacker_declared_decel_mps2"]
         for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
             del scenario[key]  # a maneuver's settings have no effect on another
-        for key in ("attacker_cruise_offset_mps", "end_distance_m"):  # stored where set: earlier campaigns keep their identity
+        for key in ("attacker_cruise_offset_mps", "end_distance_m", "route"):  # stored where set: earlier campaigns keep their identity
             if not scenario[key]:
                 del scenario[key]
+        if "route" in scenario:
+            scenario["route"] = list(scenario["route"])
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         return {"scenario": scenario, "vehicle": self.vehicle.to_dict(), "controller": controller}

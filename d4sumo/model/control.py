@@ -370,6 +370,8 @@ class SwitchingController:
         if self.mode == MODE_CC:
             if gap_m < d + self._engage_m - GAP_TOLERANCE_M and lead_speed_mps < self.target_speed_mps - SPEED_TOLERANCE_MPS:
                 self.mode = MODE_ACC
+                if self.params.cruise_pid != "code":  # d4sumo's cruise PID re-engages without a derivative kick
+                    self.cruise.disengage()
         elif gap_m > d + self._release_m + GAP_TOLERANCE_M or lead_speed_mps > self._cc_speed + 2 * SPEED_TOLERANCE_MPS:
             self.mode = MODE_CC
         self._mode_known = True

@@ -44,7 +44,8 @@ def read_fcd(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
         time, pos, speed, accel, lane, odometer = zip(*rows[vid])
         pos = np.array(pos)
         if many_edges:
-            pos = pos[0] + np.array(odometer)  # every car starts on the route's first edge
+            odometer = np.array(odometer)
+            pos = pos[0] - odometer[0] + odometer  # every car starts on the route's first edge
             lane = _lane_indices(lane)
         out[vid] = {"time": np.array(time), "pos": pos, "speed": np.array(speed),
                     "acceleration": np.array(accel), "lane": np.array(lane, dtype=str)}

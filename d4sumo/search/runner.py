@@ -13,7 +13,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..engine.scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road
+from ..engine.scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road, network_source
 from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
@@ -33,7 +33,8 @@ class Evaluator:
         self.campaign = campaign
         self.family = campaign.family()
         self.spec = campaign.specification()
-        self.network = network or campaign.config.network  # what batches' roads are built from
+        config = campaign.config  # what batches' roads are built from: the network, or its route's edges alone
+        self.network = network or (network_source(config.network, route=config.route) if config.route else config.network)
         self.road = road or build_road(self.network)
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None

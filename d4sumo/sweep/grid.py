@@ -109,9 +109,10 @@ class Sweep:
         """Build every road and check every campaign fits it, and every formula parses: before running."""
         roads = {}
         for c in self.campaigns:
-            if c.config.network not in roads:
-                roads[c.config.network] = build_road(c.config.network)
-            check_episode(c.config, roads[c.config.network])
+            key = c.config.network, c.config.route
+            if key not in roads:
+                roads[key] = build_road(c.config.network, route=c.config.route)
+            check_episode(c.config, roads[key])
         seen = set()
         for c in self.campaigns:
             key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m, c.config.maneuver)

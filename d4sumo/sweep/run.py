@@ -113,9 +113,10 @@ def run_sweep(
             cid = store.open_campaign(c.definition(), c.samples, sweep.name)
             stored = stored_results(store, cid, c.samples)
             if len(stored) < c.samples:
-                if c.config.network not in sources:
-                    sources[c.config.network] = network_source(c.config.network)
-                todo.append(_Active(c, cid, sources[c.config.network], tuple(stored), done=len(stored), batch=batch))
+                key = c.config.network, c.config.route
+                if key not in sources:
+                    sources[key] = network_source(c.config.network, route=c.config.route)
+                todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch))
         total = sweep.samples
         counts = list(store.sweep_counts(sweep.name))
 

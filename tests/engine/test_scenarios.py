@@ -113,3 +113,35 @@ def test_a_network_file_sumo_cannot_load_or_with_no_one_chain_is_one_line(tmp_pa
     subprocess.run([sumo_binary("netgenerate"), "--grid", "--grid.number", "3", "-o", str(grid)], check=True, capture_output=True)
     with pytest.raises(ConfigError, match="a network with exactly one road start"):
         build_road(str(grid), cache_dir=tmp_path / "cache")
+
+
+@pytest.mark.sumo
+def test_a_route_through_a_network_of_many_ways_is_the_road_alone_and_batches_copy_only_it(tmp_path):
+    """netgenerate's grid has no one chain of edges: scenario.route names the platoon's; the road (and
+    each copy of it in a batch) is those edges alone."""
+    import subprocess
+
+    import numpy as np
+    from conftest import assert_same_episode, random_plans
+
+    from d4sumo.engine.simulation import simulate, simulate_batch
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.sumohome import sumo_binary
+
+    grid = tmp_path / "grid.net.xml"
+    subprocess.run([sumo_binary("netgenerate"), "--grid", "--grid.number", "4", "--grid.length", "600", "-L", "2",
+                    "-o", str(grid)], check=True, capture_output=True)
+    route = ("A0B0", "B0C0", "C0D0")
+    road = build_road(str(grid), route=route, cache_dir=tmp_path / "cache")
+    assert road.route_edges == route and road.lanes == 2 and road.length_m > 1700
+    config = EpisodeConfig(network=str(grid), route=list(route), speed_mps=12.0, duration_s=80.0, setpoint_m=5.0)
+    assert config.to_dict()["scenario"]["route"] == list(route) and "route" not in EpisodeConfig().to_dict()["scenario"]
+    episode = simulate(config, np.full(config.steps, np.nan))
+    assert episode.outcome == "no_crash" and episode.trace["pos_v0"][-1] > 700.0  # past the first junction
+    plans = random_plans(config, 5, seed=1)
+    for batched, plan in zip(simulate_batch(config, plans), plans):
+        assert_same_episode(batched, simulate(config, plan))
+    for bad, message in ((("A0B0", "X"), "edges of grid \\(it has no edge 'X'\\)"), (("A0B0", "C0D0"), "edges that lead on one to the next"),
+                         (("A0B0", "A0B0"), "each edge once")):
+        with pytest.raises(ConfigError, match=f"scenario.route: got .*; allowed: {message}"):
+            build_road(str(grid), route=bad, cache_dir=tmp_path / "cache")
