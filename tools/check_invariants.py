@@ -1,7 +1,7 @@
 """Verdict invariants over many random episodes, checked against SUMO's own FCD output.
 
 Plays N random episodes (on the shipped 4-lane highway and on roads of several edges: a speed change,
-a lane drop, a curve; one in five with the paper-as-run preset, its controllers, families and scenario,
+a lane drop, a curve, a route through netgenerate's grid; one in five with the paper-as-run preset, its controllers, families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
@@ -60,6 +60,22 @@ FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 
 ROADS = ["highway_4lane", *(str(Path(__file__).resolve().parent.parent / "examples" / "roads" / name)
                             for name in ("three_edges", "lane_drop", "curved"))]
 STRAIGHT = ROADS[:3]
+#: networks with many ways, driven along a named route: netgenerate's grid (made at the first run)
+ROUTES: dict[str, tuple[str, ...]] = {}
+
+
+def netgenerate_grid() -> str:
+    """netgenerate's grid of two-lane streets at 40 m/s, 1.5 km between crossings, made once per machine."""
+    import subprocess
+
+    from d4sumo.sumohome import sumo_binary
+
+    path = Path(tempfile.gettempdir()) / "d4sumo-check-grid.net.xml"
+    if not path.is_file():
+        subprocess.run([sumo_binary("netgenerate"), "--grid", "--grid.number", "4", "--grid.length", "1500", "-L", "2",
+                        "--default.speed", "40", "-o", str(path)], check=True, capture_output=True)
+    ROUTES[str(path)] = ("A0B0", "B0C0", "C0D0")
+    return str(path)
 #: the systems under test drawn from: Python controllers and SUMO-driven followers
 SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("sumo:ACC"),
            ControllerConfig("sumo:ACC", (("tau", 0.5),)), ControllerConfig("sumo:IDM"), ControllerConfig("sumo:Krauss"),
@@ -81,8 +97,10 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         return _as_run_episode(rng, setpoint, followers)
     systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
     maneuver = lane_change(rng, followers) if rng.random() < 0.25 else {}
+    network = str(rng.choice(STRAIGHT if maneuver else ROADS))
     config = EpisodeConfig(
-        network=str(rng.choice(STRAIGHT if maneuver else ROADS)),
+        network=network,
+        route=ROUTES.get(network, ()),
         followers=followers,
         setpoint_m=setpoint,
         speed_mps=float(rng.choice([20.0, 25.0, 30.0])),
@@ -245,7 +263,8 @@ def main(argv=None) -> int:
                              "arrays command it) [8]; 0: not")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    roads = {name: build_road(name) for name in ROADS}
+    ROADS.append(netgenerate_grid())
+    roads = {name: build_road(name, route=ROUTES.get(name, ())) for name in ROADS}
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
     examples: dict[str, str] = {}
