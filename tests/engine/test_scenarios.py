@@ -145,3 +145,17 @@ def test_a_route_through_a_network_of_many_ways_is_the_road_alone_and_batches_co
                          (("A0B0", "A0B0"), "each edge once")):
         with pytest.raises(ConfigError, match=f"scenario.route: got .*; allowed: {message}"):
             build_road(str(grid), route=bad, cache_dir=tmp_path / "cache")
+
+
+@pytest.mark.sumo
+def test_the_osm_example_imports_into_a_road_of_two_ways(tmp_path):
+    import subprocess
+
+    from d4sumo.sumohome import sumo_binary
+
+    osm = Path(__file__).resolve().parents[2] / "examples" / "roads" / "osm" / "motorway.osm"
+    net = tmp_path / "motorway.net.xml"
+    subprocess.run([sumo_binary("netconvert"), "--osm-files", str(osm), "-o", str(net)], check=True, capture_output=True)
+    road = build_road(str(net), cache_dir=tmp_path / "cache")
+    assert road.route_edges == ("10", "11") and road.lanes == 3 and road.length_m > 4000
+    assert road.speed_limit_mps == pytest.approx(120 / 3.6, abs=0.01)
