@@ -43,6 +43,9 @@ class Road:
     lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
     copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
     first_edge_m: float = float("inf")  # the first edge's length: every car starts on it
+    #: whether every edge of the route, and every junction lane between two of them, is as long in each of
+    #: its lanes: positions along the route in different lanes are then comparable (lane changes need it)
+    even_lanes: bool = True
 
     @property
     def one_edge(self) -> bool:
@@ -209,7 +212,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         _build_net(source, net_file, netconvert)
         try:
             info = _describe(net_file)
-        except ConfigError as exc:
+        except ConfigError:
             if not route:
                 raise
             raise ConfigError("scenario.route", list(route), "edges that lead on one to the next") from None
@@ -225,6 +228,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lanes=info["lanes"],
         lane_width_m=info["lane_width_m"],
         first_edge_m=info["first_edge_m"],
+        even_lanes=info["even_lanes"],
     )
 
 
@@ -318,7 +322,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "first_edge_m" in info else None
+    return info if isinstance(info, dict) and "even_lanes" in info else None
 
 
 def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str, extra: list[str] | None = None) -> None:
@@ -389,7 +393,27 @@ def _describe(net_file: Path) -> dict:
         "lanes": lanes,
         "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
         "first_edge_m": chain[0].getLength(),
+        "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
     }
+
+
+def _even_lanes(net_file: Path, route: list[str], lanes: int) -> bool:
+    """Whether the route's lanes 0 .. lanes - 1, and the junction lanes joining them, are as long as each
+    other (within 1 mm) edge by edge: a car's odometer then reads the same distance in any of them."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_file), withInternal=True)
+    for edge_id, to_id in zip(route, [*route[1:], None]):
+        edge = net.getEdge(edge_id)
+        lengths = [edge.getLanes()[i].getLength() for i in range(lanes)]
+        if to_id is not None:  # the junction lanes from each lane to the next edge's
+            junction = [sum(net.getLane(c.getViaLaneID()).getLength() for c in edge.getLanes()[i].getOutgoing()
+                            if c.getTo().getID() == to_id and c.getToLane().getIndex() == i and c.getViaLaneID())
+                        for i in range(lanes)]
+            lengths = [a + b for a, b in zip(lengths, junction)]
+        if max(lengths) - min(lengths) > 1e-3:
+            return False
+    return True
 
 
 def _leads_on(edge, lane: int, to) -> bool:

@@ -33,6 +33,10 @@ __all__ = ["check_road", "check_episode", "simulate", "simulate_batch", "shares_
 def check_road(config: EpisodeConfig, road: Road) -> None:
     """Refuse episodes the road cannot hold: a target speed above the limit, or a road too short."""
     check_road_lanes(config, road.name, road.lanes)
+    if config.maneuver_class.lateral and not road.even_lanes:  # who follows whom across lanes compares positions
+        raise ConfigError("scenario.maneuver", config.maneuver,
+                          f"a road whose lanes are as long as each other ({road.name}'s are not, on a curve or at a junction), "
+                          "or maneuver inlane")
     if config.speed_mps > road.speed_limit_mps + 1e-9:
         raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
     start = max(car.position_m for car in maneuver_of(config).cars())

@@ -581,3 +581,17 @@ def test_the_paper_as_run_gives_table_2s_shape_attacker_crashes_at_small_setpoin
         summary = run_campaign(_as_run("persistent", setpoint_m=d).replace(samples=100))
         share[d] = sum(s.outcome == "attacker_crash" for s in summary.samples) / 100
     assert share[2.0] > 0.5 and share[5.0] < 0.2
+
+
+def test_a_lane_change_is_refused_on_a_road_whose_lanes_differ_in_length(road):
+    """Who follows whom across lanes compares positions along the route, which lanes of different lengths
+    (a curve, a junction) would put apart."""
+    import dataclasses as dc
+
+    from d4sumo.engine.simulation import check_road
+
+    config = EpisodeConfig(maneuver="cutin")
+    check_road(config, road)
+    with pytest.raises(ConfigError, match="a road whose lanes are as long as each other"):
+        check_road(config, dc.replace(road, even_lanes=False))
+    check_road(EpisodeConfig(), dc.replace(road, even_lanes=False))  # in its lane, a car's own lane decides
