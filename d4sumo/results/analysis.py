@@ -13,6 +13,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..errors import ConfigError
+from ..model.attacks import make_attack
 from ..model.config import EpisodeConfig
 from ..model.control import names_only
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
@@ -290,6 +291,10 @@ def most_severe(records: Sequence[Record], count: int = 3) -> list[Record]:
 FEW_ATTACKS = 3
 
 
+#: the attack families whose parameters are knots in time, to cluster
+KNOT_FAMILIES = ("knots", "spline", "knots-coded")
+
+
 def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "knots") -> np.ndarray:
     """Which knots can have shaped the attack before its collision (True); ``collision_s`` is t_c, the
     collision time counted from the attack's start, and knot k sits at t_k = k * delta.
@@ -305,7 +310,7 @@ def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "
     sampled once a step, so the rule may keep a knot whose reach before t_c is shorter than a step.
     """
     knot_times_s = np.asarray(knot_times_s, dtype=float)
-    if attack == "spline" or knot_times_s.size < 2:
+    if attack != "knots" or knot_times_s.size < 2:  # a global cubic spline (spline, knots-coded): every knot reaches
         return np.full(knot_times_s.shape, collision_s > 0.0)
     delta_s = knot_times_s[1] - knot_times_s[0]
     return np.maximum(knot_times_s - 2.0 * delta_s, 0.0) < collision_s
@@ -411,14 +416,15 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
     from sklearn.cluster import DBSCAN
     from sklearn.metrics.pairwise import nan_euclidean_distances
 
-    wins = [r for r in records if r.outcome == "success" and r.attack in ("knots", "spline")
+    wins = [r for r in records if r.outcome == "success" and r.attack in KNOT_FAMILIES
             and r.time_from_attack_start_s is not None and r.time_from_attack_start_s > 0]  # else no knot mattered
     if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s, r.maneuver == "inlane") for r in wins}) != 1:
         return None
     # the knots only: a lane-changing attack's last parameter is its lane change time, not a knot
     X = np.array([r.params if r.maneuver == "inlane" else r.params[:-1] for r in wins], dtype=float)
-    delta_s = wins[0].delta_s or 6.0
-    knot_times_s = np.arange(X.shape[1]) * delta_s
+    delta_s = wins[0].delta_s  # knots every delta_s; the coded knots where their family puts them
+    knot_times_s = (np.arange(X.shape[1]) * delta_s if delta_s
+                    else np.asarray(make_attack(wins[0].attack).knot_times_s, dtype=float))
     collision_times_s = np.array([r.time_from_attack_start_s for r in wins], dtype=float)
     relevant = np.array([relevant_knots(knot_times_s, t, wins[0].attack) for t in collision_times_s])
     ks = range(1, min(max_k, len(wins) - 1) + 1)
@@ -448,7 +454,7 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
 def richest_conditions(records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
     """For each (system,) attack, optimiser and start of knot campaigns, the condition with the most successes."""
     out = []
-    knots = [r for r in records if r.attack in ("knots", "spline")]
+    knots = [r for r in records if r.attack in KNOT_FAMILIES]
     for key, rs in runs(knots, "attack", "optimizer", "start")[1].items():
         *system, attack, optimizer, start = key
         conditions = group(rs, "network", "setpoint_m", "speed_mps")

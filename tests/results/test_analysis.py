@@ -308,3 +308,16 @@ def test_table_3_gives_shares_of_a_rows_successes_only_across_several_speeds():
     t3 = table_by_speed(two)
     assert t3.rows == (("knots bo rest", "20", "5 (25.0%)", "15 (75.0%)"),)
     assert "the share of the row's successes" in t3.title
+
+
+def test_the_coded_knot_attacks_cluster_on_their_own_knot_times_every_knot_relevant():
+    """knots-coded (the authors' 8 knots over 40 s, one global cubic spline): clustered like the knots, its
+    knot times its family's, and every knot can have shaped an attack (a global spline reaches everywhere)."""
+    from d4sumo.results.analysis import cluster_knots
+
+    rng = np.random.default_rng(0)
+    records = [_sample(i, attack="knots-coded", delta_s=None, params=tuple(rng.uniform(-1, 1, 8)), time_s=12.0,
+                       param_names=tuple(f"m{k}" for k in range(8))) for i in range(12)]
+    clustering = cluster_knots(records, "knots-coded bo")
+    assert clustering is not None and np.allclose(clustering.knot_times_s, np.linspace(0.0, 40.0, 8))
+    assert clustering.relevant.all()
