@@ -20,7 +20,12 @@ median simulations to falsify. Then each optimiser's own time (ask + tell) per p
 the full budget on the ``gap`` specification, against a SUMO episode of d4sumo's default scenario
 measured in the same run (target: at most half an episode).
 
+``--benchmark arch-comp-cc`` runs ARCH-COMP's chasing cars instead (`arch_cc.py`: the competition's
+model and CC1-CC5, CCx, input instance 1 or 2), 10 runs of up to 1,500 simulations by default as the
+competition counts, and prints FalCAuN's published figures beside ours.
+
 Usage: python tools/bench_arch.py [--runs 10] [--samples 300] [--optimizers ...] [--specs gap close held]
+       python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--samples 1500] [--specs CC1 ...]
 """
 
 from __future__ import annotations
@@ -30,7 +35,8 @@ import statistics
 import time
 
 import numpy as np
-from bench_falsify import optimizer_of  # tools/ is on the path of a script run from it
+import arch_cc  # tools/ is on the path of a script run from it
+from bench_falsify import optimizer_of
 
 from d4sumo.search.optimizers import make_optimizer
 
@@ -89,6 +95,13 @@ def robustness(spec: str, params: np.ndarray) -> np.ndarray:
 SPECS = ("gap", "close", "held")
 
 
+#: FalCAuN's figures in ARCH-COMP's summaries (10 runs, its own input model of values held 5 s, 1,500
+#: simulations): runs falsified and mean simulations to falsify, 2024 and its latest
+FALCAUN = {"CC1": ("10/10, 396", "198"), "CC2": ("10/10, 76", "38"), "CC3": ("10/10, 122", "61"),
+           "CC4": ("4/10, 1256", "10/10, 474"), "CC5": ("-", "-"), "CCx": ("-", "-")}
+ROBUSTNESS = None  # the benchmark's robustness(spec, inputs), set by main
+
+
 def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple[int | None, float, int]:
     """(simulations to the first falsification or None, own seconds, proposals)."""
     lower, upper = np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS)
@@ -99,7 +112,7 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
         t0 = time.perf_counter()
         xs = [opt.ask() for _ in range(max(1, min(opt.ready(), samples - opt.asked)))]
         own += time.perf_counter() - t0
-        scores = [float(-r) for r in robustness(spec, np.array(xs))]  # the optimisers maximise
+        scores = [float(-r) for r in ROBUSTNESS(spec, np.array(xs))]  # the optimisers maximise
         t0 = time.perf_counter()
         for x, s in zip(xs, scores):
             opt.tell(x, s)
@@ -128,10 +141,19 @@ def sumo_episode_seconds(repeats: int = 20) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
-    parser.add_argument("--samples", type=int, default=300)
+    parser.add_argument("--samples", type=int, help="simulations per run [300; arch-comp-cc: 1500, the competition's]")
     parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "turbo"])
-    parser.add_argument("--specs", nargs="+", default=list(SPECS), choices=SPECS)
+    parser.add_argument("--specs", nargs="+", choices=(*SPECS, *arch_cc.SPECS))
+    parser.add_argument("--benchmark", choices=("plateaus", "arch-comp-cc"), default="plateaus")
+    parser.add_argument("--instance", type=int, choices=(1, 2), default=2, help="arch-comp-cc's input instance [2]")
     args = parser.parse_args()
+    global ROBUSTNESS
+    if args.benchmark == "arch-comp-cc":
+        ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, args.instance))  # noqa: E731
+        return arch_comp(args)
+    ROBUSTNESS = robustness
+    args.specs = args.specs or list(SPECS)
+    args.samples = args.samples or 300
     t0 = time.perf_counter()
     simulate(np.zeros(2 * SEGMENTS))
     print(f"model: 5 cars, 40 piecewise-constant inputs, {STEPS} steps: {(time.perf_counter() - t0) * 1e3:.1f} ms a simulation")
@@ -152,6 +174,34 @@ def main() -> None:
         _, own, asked = run(o, "gap", 0, args.samples, stop=False)
         print(f"{o:12s}" + "".join(f"{falsified[o][s]:>16s}" for s in args.specs)
               + f"{own / asked * 1e3:10.1f}{own / asked / episode:13.2f}", flush=True)
+
+
+def arch_comp(args) -> None:
+    """ARCH-COMP's chasing cars: each optimiser's falsified runs, mean and median simulations, own time."""
+    runs, samples = args.runs, args.samples or 1500
+    specs = args.specs or list(arch_cc.SPECS)
+    t0 = time.perf_counter()
+    arch_cc.simulate(np.zeros(2 * SEGMENTS), args.instance)
+    print(f"chasing cars, instance {args.instance}: {(time.perf_counter() - t0) * 1e3:.0f} ms a simulation; "
+          f"{runs} runs of up to {samples} simulations", flush=True)
+    rows = {o: {} for o in args.optimizers}
+    own_time = {}
+    for spec in specs:
+        for o in args.optimizers:
+            results = [run(o, spec, seed, samples, stop=True) for seed in range(runs)]
+            hits = [f for f, _, _ in results if f is not None]
+            own = sum(t for _, t, _ in results) / max(sum(n for _, _, n in results), 1)
+            own_time.setdefault(o, []).append(own)
+            mean = f"{statistics.mean(hits):.0f}" if hits else "-"
+            median = f"{statistics.median(hits):.0f}" if hits else "-"
+            rows[o][spec] = f"{len(hits)}/{runs}, {mean} ({median})"
+            print(f"[{spec}] {o:10s}: falsified {len(hits)}/{runs}; simulations {[f for f, _, _ in results]}", flush=True)
+    print("\nfalsified runs, mean (median) simulations to falsify; own time per proposal")
+    print(f"{'optimizer':12s}" + "".join(f"{s:>22s}" for s in specs) + f"{'own ms':>9s}")
+    for o in args.optimizers:
+        print(f"{o:12s}" + "".join(f"{rows[o][s]:>22s}" for s in specs) + f"{statistics.mean(own_time[o]) * 1e3:9.2f}")
+    print(f"{'FalCAuN 2024':12s}" + "".join(f"{FALCAUN[s][0]:>22s}" for s in specs))
+    print(f"{'FalCAuN now':12s}" + "".join(f"{FALCAUN[s][1]:>22s}" for s in specs))
 
 
 if __name__ == "__main__":

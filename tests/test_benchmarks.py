@@ -1,0 +1,37 @@
+"""The benchmarks' own models (tools/): ARCH-COMP's chasing cars, with values worked out by hand."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import arch_cc  # noqa: E402
+
+
+def test_with_no_pedal_nobody_moves_and_each_specification_scores_the_standing_gaps():
+    y = arch_cc.simulate(np.zeros(40))
+    assert y.shape == (1, 1001, 5) and np.allclose(y[0], [0.0, 10.0, 20.0, 30.0, 40.0])  # Keeping, v = 0
+    rho = {s: float(arch_cc.robustness(s, y)[0]) for s in arch_cc.SPECS}
+    # d21 = d54 = 10 throughout: CC1 40 - 10; CC2 10 - 15; CC3 max(20 - 10, 40 - 10); CC4 10 - 8;
+    # CC5 max(-(10 - 9), 10 - 9); CCx 10 - 7.5
+    assert rho == pytest.approx({"CC1": 30.0, "CC2": -5.0, "CC3": 30.0, "CC4": 2.0, "CC5": 1.0, "CCx": 2.5})
+
+
+def test_full_throttle_pulls_car_1_away_and_car_2_chases_it():
+    y = arch_cc.simulate(np.r_[np.ones(20), np.zeros(20)])[0]
+    # car 1: v' = -1, so y1 = -t^2 / 2 (Euler at 0.01 s: within a few cm at 2 s)
+    assert y[20, 0] == pytest.approx(-2.0, abs=0.05)
+    assert y[-1, 1] < 0.0 and y[-1, 1] - y[-1, 0] >= 5.0  # car 2 has followed, never closer than Braking allows
+
+
+def test_the_input_instances():
+    x = np.r_[np.linspace(0, 1, 20), np.zeros(20)]
+    t = np.array([0.0, 4.99, 5.0, 99.9])
+    throttle2, _ = arch_cc.inputs(x, 2, t)
+    assert throttle2[0].tolist() == [0.0, 0.0, x[1], 1.0]  # held 5 s a value
+    throttle1, _ = arch_cc.inputs(x, 1, t)
+    assert throttle1[0, 0] == 0.0 and 0.0 < throttle1[0, 1] < x[1] and throttle1[0, 3] == pytest.approx(1.0, abs=0.01)
