@@ -128,15 +128,22 @@ def network_source(name: str, root: Path | None = None, route: tuple[str, ...] =
     return _restrict(source, tuple(route)) if route else source
 
 
+def _parsed(source: NetworkSource):
+    """A source's node, edge and connection XML as element trees (no connections: None)."""
+    from xml.etree import ElementTree as ET
+
+    try:
+        return (ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml),
+                ET.fromstring(source.connections_xml) if source.connections_xml else None)
+    except ET.ParseError as exc:
+        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+
+
 def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
     """The route's edges alone, with their nodes and the connections from each to the next."""
     from xml.etree import ElementTree as ET
 
-    try:
-        nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
-        connections = ET.fromstring(source.connections_xml) if source.connections_xml else None
-    except ET.ParseError as exc:
-        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+    nodes, edges, connections = _parsed(source)
     by_id = {e.get("id"): e for e in edges.iter("edge")}
     for edge in route:
         if edge not in by_id:
@@ -279,11 +286,7 @@ def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes, byt
     """Node, edge and connection XML of ``copies`` copies of a variant, each shifted in y past the one before."""
     from xml.etree import ElementTree as ET
 
-    try:
-        nodes, edges = ET.fromstring(source.nodes_xml), ET.fromstring(source.edges_xml)
-        connections = ET.fromstring(source.connections_xml) if source.connections_xml else None
-    except ET.ParseError as exc:
-        raise ConfigError("scenario.network", source.name, f"node and edge XML that parses ({exc})") from None
+    nodes, edges, connections = _parsed(source)
     ys = [float(n.get("y", 0.0)) for n in nodes.iter("node")]
     spacing = (max(ys) - min(ys) if ys else 0.0) + 100.0  # wider than any road of a few lanes
 

@@ -314,7 +314,7 @@ class SwitchingController:
         self._every = max(1, int(round(period / step_s)))  # steps between two actions
         self._period_s = self._every * step_s
         self._calls = 0
-        self._held = 0.0
+        self.held = 0.0
         self._prev_speed: float | None = None
         if params.cruise_pid == "code":
             self._code_cruise = CodePID(params.cruise_kp, params.cruise_ki, params.cruise_kd, self._period_s,
@@ -380,17 +380,17 @@ class SwitchingController:
     def command_as_run(self, gap_m: float, speed_mps: float, lead_speed_mps: float, act: bool = True) -> float | None:
         """One call of the authors' controller (every step; it acts once a control period and holds its
         pedal between). ``act`` False: at a control step whose pedal someone else sets (their attacker
-        attacking), it only measures and returns None; the caller then sets ``held``."""
+        attacking), it only measures and returns None; the caller then sets ``held``, the pedal it holds."""
         calls = self._calls
         self._calls = calls + 1
         if calls % self._every:
-            return self._held  # between two actions the pedal holds
+            return self.held  # between two actions the pedal holds
         p = self.params
         # the measured acceleration: the speed's change over the last control period
         measured = 0.0 if self._prev_speed is None else (speed_mps - self._prev_speed) / self._period_s
         self._prev_speed = speed_mps
         if calls == 0 and p.first_command_zero:
-            self._held = 0.0
+            self.held = 0.0
             return 0.0
         if not act:
             return None
@@ -409,16 +409,8 @@ class SwitchingController:
         else:
             u = a / self._accel_max if a >= 0.0 else a / self._decel_max
             u = 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
-        self._held = u
+        self.held = u
         return u
-
-    @property
-    def held(self) -> float:
-        return self._held
-
-    @held.setter
-    def held(self, u: float) -> None:
-        self._held = u
 
 
 @dataclass(frozen=True)
