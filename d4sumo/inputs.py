@@ -5,7 +5,8 @@ A document is the tables of a config file:
     [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s, maneuver
                  (lead, cutin, cutout) and its settings (cutin_follower, cutin_offset_m, lane_change_s,
                  obstacle_distance_m, obstacle_speed_mps)
-    [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s
+    [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s, coast_decel_mps2, vclass, shape;
+                 [vehicle.v2] (any car: v0 the attacker, vI a follower, lead, obstacle): what differs for it
     [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
     [attack]     family, params (simulate only), and the families' options (knots: delta_s, horizon_s)
@@ -34,7 +35,7 @@ from .presets import PRESETS, apply_preset
 from .search.optimizers import OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
-SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "controller"))
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "vehicles", "controller"))
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "scenario": SCENARIO_KEYS,
     "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
@@ -72,6 +73,8 @@ def check_document(doc: Mapping[str, Any], source: str = "config", extra_keys: t
             raise ConfigError(f"{source}: [{key}]", _short(value), "a table")
         allowed = TABLE_KEYS.get(key)
         for k, v in value.items():
+            if key == "vehicle" and isinstance(v, Mapping):  # [vehicle.vI]: a car's own table, checked with the episode
+                continue
             if allowed is not None and k not in allowed:
                 raise ConfigError(f"{key}.{k}", _short(v), f"a key of [{key}]: {', '.join(allowed)}")
             if key == "search" and k in OPTIMIZERS and not isinstance(v, Mapping):

@@ -34,6 +34,10 @@ SIMULATE = [
     ["--controller", "sumo:ACC,switching,sumo:IDM", "--set", "controller.v4.tau=1"], ["--controller", "sumo:ACC,,switching"],
     ["--controller", "timegap", "--set", "controller.time_gap_s=-1"],
     ["--controller", "sumo:Krauss", "--set", "scenario.attacker_declared_decel_mps2=0"],
+    # a platoon of different vehicles: a car that does not exist, a key or value [vehicle] does not take
+    ["--set", "vehicle.v7.length_m=12"], ["--set", "vehicle.lead.length_m=12"], ["--set", "vehicle.v2.length=12"],
+    ["--set", "vehicle.v2.length_m=50"], ["--set", "vehicle.v2.vclass=tram"], ["--set", "vehicle.v2.shape=ship"],
+    ["--set", "vehicle.v2=3"], ["--set", "vehicle.vclass=rail"],
 ]
 
 

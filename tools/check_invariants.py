@@ -109,12 +109,23 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         controller=systems if rng.random() < 0.25 else systems[0],
         **maneuver,
     )
+    if rng.random() < 0.25:  # a platoon of different vehicles: a truck, a bus or a small car among the cars
+        cars = rng.choice(config.vehicle_ids, size=int(rng.integers(1, min(3, len(config.vehicle_ids)) + 1)), replace=False)
+        config = dataclasses.replace(config, vehicles={str(car): vehicle_table(rng) for car in cars})
     family = str(rng.choice(FAMILIES))
     # with one follower the paper's psi is undefined: score the attacker's gap instead
     formula = None if config.followers >= 2 or config.maneuver != "inlane" else "always(gap_0 > 0)"
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
+
+
+def vehicle_table(rng: np.random.Generator) -> dict:
+    """A car's own [vehicle] table: its length, limits, lag and class."""
+    kind = str(rng.choice(["truck", "bus", "delivery", "passenger"]))
+    return {"length_m": float(rng.choice([3.0, 7.5, 12.0, 16.5])) if kind != "passenger" else float(rng.uniform(3.0, 5.5)),
+            "max_accel_mps2": float(rng.uniform(1.0, 4.0)), "max_decel_mps2": float(rng.uniform(3.0, 9.0)),
+            "actuator_lag_s": float(rng.choice([0.0, 0.3, 0.5, 1.0])), "vclass": kind}
 
 
 def _as_run_episode(rng: np.random.Generator, setpoint: float, followers: int) -> tuple[Campaign, np.ndarray]:

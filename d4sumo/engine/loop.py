@@ -74,7 +74,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
 
     batch = None
     end_m = config.end_distance_m  # an episode also ends once its attacker is this far from its start
-    if m > detach_at and detach_at_step != 0 and not config.as_run:  # the arrays play the model as printed
+    if m > detach_at and detach_at_step != 0 and config.batch_arrays:  # the arrays play the model as printed
         batch = PlatoonBatch(configs, np.array([p.u for p in plans]), attacker_max_speed_mps=max_speed)
         arrayed = list(range(m))  # still commanded by the batch's arrays
         active = np.ones(m, dtype=bool)

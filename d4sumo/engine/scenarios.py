@@ -46,6 +46,12 @@ class Road:
     #: whether every edge of the route, and every junction lane between two of them, is as long in each of
     #: its lanes: positions along the route in different lanes are then comparable (lane changes need it)
     even_lanes: bool = True
+    #: lane index -> {vehicle class: the first edge of the route whose lane of that index it may not use}
+    closed_to: tuple[tuple[tuple[str, str], ...], ...] = ()
+
+    def closed(self, lane: int, vclass: str) -> str | None:
+        """The first edge of the route whose lane ``lane`` ``vclass`` may not use, or None."""
+        return dict(self.closed_to[lane]).get(vclass) if lane < len(self.closed_to) else None
 
     @property
     def one_edge(self) -> bool:
@@ -236,6 +242,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lane_width_m=info["lane_width_m"],
         first_edge_m=info["first_edge_m"],
         even_lanes=info["even_lanes"],
+        closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in info["closed_to"]),
     )
 
 
@@ -325,7 +332,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "even_lanes" in info else None
+    return info if isinstance(info, dict) and "closed_to" in info else None
 
 
 def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str, extra: list[str] | None = None) -> None:
@@ -397,7 +404,20 @@ def _describe(net_file: Path) -> dict:
         "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
         "first_edge_m": chain[0].getLength(),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
+        "closed_to": [_closed_to(chain, i) for i in range(lanes)],
     }
+
+
+def _closed_to(chain, lane: int) -> list[tuple[str, str]]:
+    """The vehicle classes some edge of the chain closes its lane ``lane`` to, each with the first such edge."""
+    from ..model.control import VEHICLE_CLASSES
+
+    closed: dict[str, str] = {}
+    for edge in chain:
+        for vclass in VEHICLE_CLASSES:
+            if vclass not in closed and not edge.getLanes()[lane].allows(vclass):
+                closed[vclass] = edge.getID()
+    return sorted(closed.items())
 
 
 def _even_lanes(net_file: Path, route: list[str], lanes: int) -> bool:

@@ -37,6 +37,13 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road whose lanes are as long as each other ({road.name}'s are not, on a curve or at a junction), "
                           "or maneuver inlane")
+    own = dict(config.vehicles)
+    for vid, v in zip(config.vehicle_ids, config.car_vehicles):
+        for lane in range(config.maneuver_class.lanes_needed):
+            edge = road.closed(lane, v.vclass)
+            if edge is not None:
+                raise ConfigError(f"vehicle.{vid}.vclass" if "vclass" in dict(own.get(vid, ())) else "vehicle.vclass", v.vclass,
+                                  f"a class {road.name} lets drive in lane {lane} (edge {edge} closes it to {v.vclass})")
     if config.speed_mps > road.speed_limit_mps + 1e-9:
         raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
     start = max(car.position_m for car in maneuver_of(config).cars())

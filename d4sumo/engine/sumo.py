@@ -22,7 +22,8 @@ from xml.sax.saxutils import escape as xml_escape
 import numpy as np
 
 from ..errors import ConfigError, SumoError
-from ..model.config import ControllerConfig, EpisodeConfig
+from ..model.config import EpisodeConfig
+from ..model.control import VehicleParams
 from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
 from ..model.platoon import SumoFollower, followers_of
 from ..sumohome import sumo_binary
@@ -44,14 +45,14 @@ FCD_ATTRIBUTES = "x,y,angle,type,speed,pos,lane,slope,acceleration,odometer"
 _CHECKED: dict[str, Path] = {}  # vehicle-type XML -> its checked file, in this process
 
 
-def follower_types(config: EpisodeConfig) -> dict[ControllerConfig, tuple[str, SumoFollower]]:
-    """The SUMO-driven followers' distinct controllers -> their vehicle-type id and one such follower."""
+def follower_types(config: EpisodeConfig) -> dict[tuple, tuple[str, SumoFollower]]:
+    """The SUMO-driven followers' distinct (controller, vehicle) -> their vehicle-type id and one such follower."""
     types: dict = {}
     if not config.sumo_driven:  # the common case: nothing to build
         return types
     for follower in followers_of(config):
-        if follower.sumo_driven and follower.config not in types:
-            types[follower.config] = (f"d4{follower.model}{len(types)}", follower)
+        if follower.sumo_driven and follower.vtype_key not in types:
+            types[follower.vtype_key] = (f"d4{follower.model}{len(types)}", follower)
     return types
 
 
@@ -144,6 +145,10 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         "--no-step-log", "true",
         "--no-warnings", "true",
         "--duration-log.disable", "true",
+        # SUMO's output precision reaches its car-following: a Krauss follower answering a cut-in moved
+        # 5 mm apart with the FCD's 6 decimals and without them. One precision for every run, so a replay
+        # that writes FCD is the campaign's episode.
+        "--precision", str(FCD_PRECISION),
     ]
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
@@ -151,7 +156,7 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.attributes", FCD_ATTRIBUTES,
-                "--fcd-output.acceleration", "true", "--precision", str(FCD_PRECISION)]
+                "--fcd-output.acceleration", "true"]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
         cmd += ["--start", "true", "--quit-on-end", "false", "--delay", "50"]
     return cmd
@@ -163,26 +168,26 @@ def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1,
     ``episodes`` > 1, one platoon on each copy of the road (`scenarios.batch_road`), each placed as
     its own entry of ``configs`` says (default: ``config``). Returns each platoon's SUMO vehicle ids,
     in the order of ``config.vehicle_ids`` (the same ids for one platoon)."""
-    v = config.vehicle
-    api.vehicletype.copy("DEFAULT_VEHTYPE", VTYPE_ID)
-    api.vehicletype.setLength(VTYPE_ID, v.length_m)
-    api.vehicletype.setWidth(VTYPE_ID, CAR_WIDTH_M)
-    api.vehicletype.setMinGap(VTYPE_ID, 0.0)
-    api.vehicletype.setMaxSpeed(VTYPE_ID, 100.0)  # Python clamps speeds itself
-    api.vehicletype.setAccel(VTYPE_ID, v.max_accel_mps2)
-    api.vehicletype.setDecel(VTYPE_ID, v.max_decel_mps2)
-    api.vehicletype.setEmergencyDecel(VTYPE_ID, v.max_decel_mps2)
-    api.vehicletype.setImperfection(VTYPE_ID, 0.0)
-    api.vehicletype.setSpeedDeviation(VTYPE_ID, 0.0)
+    own_types = {config.vehicle: VTYPE_ID}  # the vehicle types of the cars Python commands, by vehicle
+
+    def type_of(v: VehicleParams) -> str:
+        if v not in own_types:
+            own_types[v] = f"{VTYPE_ID}{len(own_types)}"
+            _define_type(api, own_types[v], v)
+        return own_types[v]
+
+    _define_type(api, VTYPE_ID, config.vehicle)
     types = follower_types(config)
-    attacker_type = VTYPE_ID
+    followers = followers_of(config) if types else []
+    attacker_type = type_of(config.vehicle_of(0))
     if types:  # the attacker's own type: what SUMO's models believe of its brakes
+        api.vehicletype.copy(attacker_type, ATTACKER_VTYPE_ID)
+        api.vehicletype.setApparentDecel(ATTACKER_VTYPE_ID, config.attacker_declared_decel_mps2)
         attacker_type = ATTACKER_VTYPE_ID
-        api.vehicletype.copy(VTYPE_ID, attacker_type)
-        api.vehicletype.setApparentDecel(attacker_type, config.attacker_declared_decel_mps2)
     n = config.followers + 1
-    type_ids = [attacker_type] + [types[c][0] if c in types else VTYPE_ID for c in config.controllers]
-    type_ids += [VTYPE_ID] * (len(config.vehicle_ids) - n)  # the benign lead or the obstacle
+    type_ids = [attacker_type] + [types[followers[i - 1].vtype_key][0] if types and followers[i - 1].sumo_driven
+                                  else type_of(config.vehicle_of(i)) for i in range(1, n)]
+    type_ids += [type_of(config.vehicle_of(i)) for i in range(n, len(config.vehicle_ids))]  # the benign lead or the obstacle
     configs = configs or [config] * episodes
     placed = {id(c): maneuver_of(c).cars() for c in configs}
     platoons = [config.vehicle_ids if episodes == 1 else tuple(f"{e}.{vid}" for vid in config.vehicle_ids)
@@ -203,13 +208,31 @@ def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1,
             api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_OFF)
         for vid in (ids[0], *ids[n:]):
             api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
-        for vid, controller in zip(ids[1:n], config.controllers):
-            if controller not in types:
+        for i, vid in enumerate(ids[1:n], start=1):
+            if not (types and followers[i - 1].sumo_driven):
                 api.vehicle.setSpeedMode(vid, SPEED_MODE_PYTHON)
                 continue
-            for key, value in types[controller][1].parameters().items():
+            for key, value in followers[i - 1].parameters().items():
                 api.vehicle.setParameter(vid, key, value)
     return platoons
+
+
+def _define_type(api, type_id: str, v: VehicleParams) -> None:
+    """A vehicle type of a car Python commands: its body and limits, no checks of SUMO's own."""
+    api.vehicletype.copy("DEFAULT_VEHTYPE", type_id)
+    if v.vclass != "passenger":
+        api.vehicletype.setVehicleClass(type_id, v.vclass)
+    if v.shape:
+        api.vehicletype.setShapeClass(type_id, v.shape)
+    api.vehicletype.setLength(type_id, v.length_m)
+    api.vehicletype.setWidth(type_id, CAR_WIDTH_M)
+    api.vehicletype.setMinGap(type_id, 0.0)
+    api.vehicletype.setMaxSpeed(type_id, 100.0)  # Python clamps speeds itself
+    api.vehicletype.setAccel(type_id, v.max_accel_mps2)
+    api.vehicletype.setDecel(type_id, v.max_decel_mps2)
+    api.vehicletype.setEmergencyDecel(type_id, v.max_decel_mps2)
+    api.vehicletype.setImperfection(type_id, 0.0)
+    api.vehicletype.setSpeedDeviation(type_id, 0.0)
 
 
 def vehicle_call(api, name: str):

@@ -70,6 +70,8 @@ class PlatoonBatch:
         config = configs[0]
         if attacks_u.ndim != 2 or attacks_u.shape[1] != config.steps:
             raise ValueError(f"attack signals have shape {attacks_u.shape}, expected (episodes, {config.steps})")
+        if not config.batch_arrays:
+            raise ValueError("these platoons are commanded one by one (EpisodeConfig.batch_arrays), not by the arrays")
         distinct = {id(c): c for c in configs}
         self.config = config  # what every episode shares
         self.configs = configs
@@ -77,7 +79,7 @@ class PlatoonBatch:
         self.ids = config.vehicle_ids
         self.size = m = attacks_u.shape[0]
         self.attacks_u = attacks_u
-        vehicle, dt, n = config.vehicle, config.step_s, config.followers + 1
+        vehicle, dt, n = config.vehicle, config.step_s, config.followers + 1  # one vehicle for all (`batch_arrays`)
         self.followers = followers_of(config)  # the kinds, for the trace: the same in every episode
         # each distinct configuration's followers: their controllers carry its setpoint and target speed
         rows_followers = {k: (self.followers if c is config else followers_of(c)) for k, c in distinct.items()}
@@ -107,7 +109,7 @@ class PlatoonBatch:
             kernel = ARRAY_KERNELS.get(type(prototype))
             if kernel is None:
                 for i, column in members:
-                    self._scalar.append((i, column, [PythonFollower(controller, c) for c in configs]))
+                    self._scalar.append((i, column, [PythonFollower(controller, c, i) for c in configs]))
                 continue
             columns = [c for _, c in members]
             modes = [self._with_mode.index(i) for i, _ in members]
@@ -199,7 +201,7 @@ class PlatoonBatch:
         whose few episodes left cost less that way than the arrays' fixed cost per step. (A lane-changing
         maneuver's pairs are the caller's: it records them for every episode.)"""
         config = self.configs[e]
-        followers = [f if f.sumo_driven else PythonFollower(f.config, config) for f in self.followers]
+        followers = [f if f.sumo_driven else PythonFollower(f.config, config, i) for i, f in enumerate(self.followers, start=1)]
         for i, _, scalar in self._scalar:  # a user's controller: its own object goes on
             followers[i - 1] = scalar[e]
         platoon = Platoon(config, self.attacks_u[e], float(self.actuator.max_speed_mps[e, 0]), followers)
@@ -217,7 +219,7 @@ class PlatoonBatch:
         for i, f in enumerate(followers, start=1):
             if not f.sumo_driven:
                 f.actuator.accel_mps2 = accel[column[i]]
-        for j, (i, cruise, actuator) in enumerate(platoon._others):
+        for j, (i, cruise, actuator, _) in enumerate(platoon._others):
             actuator.accel_mps2 = accel[column[i]]
             if cruise is not None:
                 _carry(self._lead, (e, j), cruise)

@@ -117,6 +117,9 @@ class EpisodeConfig:
     duration_s: float = 60.0  # from the attack's start to the episode's end
     warmup_s: float = 15.0  # start = "warmup": seconds driven from rest before the attack starts
     vehicle: VehicleParams = field(default_factory=VehicleParams)
+    #: the cars whose vehicle differs from [vehicle], each with what differs: its [vehicle.vI] table, as
+    #: (car id, ((key, value), ...)) pairs (a mapping is taken too); a car id is one of `vehicle_ids`
+    vehicles: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
     #: one controller for every follower, or one per follower (v1 first): a mixed platoon
     controller: ControllerConfig | tuple[ControllerConfig, ...] = field(default_factory=ControllerConfig)
     #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
@@ -171,11 +174,12 @@ class EpisodeConfig:
             period = dict(c.params).get("control_period_s") if not c.sumo_model else None
             if period and not (period >= self.step_s and _on_grid(period, self.step_s)):
                 raise ConfigError(f"{c.where}.control_period_s", period, f"0, or a whole number of steps of {self.step_s:g} s")
-        declared = self.vehicle.max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
-        fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
-                                                         "m/s^2 (positive)", low_open=True))
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
+        fix("vehicles", self._checked_vehicles())
+        declared = self.vehicle_of(0).max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
+        fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
+                                                         "m/s^2 (positive)", low_open=True))
         fix("cutin_follower", check_int("scenario.cutin_follower", self.cutin_follower, 1, MAX_FOLLOWERS,
                                         f"(a follower: 1 for v1 .. {self.followers} for v{self.followers})"))
         fix("cutin_offset_m", check_number("scenario.cutin_offset_m", self.cutin_offset_m, -500.0, 500.0, "metres"))
@@ -221,7 +225,53 @@ class EpisodeConfig:
         (its controllers, a coasting car, a slower attacker, an end distance): its platoons are then
         commanded one by one, side by side in one SUMO all the same."""
         return (any(isinstance(p := c.build_params(), SwitchingParams) and p.as_run for c in self.controllers if not c.sumo_model)
-                or bool(self.vehicle.coast_decel_mps2 or self.attacker_cruise_offset_mps or self.end_distance_m))
+                or any(v.coast_decel_mps2 for v in self.car_vehicles) or bool(self.attacker_cruise_offset_mps or self.end_distance_m))
+
+    @functools.cached_property
+    def batch_arrays(self) -> bool:
+        """Whether a batch's arrays may play its platoons: they play the model as printed, one vehicle for
+        every car (otherwise its platoons are commanded one by one, side by side in one SUMO all the same)."""
+        return not self.as_run and not self.vehicles
+
+    @functools.cached_property
+    def car_vehicles(self) -> tuple[VehicleParams, ...]:
+        """Each car's vehicle, in the order of `vehicle_ids`: [vehicle], with its [vehicle.vI] table laid over."""
+        own = dict(self.vehicles)
+        return tuple(dataclasses.replace(self.vehicle, **dict(own[vid])) if vid in own else self.vehicle
+                     for vid in self.vehicle_ids)
+
+    def vehicle_of(self, car: int) -> VehicleParams:
+        """The vehicle of car ``car`` (an index into `vehicle_ids`: 0 the attacker, I the follower vI)."""
+        return self.car_vehicles[car]
+
+    def _checked_vehicles(self) -> tuple[tuple[str, tuple[tuple[str, Any], ...]], ...]:
+        """The [vehicle.vI] tables, checked (a car of the platoon, keys of [vehicle], values in range) and
+        reduced to what differs from [vehicle]: a table that changes nothing is dropped."""
+        given = self.vehicles
+        if isinstance(given, Mapping):
+            given = tuple(given.items())
+        if not isinstance(given, (list, tuple)) or not all(isinstance(t, (list, tuple)) and len(t) == 2 for t in given):
+            raise ConfigError("vehicle", given, "a [vehicle.vI] table per car that differs")
+        ids = self.vehicle_ids
+        keys = [f.name for f in dataclasses.fields(VehicleParams)]
+        base = dataclasses.asdict(self.vehicle)
+        out = {}
+        for car, table in given:
+            if car not in ids:
+                raise ConfigError(f"vehicle.{car}", _short_table(table),
+                                  f"a car of this platoon: {', '.join(ids)} (v0 the attacker, v1..v{self.followers} the followers)")
+            table = dict(table) if isinstance(table, (Mapping, list, tuple)) else table
+            if not isinstance(table, dict):
+                raise ConfigError(f"vehicle.{car}", table, "a table of [vehicle] keys")
+            _check_keys(f"vehicle.{car}", table, keys)
+            try:
+                own = VehicleParams(**{**base, **table})
+            except ConfigError as exc:  # name the car's table: vehicle.v2.length_m
+                raise ConfigError(exc.field.replace("vehicle.", f"vehicle.{car}.", 1), exc.given, exc.allowed) from None
+            differs = tuple((k, v) for k, v in dataclasses.asdict(own).items() if v != base[k])
+            if differs:
+                out[car] = differs
+        return tuple(sorted(out.items(), key=lambda item: ids.index(item[0])))
 
     @property
     def controllers(self) -> tuple[ControllerConfig, ...]:
@@ -237,10 +287,13 @@ class EpisodeConfig:
 
     @property
     def system_label(self) -> str:
-        """The system under test in a few words: the controller, or each follower's for a mixed platoon."""
-        if isinstance(self.controller, ControllerConfig):
-            return self.controller.label
-        return " / ".join(c.label for c in self.controller)
+        """The system under test in a few words: the controller, or each follower's for a mixed platoon, and
+        the cars whose vehicle differs (``switching; v2: length_m=12, vclass=truck``)."""
+        label = (self.controller.label if isinstance(self.controller, ControllerConfig)
+                 else " / ".join(c.label for c in self.controller))
+        for car, differs in self.vehicles:
+            label += f"; {car}: " + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in differs)
+        return label
 
     @property
     def vehicle_ids(self) -> tuple[str, ...]:
@@ -256,7 +309,7 @@ class EpisodeConfig:
     # --- TOML/JSON round trip -----------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("vehicle", "controller")}
+        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in _TABLES}
         # Keys without effect are not part of what identifies the episode.
         if self.start != "warmup":
             del scenario["warmup_s"]
@@ -271,22 +324,27 @@ class EpisodeConfig:
             scenario["route"] = list(scenario["route"])
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
-        return {"scenario": scenario, "vehicle": self.vehicle.to_dict(), "controller": controller}
+        vehicle = self.vehicle.to_dict()
+        vehicle.update({car: dict(differs) for car, differs in self.vehicles})  # [vehicle.vI]: where a car differs
+        return {"scenario": scenario, "vehicle": vehicle, "controller": controller}
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
         """Build from the [scenario], [vehicle] and [controller] tables of a document; [controller] may
         be a list of tables (TOML's [[controller]]) or names, one per follower."""
         tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
-        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in ("vehicle", "controller")]
+        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in _TABLES]
         _check_keys("scenario", tables["scenario"], scenario_keys)
-        _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)])
+        # [vehicle.vI]: a car's own table (the config checks the car); any other key is one of [vehicle]
+        cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"]) if isinstance(tables["vehicle"][k], Mapping)}
+        _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)] + ["vI (a car's own table)"])
         given = doc.get("controller", {})
         if isinstance(given, (list, tuple)):
             controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
         else:
             controller = ControllerConfig.from_table(_table(doc, "controller"))
-        return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), controller=controller)
+        return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), vehicles=tuple(cars.items()),
+                   controller=controller)
 
 
 def read_toml(path: str | Path, field: str = "--config") -> dict:
@@ -311,6 +369,14 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
         raise ConfigError(f"[{name}]", value, "a table")
     return value
+
+
+#: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
+_TABLES = ("vehicle", "vehicles", "controller")
+
+
+def _short_table(table: Any) -> Any:
+    return dict(table) if isinstance(table, (list, tuple)) and all(isinstance(t, (list, tuple)) and len(t) == 2 for t in table) else table
 
 
 def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> None:

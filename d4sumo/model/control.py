@@ -34,9 +34,19 @@ GAP_TOLERANCE_M = 1e-6
 SPEED_TOLERANCE_MPS = 1e-6
 
 
+#: SUMO's classes of road vehicle (its vClass): a lane's permissions say which may drive on it
+VEHICLE_CLASSES = ("passenger", "private", "taxi", "hov", "emergency", "authority", "army", "vip", "evehicle", "delivery",
+                   "truck", "trailer", "bus", "coach", "motorcycle", "moped", "custom1", "custom2")
+#: how sumo-gui draws a car (SUMO's guiShape; "": the class's own shape)
+GUI_SHAPES = ("", "passenger", "passenger/sedan", "passenger/hatchback", "passenger/wagon", "passenger/van", "delivery",
+              "truck", "truck/semitrailer", "truck/trailer", "bus", "bus/city", "bus/flexible", "bus/overland", "evehicle",
+              "emergency", "firebrigade", "police", "motorcycle", "moped", "scooter", "unknown")
+
+
 @dataclass(frozen=True)
 class VehicleParams:
-    """Vehicle body and actuator: the same for the attacker and every follower."""
+    """Vehicle body and actuator: [vehicle] for every car, and a [vehicle.vI] table for a car that differs
+    (`EpisodeConfig.vehicle_of`)."""
 
     length_m: float = 4.5
     max_accel_mps2: float = 3.5  # at full throttle, u = +1
@@ -46,20 +56,33 @@ class VehicleParams:
     #: the pedal asks for; 0: none (the model as printed). Not a calibration of any car: CARLA's figures
     #: are not in the authors' code.
     coast_decel_mps2: float = 0.0
+    #: SUMO's vehicle class: which lanes it may use (a road that closes a lane of the platoon's to it is
+    #: refused); the car's dimensions and limits are the keys above, never the class's defaults
+    vclass: str = "passenger"
+    shape: str = ""  # how sumo-gui draws it (SUMO's guiShape; "": the class's own)
 
     def __post_init__(self) -> None:
         for name, low, high, unit in (("length_m", 0.5, 30.0, "metres"), ("max_accel_mps2", 0.1, 20.0, "m/s^2"),
                                       ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds"),
                                       ("coast_decel_mps2", 0.0, 5.0, "m/s^2 (positive)")):
             object.__setattr__(self, name, check_number(f"vehicle.{name}", getattr(self, name), low, high, unit))
+        if self.vclass not in VEHICLE_CLASSES:
+            raise ConfigError("vehicle.vclass", self.vclass, f"one of SUMO's road vehicle classes: {', '.join(VEHICLE_CLASSES)}")
+        if self.shape not in GUI_SHAPES:
+            raise ConfigError("vehicle.shape", self.shape, f"one of SUMO's shapes: {', '.join(s for s in GUI_SHAPES if s)}, or \"\"")
 
     def to_dict(self) -> dict:
-        """As a definition stores it: the coasting deceleration only where there is one (campaigns stored
-        before it keep their identity)."""
+        """As a definition stores it: the keys added after the first (coasting, class, shape) only where
+        they differ from their defaults (campaigns stored before them keep their identity)."""
         d = dataclasses.asdict(self)
-        if not d["coast_decel_mps2"]:
-            del d["coast_decel_mps2"]
+        for key in LATER_KEYS:
+            if d[key] == LATER_KEYS[key]:
+                del d[key]
         return d
+
+
+#: [vehicle] keys a definition holds only where set (`VehicleParams.to_dict`), with their defaults
+LATER_KEYS = {"coast_decel_mps2": 0.0, "vclass": "passenger", "shape": ""}
 
 
 def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:

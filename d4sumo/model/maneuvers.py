@@ -50,13 +50,20 @@ class Car:
     speed_mps: float
 
 
-def initial_state(config: "EpisodeConfig") -> tuple[list[float], list[float]]:
+def initial_state(config: "EpisodeConfig", front: int = 0) -> tuple[list[float], list[float]]:
     """Front-bumper positions and speeds at t = 0 of a column of followers + 1 cars in one lane, front to
-    back, spaced at the setpoint (the attacker and the followers; in a cut-in, the benign lead and the followers)."""
+    back, each a setpoint behind the rear bumper of the car ahead: the attacker and the followers, or with
+    ``front`` the index of another car (a cut-in's benign lead) in the attacker's place."""
     n = config.followers + 1
-    spacing = config.vehicle.length_m + config.setpoint_m
-    rear = config.vehicle.length_m + REAR_START_M
-    positions = [rear + spacing * (n - 1 - i) for i in range(n)]
+    lengths = [config.vehicle_of(i).length_m for i in (front, *range(1, n))]
+    rear = lengths[-1] + REAR_START_M
+    if len(set(lengths)) == 1:  # one vehicle for all: the arithmetic every stored campaign was played with
+        positions = [rear + (lengths[0] + config.setpoint_m) * (n - 1 - i) for i in range(n)]
+    else:
+        positions = [rear]
+        for length in reversed(lengths[:-1]):  # from the rearmost forwards
+            positions.append(positions[-1] + config.setpoint_m + length)
+        positions.reverse()
     speed = config.speed_mps if config.start == "steady" else 0.0  # rest and warmup start standing
     return positions, [speed] * n
 
@@ -88,7 +95,7 @@ class Maneuver:
     def __init__(self, config: "EpisodeConfig"):
         self.config = config
         self.ids = config.vehicle_ids
-        self.length_m = config.vehicle.length_m
+        self.lengths_m = [v.length_m for v in config.car_vehicles]  # by index into ids
 
     @classmethod
     def check(cls, config: "EpisodeConfig") -> None:
@@ -112,8 +119,8 @@ class Maneuver:
 
     def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
         """(leader, follower, gap) of the cars next to each other in a lane, frontmost first."""
-        length = self.length_m
-        return [(i, i + 1, positions[i] - length - positions[i + 1]) for i in range(len(positions) - 1)]
+        lengths = self.lengths_m
+        return [(i, i + 1, positions[i] - lengths[i] - positions[i + 1]) for i in range(len(positions) - 1)]
 
 
 class LaneChange(Maneuver):
@@ -133,12 +140,12 @@ class LaneChange(Maneuver):
         for i, covered in enumerate(lanes):
             for lane in covered:
                 by_lane.setdefault(lane, []).append(i)
-        length = self.length_m
+        lengths = self.lengths_m
         found = set()
         for cars in by_lane.values():
             cars.sort(key=lambda i: (-positions[i], i))
             found.update(zip(cars, cars[1:]))
-        return sorted(((a, b, positions[a] - length - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
+        return sorted(((a, b, positions[a] - lengths[a] - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
 
 
 class CutIn(LaneChange):
@@ -152,16 +159,17 @@ class CutIn(LaneChange):
         if config.cutin_follower > config.followers:
             raise ConfigError("scenario.cutin_follower", config.cutin_follower,
                               f"a follower: 1 for v1 .. {config.followers} for v{config.followers}")
-        positions, _ = initial_state(config)
+        positions, _ = initial_state(config, front=len(config.vehicle_ids) - 1)
         rear = positions[config.cutin_follower] + config.cutin_offset_m  # the attacker's rear bumper
         if rear < 0.0:  # SUMO would read a negative position from the road's end
             raise ConfigError("scenario.cutin_offset_m", config.cutin_offset_m,
                               f"at least {-(rear - config.cutin_offset_m):g} m: the attacker starts on the road")
 
     def cars(self) -> list[Car]:
-        positions, speeds = initial_state(self.config)  # the benign lead where the paper's attacker would be
+        lead = len(self.ids) - 1
+        positions, speeds = initial_state(self.config, front=lead)  # the benign lead where the paper's attacker would be
         k = self.config.cutin_follower
-        attacker = positions[k] + self.config.cutin_offset_m + self.length_m
+        attacker = positions[k] + self.config.cutin_offset_m + self.lengths_m[0]
         followers = [Car(i, 0, x, v) for i, x, v in zip(self.ids[1:-1], positions[1:], speeds[1:])]
         return [Car("v0", 1, attacker, speeds[0]), *followers, Car("lead", 0, positions[0], speeds[0])]
 
@@ -184,7 +192,7 @@ class CutOut(LaneChange):
 
     def cars(self) -> list[Car]:
         column = super().cars()
-        front = column[0].position_m + self.config.obstacle_distance_m + self.length_m
+        front = column[0].position_m + self.config.obstacle_distance_m + self.lengths_m[-1]
         return [*column, Car("obstacle", 0, front, self.config.obstacle_speed_mps)]
 
     def target_lane(self) -> int:

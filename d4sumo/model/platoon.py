@@ -20,7 +20,7 @@ from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import Actuator, CruiseControl, SwitchingController, SwitchingParams, acceleration_to_command
-from .maneuvers import FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
+from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 
 
@@ -61,12 +61,13 @@ class PythonFollower:
     sumo_driven = False
     shares_sumo = True  # its platoon may share one SUMO with others (a batch)
 
-    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig, car: int):
         self.config = config
+        self.vehicle = episode.vehicle_of(car)
         self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
-                                                    target_speed_mps=episode.speed_mps, vehicle=episode.vehicle,
+                                                    target_speed_mps=episode.speed_mps, vehicle=self.vehicle,
                                                     step_s=episode.step_s)
-        self.actuator = Actuator(episode.vehicle, episode.step_s, float("inf"))
+        self.actuator = Actuator(self.vehicle, episode.step_s, float("inf"))
         self.command = self.controller.command
         self.has_mode = hasattr(self.controller, "mode")
 
@@ -74,16 +75,18 @@ class PythonFollower:
 class SumoFollower:
     """A follower driven by one of SUMO's car-following models: d4sumo senses it and commands nothing.
 
-    It is the same car as the attacker (length, full-throttle acceleration and full-brake deceleration
-    from [vehicle]) whose desired speed is the target speed; the model and its attributes come from
-    its controller table. `vtype` and `parameters` say it in SUMO's terms; the simulation loads them.
+    Its car is its vehicle (length, full-throttle acceleration, full-brake deceleration, class and shape
+    from [vehicle] or its own [vehicle.vI]) whose desired speed is the target speed; the model and its
+    attributes come from its controller table. `vtype` and `parameters` say it in SUMO's terms; the
+    simulation loads them.
     """
 
     sumo_driven = True
     has_mode = False  # SUMO does not expose its models' internal modes to TraCI
 
-    def __init__(self, config: ControllerConfig, episode: EpisodeConfig):
+    def __init__(self, config: ControllerConfig, episode: EpisodeConfig, car: int):
         self.config = config
+        self.vehicle = episode.vehicle_of(car)
         self.model = config.sumo_model
         self.params = dict(config.params)
         self.episode = episode
@@ -92,25 +95,32 @@ class SumoFollower:
 
     def vtype(self, lanes: int) -> dict[str, str]:
         """Its <vType> attributes."""
-        v = self.episode.vehicle
+        v = self.vehicle
         attributes = carfollowing.vtype_attributes(self.model, self.params, lanes=lanes)
         attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
                           maxSpeed=repr(self.episode.speed_mps), speedFactor="1", speedDev="0")
+        if v.vclass != "passenger" or v.shape:  # a class's defaults reach only what is not set above
+            attributes.update(vClass=v.vclass, width=repr(CAR_WIDTH_M), **({"guiShape": v.shape} if v.shape else {}))
         return attributes
+
+    @property
+    def vtype_key(self) -> tuple:
+        """What decides its <vType>: followers alike in it share one."""
+        return self.config, self.vehicle
 
     def parameters(self) -> dict[str, str]:
         """Per-vehicle parameters its model reads after insertion."""
         return carfollowing.runtime_parameters(self.model, self.params, self.episode.speed_mps)
 
 
-def make_follower(controller: ControllerConfig, config: EpisodeConfig) -> PythonFollower | SumoFollower:
-    """The one place that tells the kinds of follower apart."""
-    return (SumoFollower if controller.sumo_model else PythonFollower)(controller, config)
+def make_follower(controller: ControllerConfig, config: EpisodeConfig, car: int) -> PythonFollower | SumoFollower:
+    """The one place that tells the kinds of follower apart (``car``: its index, 1 for v1)."""
+    return (SumoFollower if controller.sumo_model else PythonFollower)(controller, config, car)
 
 
 def followers_of(config: EpisodeConfig) -> list[PythonFollower | SumoFollower]:
     """Each follower of the platoon, v1 first."""
-    return [make_follower(c, config) for c in config.controllers]
+    return [make_follower(c, config, i) for i, c in enumerate(config.controllers, start=1)]
 
 
 class Platoon:
@@ -126,7 +136,8 @@ class Platoon:
         self.maneuver = maneuver_of(config)
         self.ids = config.vehicle_ids
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
-        vehicle, dt = config.vehicle, config.step_s
+        vehicle, dt = config.vehicle_of(0), config.step_s  # the attacker's
+        self.attacker_vehicle = vehicle
         self.followers = followers or followers_of(config)  # given: an episode carried on from a batch
         gains = cruise_params(config)  # the attacker is the same kind of car
         self.attacker_cruise = CruiseControl(gains, config.attacker_cruise_mps, dt)
@@ -140,11 +151,12 @@ class Platoon:
         n = config.followers + 1
         #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
         self._others = [(i, CruiseControl(gains, config.speed_mps, dt) if self.maneuver.other_cruises else None,
-                         Actuator(vehicle, dt, attacker_max_speed_mps)) for i, vid in enumerate(self.ids[n:], start=n)]
+                         Actuator(config.vehicle_of(i), dt, attacker_max_speed_mps), config.vehicle_of(i))
+                        for i in range(n, len(self.ids))]
         #: the cars Python commands (the attacker, the Python-commanded followers, the other car): advance
         #: returns their speeds
         self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven),
-                          *(i for i, _, _ in self._others))
+                          *(i for i, _, _, _ in self._others))
         self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
@@ -166,7 +178,7 @@ class Platoon:
             if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
                 self.attacker_cruise.reset()
                 self._attacking = False
-            u = acceleration_to_command(self.attacker_cruise.acceleration(speeds[0]), self.config.vehicle)
+            u = acceleration_to_command(self.attacker_cruise.acceleration(speeds[0]), self.attacker_vehicle)
         else:
             self._attacking = True
         commands = [u]
@@ -180,12 +192,12 @@ class Platoon:
             c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
             commands.append(c)
             new_speeds.append(follower.actuator.apply(c, speeds[i]))
-        for i, cruise, actuator in self._others:
+        for i, cruise, actuator, vehicle in self._others:
             if cruise is None:  # the obstacle holds its speed
                 commands.append(0.0)
                 new_speeds.append(self.config.obstacle_speed_mps)
                 continue
-            c = acceleration_to_command(cruise.acceleration(speeds[i]), self.config.vehicle)
+            c = acceleration_to_command(cruise.acceleration(speeds[i]), vehicle)
             commands.append(c)
             new_speeds.append(actuator.apply(c, speeds[i]))
         self.commands.append(commands)
@@ -226,9 +238,9 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
     accel[1:] = np.diff(speeds, axis=0) / config.step_s
     cmds = np.empty((n_samples, len(ids)))
     cmds[:, list(commanded)] = _hold_last(commands, n_samples)
-    vehicle = config.vehicle
     for i, follower in enumerate(followers, start=1):
         if follower.sumo_driven:  # no throttle/brake in SUMO: the command its next step's acceleration asks for
+            vehicle = follower.vehicle
             ahead = np.append(accel[1:, i], accel[-1, i])
             u = np.where(ahead >= 0.0, ahead / vehicle.max_accel_mps2, ahead / vehicle.max_decel_mps2)
             cmds[:, i] = np.clip(u, -1.0, 1.0)  # acceleration_to_command, over the whole column
@@ -241,7 +253,7 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
     if config.maneuver_class.lateral:
         min_gaps = _lane_gaps(ids, signals, pairs, lateral_m)
     else:
-        min_gaps = _column_gaps(config.vehicle.length_m, signals, positions)
+        min_gaps = _column_gaps([v.length_m for v in config.car_vehicles], signals, positions)
     if modes is not None and modes.size:
         modes = _hold_last(modes, n_samples)
         with_mode = [i for i, f in enumerate(followers, start=1) if f.has_mode]
@@ -250,12 +262,12 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
     return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps
 
 
-def _column_gaps(length_m: float, signals: dict, positions: np.ndarray) -> dict[str, float]:
-    """The paper's column v0, v1, .., vN: gap_I between vI and vI+1, vectorised (the same arithmetic as
-    the maneuver's pairs), and the named gaps every maneuver's trace has."""
+def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -> dict[str, float]:
+    """The paper's column v0, v1, .., vN: gap_I between vI and vI+1 (vI's length behind its front bumper),
+    vectorised (the same arithmetic as the maneuver's pairs), and the named gaps every maneuver's trace has."""
     n = positions.shape[1]
     for i in range(n - 1):
-        signals[f"gap_{i}"] = positions[:, i] - length_m - positions[:, i + 1]
+        signals[f"gap_{i}"] = positions[:, i] - lengths_m[i] - positions[:, i + 1]
     free = np.full(positions.shape[0], FREE_ROAD_GAP_M)
     signals["gap_v0"] = free
     for i in range(1, n):

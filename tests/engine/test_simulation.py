@@ -380,6 +380,13 @@ BATCH_CONFIGS = {
                                              ControllerConfig("test_simulation:FlakyController", where="controller.v2"),
                                              ControllerConfig("test_simulation:RaisingController", where="controller.v3"))),
 }
+BATCH_CONFIGS.update({  # a platoon of different vehicles: its platoons commanded one by one, in one SUMO
+    "mixed-vehicles": EpisodeConfig(setpoint_m=4.0, vehicles={"v0": {"length_m": 6.0, "max_decel_mps2": 9.0},
+                                                             "v2": {"length_m": 12.0, "max_decel_mps2": 4.0, "vclass": "truck"}}),
+    "mixed-vehicles-sumo-ACC": EpisodeConfig(setpoint_m=4.0, controller=(ControllerConfig("sumo:ACC"), ControllerConfig("sumo:ACC", where="controller.v2"),
+                                                                         ControllerConfig("switching", where="controller.v3")),
+                                             vehicles={"v2": {"length_m": 12.0, "max_accel_mps2": 1.5, "vclass": "truck", "shape": "truck"}}),
+})
 BATCH_CONFIGS.update({f"sumo-{m}": EpisodeConfig(controller=ControllerConfig(f"sumo:{m}"), setpoint_m=4.0)
                       for m in ("ACC", "CACC", "CC", "Daniel1", "EIDM", "IDM", "IDMM", "Krauss", "KraussOrig1", "KraussPS",
                                 "PWagner2009", "SmartSK", "W99", "Wiedemann", "BKerner")})
@@ -595,3 +602,86 @@ def test_a_lane_change_is_refused_on_a_road_whose_lanes_differ_in_length(road):
     with pytest.raises(ConfigError, match="a road whose lanes are as long as each other"):
         check_road(config, dc.replace(road, even_lanes=False))
     check_road(EpisodeConfig(), dc.replace(road, even_lanes=False))  # in its lane, a car's own lane decides
+
+
+# --- a platoon of different vehicles --------------------------------------------------------------
+
+TRUCK = {"length_m": 12.0, "max_accel_mps2": 1.5, "max_decel_mps2": 4.0, "vclass": "truck", "shape": "truck/semitrailer"}
+
+
+def test_sumo_measures_a_mixed_platoons_gaps_with_each_cars_own_length(road):
+    """Issue 23: a truck in the platoon. SUMO moves every car as the SUMO-free reference does, and SUMO's own
+    gap to each car's leader (getLeader, from its vehicle types' lengths) is the trace's gap, step by step."""
+    from d4sumo.engine.loop import play
+    from d4sumo.engine.sumo import open_world
+
+    config = dataclasses.replace(CONFIG, setpoint_m=5.0, vehicles={"v1": TRUCK, "v3": {"length_m": 3.0}})
+    u = knots_signal(SUCCESS_KNOTS, config)
+    seen = []
+    with open_world(config, road, [config]) as world:
+        api, step = world.api, world.step
+
+        def step_and_look():
+            step()
+            seen.append([api.vehicle.getLeader(f"v{i}", 200.0) for i in (1, 2, 3)])
+
+        world.step = step_and_look
+        assert [api.vehicle.getLength(f"v{i}") for i in range(4)] == [4.5, 12.0, 4.5, 3.0]
+        assert api.vehicle.getVehicleClass("v1") == "truck" and api.vehicle.getShapeClass("v1") == "truck/semitrailer"
+        episode = play(world, [config], [AttackPlan(u)])[0]
+    reference = integrate(config, u, road.speed_limit_mps)
+    for name in episode.trace.names:
+        assert np.allclose(episode.trace[name], reference.trace[name], atol=1e-6), name
+    assert len(seen) == len(episode.trace) - 1
+    for k, leaders in enumerate(seen[:-1], start=1):  # behind an overlap (the last step) SUMO finds no leader
+        for i, (leader, gap) in enumerate(leaders):
+            assert leader == f"v{i}" and abs(gap - episode.trace[f"gap_{i}"][k]) < 1e-6, (i, k)
+    # the truck (4 m/s^2 of brakes) runs into the attacker that brakes at 8: the trace's last gap is the overlap
+    assert episode.outcome == "attacker_crash" and episode.first_collision.pair == "v0-v1"
+    assert episode.min_gaps_m()["v0-v1"] == float(episode.trace["gap_0"][-1]) < 0
+
+
+def test_a_sumo_driven_truck_follows_with_its_own_body_and_limits(road, tmp_path):
+    config = EpisodeConfig(setpoint_m=5.0, controller=ControllerConfig("sumo:ACC"), start="steady", duration_s=20.0,
+                           vehicles={"v2": TRUCK})
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, np.full(config.steps, -1.0), road=road, fcd_path=fcd)
+    types = {v.id: v.type for _, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "type"])}
+    assert types["v2"] != types["v1"] and types["v1"] == types["v3"]
+    # the truck brakes at no more than its own 4 m/s^2 (SUMO's ACC may ask for more; the truck cannot give it)
+    assert np.min(episode.trace["accel_v2"]) >= -4.0 - 1e-9 and np.min(episode.trace["accel_v1"]) < -4.5
+    assert np.array_equal(episode.trace["gap_1"], episode.trace["pos_v1"] - 4.5 - episode.trace["pos_v2"])
+    assert np.array_equal(episode.trace["gap_2"], episode.trace["pos_v2"] - 12.0 - episode.trace["pos_v3"])
+
+
+def test_a_road_that_closes_the_platoons_lane_to_a_cars_class_is_refused(tmp_path):
+    folder = tmp_path / "no_trucks"
+    folder.mkdir()
+    (folder / "road.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/>'
+                                         '<node id="c" x="5000" y="0"/></nodes>')
+    (folder / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="2" speed="40"/>'
+        '<edge id="e2" from="b" to="c" numLanes="2" speed="40"><lane index="0" disallow="truck"/></edge></edges>')
+    road = build_road(str(folder))
+    config = EpisodeConfig(network=str(folder), vehicles={"v2": {"vclass": "truck"}})
+    with pytest.raises(ConfigError) as info:
+        simulate(config, np.zeros(config.steps), road=road)
+    assert info.value.field == "vehicle.v2.vclass" and "e2" in str(info.value)
+    simulate(dataclasses.replace(config, vehicles={"v2": {"vclass": "delivery"}}, duration_s=5.0), np.zeros(100), road=road)
+
+
+def test_an_episode_written_to_fcd_is_the_episode_played_without(tmp_path):
+    """SUMO's output precision reached a Krauss follower's answer to a cut-in: with the FCD's 6 decimals it
+    drove 5 mm apart from the campaign's episode, so a replay was another episode. Found by check_invariants."""
+    from d4sumo.model.control import VehicleParams
+
+    config = EpisodeConfig(network=str(ROADS / "three_edges"), setpoint_m=8.43871715046162, start="steady",
+                           vehicle=VehicleParams(max_decel_mps2=8.792978395245848, actuator_lag_s=0.0),
+                           controller=ControllerConfig("sumo:Krauss"), maneuver="cutin", cutin_offset_m=-2.2075598495009947)
+    plan = attack_plan(maneuver_of(config).family(make_attack("persistent")), [0.3093537649487167, 0.9346432409048265, 0.9367941073372221,
+                                                                                12.748590256480355], config)
+    road = build_road(config.network)
+    alone = simulate(config, plan, road=road)
+    written = simulate(config, plan, road=road, fcd_path=tmp_path / "fcd.xml")
+    for name in alone.trace.names:
+        assert np.array_equal(alone.trace[name], written.trace[name]), name

@@ -61,3 +61,46 @@ def test_a_step_is_checked_only_against_the_times_the_episode_reads():
         EpisodeConfig(step_s=0.03, maneuver="cutin")
     with pytest.raises(ConfigError, match="scenario.warmup_s"):
         EpisodeConfig(step_s=0.07, start="warmup", warmup_s=15.0)
+
+
+# --- a platoon of different vehicles: [vehicle.vI] ------------------------------------------------
+
+def test_a_cars_own_vehicle_table_lays_over_vehicle_and_round_trips():
+    from d4sumo.model.control import VehicleParams
+
+    c = EpisodeConfig(vehicle=VehicleParams(max_decel_mps2=7.0),
+                      vehicles={"v2": {"length_m": 12.0, "max_decel_mps2": 5.0, "vclass": "truck"}})
+    assert [v.length_m for v in c.car_vehicles] == [4.5, 4.5, 12.0, 4.5]
+    assert c.vehicle_of(2) == VehicleParams(length_m=12.0, max_decel_mps2=5.0, vclass="truck")
+    assert c.vehicle_of(1) is c.vehicle and not c.batch_arrays  # the arrays play one vehicle for all
+    stored = c.to_dict()["vehicle"]
+    assert stored["v2"] == {"length_m": 12.0, "max_decel_mps2": 5.0, "vclass": "truck"} and stored["max_decel_mps2"] == 7.0
+    assert EpisodeConfig.from_dict(c.to_dict()) == c
+
+
+def test_a_uniform_platoon_keeps_its_stored_identity():
+    """Campaigns stored before cars had tables of their own keep their definition, key for key."""
+    assert EpisodeConfig().to_dict()["vehicle"] == {"length_m": 4.5, "max_accel_mps2": 3.5, "max_decel_mps2": 8.0,
+                                                    "actuator_lag_s": 0.5}
+    same = EpisodeConfig(vehicles={"v1": {"length_m": 4.5}})  # a table that changes nothing is dropped
+    assert same == EpisodeConfig() and same.batch_arrays
+
+
+@pytest.mark.parametrize("vehicles, field", [
+    ({"v4": {"length_m": 12.0}}, "vehicle.v4"),
+    ({"lead": {"length_m": 12.0}}, "vehicle.lead"),  # inlane has no benign lead
+    ({"v2": {"length": 12.0}}, "vehicle.v2.length"),
+    ({"v2": {"length_m": 50.0}}, "vehicle.v2.length_m"),
+    ({"v2": {"vclass": "tram"}}, "vehicle.v2.vclass"),
+    ({"v2": {"shape": "ship"}}, "vehicle.v2.shape"),
+    ({"v2": 3}, "vehicle.v2"),
+])
+def test_a_vehicle_table_for_a_car_that_does_not_exist_or_a_bad_value_names_it(vehicles, field):
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(vehicles=vehicles)
+    assert info.value.field == field
+
+
+def test_the_attacker_declares_its_own_brakes_by_default():
+    c = EpisodeConfig(vehicles={"v0": {"max_decel_mps2": 6.0}})
+    assert c.attacker_declared_decel_mps2 == 6.0

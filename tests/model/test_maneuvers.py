@@ -159,3 +159,22 @@ def test_a_lane_change_time_on_a_half_step_always_rounds_up():
 
     assert [lane_change_steps((k + 0.5) * 0.05, 0.05) for k in range(1200)] == list(range(1, 1201))
     assert lane_change_steps(1.074, 0.05) == 21 and lane_change_steps(1.076, 0.05) == 22
+
+
+def test_a_platoon_of_different_lengths_starts_a_setpoint_behind_each_rear_bumper():
+    config = EpisodeConfig(setpoint_m=5.0, vehicles={"v1": {"length_m": 12.0}, "v3": {"length_m": 8.0}})
+    x = [car.position_m for car in maneuver_of(config).cars()]
+    assert x[3] == 8.0 + 10.0  # the rearmost car's rear bumper 10 m from the road's start
+    assert [x[i] - config.vehicle_of(i).length_m - x[i + 1] for i in range(3)] == pytest.approx([5.0, 5.0, 5.0])
+    assert x[1] - x[2] == pytest.approx(12.0 + 5.0)  # the truck's length lies between v1's and v2's front bumpers
+    assert [gap for _, _, gap in maneuver_of(config).pairs(x)] == pytest.approx([5.0, 5.0, 5.0])
+
+
+def test_a_cut_ins_benign_lead_and_a_cut_outs_obstacle_have_their_own_vehicles():
+    cutin = EpisodeConfig(maneuver="cutin", setpoint_m=5.0, vehicles={"lead": {"length_m": 10.0}, "v0": {"length_m": 6.0}})
+    cars = {car.id: car for car in maneuver_of(cutin).cars()}
+    assert cars["lead"].position_m - 10.0 - cars["v1"].position_m == pytest.approx(5.0)
+    assert cars["v0"].position_m - 6.0 == pytest.approx(cars["v1"].position_m)  # its rear at v1's front, offset 0
+    cutout = EpisodeConfig(maneuver="cutout", obstacle_distance_m=60.0, vehicles={"obstacle": {"length_m": 16.0}})
+    cars = {car.id: car for car in maneuver_of(cutout).cars()}
+    assert cars["obstacle"].position_m - 16.0 - cars["v0"].position_m == pytest.approx(60.0)

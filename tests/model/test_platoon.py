@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -134,3 +135,22 @@ def test_a_controller_returning_nan_is_refused_with_the_car_and_step():
     config = EpisodeConfig(controller=ControllerConfig(cls="test-nan"))
     with pytest.raises(ControllerError, match="v1 returned nan at step 0"):
         integrate(config, np.full(config.steps, np.nan))
+
+
+def test_each_car_brakes_and_is_measured_as_its_own_vehicle():
+    """A truck (12 m, brakes at 4 m/s^2) in a platoon of cars: its actuator and controller use its limits,
+    and every gap behind it is measured from its own rear bumper."""
+    truck = {"length_m": 12.0, "max_decel_mps2": 4.0, "vclass": "truck"}
+    config = EpisodeConfig(start="steady", setpoint_m=10.0, duration_s=20.0, vehicles={"v1": truck})
+    platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
+    assert platoon.followers[0].actuator.decel_max == 4.0 and platoon.followers[1].actuator.decel_max == 8.0
+    assert platoon.followers[0].controller.vehicle.length_m == 12.0
+    brake = np.full(config.steps, -1.0)  # the attacker brakes at full from 25 m/s
+    mixed, uniform = integrate(config, brake, 40.0), integrate(dataclasses.replace(config, vehicles=()), brake, 40.0)
+    t = mixed.trace
+    assert np.array_equal(t["gap_1"], t["pos_v1"] - 12.0 - t["pos_v2"])
+    assert np.array_equal(t["gap_0"], t["pos_v0"] - 4.5 - t["pos_v1"])
+    assert mixed.min_gaps_m()["v1-v2"] == pytest.approx(float(t["gap_1"].min()))
+    # the truck stops later than a car would: the attacker's gap to it closes further
+    assert mixed.min_gaps_m()["v0-v1"] < uniform.min_gaps_m()["v0-v1"]
+    assert mixed.outcome == "attacker_crash" and mixed.first_collision.pair == "v0-v1"
