@@ -227,7 +227,7 @@ def documented_commands() -> list[tuple[str, str]]:
     for page in GUIDE:
         text = page.read_text()
         for block in re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S):
-            for line in block.splitlines():
+            for line in re.sub(r"\\\n\s*", " ", block).splitlines():  # a command continued with a backslash is one line
                 for part in re.sub(r"\s+#.*$", "", line.strip()).split("&&"):
                     part = part.strip().removeprefix("$ ").removeprefix(".venv/bin/")
                     if part.startswith(("d4sumo ", "python tools/")):
