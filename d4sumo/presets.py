@@ -8,7 +8,8 @@ switching rule, cruise PID and low-level PID, a 0.1 s control period and no peda
 starts from rest; the attack families as coded; their episode lengths (25 s for the persistent attack;
 the intermittent and knot files' 40 s limit sits inside a string literal, so they ran to VerifAI's
 1,000 steps, 100 s) and end at 760 m; their scoring
-distance (5 m between centres of 4.95 m cars: a 0.05 m bumper gap). With ``--attack persistent`` or
+distance (5 m between centres of 4.95 m cars: a 0.05 m bumper gap), which is also where their code
+counts a crash (an attacker within it is an attacker crash): `scenario.collision_gap_m`. With ``--attack persistent`` or
 ``intermittent`` (their parametric scenarios, commit d458f6c) the followers' target speed is 20 m/s and
 the attacker cruises 5 m/s slower until it attacks; with ``knots`` (their HEAD) the attack plays from
 the first step and the low-level gains are HEAD's.
@@ -24,7 +25,7 @@ from .errors import ConfigError
 #: the authors' follower controller at commit d458f6c (the parametric attacks)
 _CODE_CONTROLLER = {"switching_rule": "code", "cruise_pid": "code", "low_level": "pid", "control_period_s": 0.1,
                     "first_command_zero": True, "low_kp": 0.1, "low_ki": 0.1, "low_kd": 0.005}
-_COMMON = {"scenario": {"start": "rest", "end_distance_m": 760.0}, "spec": {"d_safe_m": 0.05}}
+_COMMON = {"scenario": {"start": "rest", "end_distance_m": 760.0, "collision_gap_m": 0.05}, "spec": {"d_safe_m": 0.05}}
 #: per attack family named: the family as coded and what its scenario files set
 PAPER_AS_RUN = {
     "persistent": {"attack": {"family": "persistent-coded"}, "controller": _CODE_CONTROLLER,

@@ -16,9 +16,20 @@ def test_with_no_pedal_nobody_moves_and_each_specification_scores_the_standing_g
     y = arch_cc.simulate(np.zeros(40))
     assert y.shape == (1, 1001, 5) and np.allclose(y[0], [0.0, 10.0, 20.0, 30.0, 40.0])  # Keeping, v = 0
     rho = {s: float(arch_cc.robustness(s, y)[0]) for s in arch_cc.SPECS}
-    # d21 = d54 = 10 throughout: CC1 40 - 10; CC2 10 - 15; CC3 max(20 - 10, 40 - 10); CC4 10 - 8;
-    # CC5 max(-(10 - 9), 10 - 9); CCx 10 - 7.5
-    assert rho == pytest.approx({"CC1": 30.0, "CC2": -5.0, "CC3": 30.0, "CC4": 2.0, "CC5": 1.0, "CCx": 2.5})
+    # d21 = d54 = 10 throughout: CC1 40 - 10; CC2 10 - 15; CC3 max(20 - 10, 10 - 40); CC4 10 - 8 (its
+    # windows reach 115 s, cut at the trace's end); CC5 max(-(10 - 9), 10 - 9); CCx 10 - 7.5
+    assert rho == pytest.approx({"CC1": 30.0, "CC2": -5.0, "CC3": 10.0, "CC4": 2.0, "CC5": 1.0, "CCx": 2.5})
+
+
+def test_cc3_is_the_competitions_a_first_gap_opening_while_the_last_stays_under_40_m_falsifies_it():
+    """CC3 as ARCH-COMP states it (FalStar's file of 2019 had <= 40 in the second disjunct, which nothing
+    falsifies): d21 > 20 somewhere in [t, t + 20] and d54 < 40 all through it, for some t <= 80."""
+    t = np.arange(1001) * arch_cc.SAMPLE_S
+    y = np.tile([0.0, 10.0, 20.0, 30.0, 40.0], (1, 1001, 1)).astype(float)
+    y[0, :, 0] = np.where((t >= 30) & (t <= 35), -15.0, 0.0)  # the first gap opens to 25 m for 5 s
+    assert arch_cc.robustness("CC3", y)[0] == pytest.approx(max(20.0 - 25.0, 10.0 - 40.0))
+    y[0, :, 4] = np.where((t >= 30) & (t <= 35), 75.0, 40.0)  # the last gap opening to 45 m then satisfies it
+    assert arch_cc.robustness("CC3", y)[0] == pytest.approx(45.0 - 40.0)
 
 
 def test_full_throttle_pulls_car_1_away_and_car_2_chases_it():

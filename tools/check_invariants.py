@@ -9,16 +9,18 @@ target follower, offset, obstacle and lane change duration), each scored and sto
 campaign stores a sample, and counts the samples where any of these disagree:
 
 - outcome and collision record: no collision <=> no_crash; a collision involving v0 <=> attacker_crash;
-- outcome and the stored minimum gaps: no_crash <=> every minimum gap >= 0; attacker_crash <=> a pair
-  with v0 < 0; success <=> no pair with v0 < 0 and some other pair < 0;
-- outcome and the sign of the stored robustness (psi, d_safe 0): success <=> rho > 0; for the paper's
-  maneuver, rtamt's robustness and a direct numpy evaluation of psi agree;
-- the collision time is the last simulated step, and the collision pair has a negative gap there;
+  a collision is a bumper gap below scenario.collision_gap_m (0: an overlap; the paper-as-run draws:
+  0.05 m, as the authors' code counts a crash), written c below;
+- outcome and the stored minimum gaps: no_crash <=> every minimum gap >= c; attacker_crash <=> a pair
+  with v0 < c; success <=> no pair with v0 < c and some other pair < c;
+- outcome and the sign of the stored robustness (psi with d_safe = c): success <=> rho > 0; for the
+  paper's maneuver, rtamt's robustness and a direct numpy evaluation of psi agree;
+- the collision time is the last simulated step, and the collision pair's gap is below c there;
 - the FCD file SUMO wrote: every car's position along its route at every step (on a road of several
   edges: its first lane position plus SUMO's odometer) agrees with the trace to the FCD's
   precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
-  coordinate) is negative (beyond that precision) before the stored collision time, nor is the
-  collision pair's FCD gap positive at it;
+  coordinate) is below c (beyond that precision) before the stored collision time, nor is the
+  collision pair's FCD gap above c at it;
 - the episode played in a batch (beside --batch - 1 other random attacks, half of them of its
   configuration, half of other campaigns' that may share its SUMO: other setpoints, target speeds and
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
@@ -187,11 +189,13 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         broken.append("outcome/collision pair")
     with_attacker = [g for pair, g in row.min_gaps.items() if "v0" in pair.split("-")]
     others = [g for pair, g in row.min_gaps.items() if "v0" not in pair.split("-")]
-    expected = ("attacker_crash" if min(with_attacker, default=0.0) < 0 else
-                "success" if min(others, default=0.0) < 0 else "no_crash")
+    crash = config.collision_gap_m  # a pair has collided below this gap (0: an overlap)
+    expected = ("attacker_crash" if min(with_attacker, default=crash) < crash else
+                "success" if min(others, default=crash) < crash else "no_crash")
     if expected != row.outcome:
         broken.append("outcome/min gaps")
-    if config.followers >= 2 or config.maneuver != "inlane":
+    # the paper's psi scores what the outcome counts when it draws the line where a collision is
+    if (config.followers >= 2 or config.maneuver != "inlane") and campaign.d_safe_m == crash:
         if (row.robustness > 0) != (row.outcome == "success"):
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
@@ -207,14 +211,14 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         broken.append("FCD/trace positions")
         return broken
     pairs = fcd_pairs(config, positions, y, road.lane_width_m)
-    if any(g < -FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
-        broken.append("FCD overlap before the end")
+    if any(g < crash - FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
+        broken.append("FCD collision before the end")
     if c is not None:
         if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
             broken.append("collision time/end of episode")
         ids = config.vehicle_ids
         last = {f"{ids[a]}-{ids[b]}": g for a, b, g in pairs[-1]}
-        if last.get(c["pair"], np.inf) > FCD_TOLERANCE_M or row.min_gaps[c["pair"]] >= 0:
+        if last.get(c["pair"], np.inf) > crash + FCD_TOLERANCE_M or row.min_gaps[c["pair"]] >= crash:
             broken.append("collision pair/gap")
     elif len(episode.trace) != config.steps + 1:
         x = episode.trace["pos_v0"]  # only the end distance may end it early: the attacker there, not before

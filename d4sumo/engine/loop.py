@@ -74,6 +74,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
 
     batch = None
     end_m = config.end_distance_m  # an episode also ends once its attacker is this far from its start
+    crash_m = config.collision_gap_m  # the same in every episode of a batch (`batch.batch_key`)
     if m > detach_at and detach_at_step != 0 and config.batch_arrays:  # the arrays play the model as printed
         batch = PlatoonBatch(configs, np.array([p.u for p in plans]), attacker_max_speed_mps=max_speed)
         arrayed = list(range(m))  # still commanded by the batch's arrays
@@ -169,7 +170,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             alone.vs.append(v)
             alone.x, alone.v = x, v
             alone.pairs = pairs = sense_pairs(alone.e, x) if lateral else pairs_at(x)
-            collisions = collisions_at(time_s, pairs, x, v, names)
+            collisions = collisions_at(time_s, pairs, x, v, names, crash_m)
             if collisions:
                 end(alone.e, k + 1, collisions)
             elif end_m and x[0] - alone.xs[0][0] >= end_m:
@@ -184,11 +185,11 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             if lateral:
                 pairs = [sense_pairs(e, rows_x[k + 1, e].tolist()) if e in arrayed else None for e in range(m)]
             lead, gap = batch.leaders(rows_x[k + 1], pairs)
-            hit = collided(gap)
+            hit = collided(gap, crash_m)
             if np.count_nonzero(hit):
                 for e in [e for e in arrayed if hit[e]]:
                     x, v = rows_x[k + 1, e].tolist(), rows_v[k + 1, e].tolist()
-                    end(e, k + 1, collisions_at(time_s, pairs[e] if lateral else pairs_at(x), x, v, names))
+                    end(e, k + 1, collisions_at(time_s, pairs[e] if lateral else pairs_at(x), x, v, names, crash_m))
         if not live:
             break
     for e in sorted(live):

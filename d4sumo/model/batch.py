@@ -255,6 +255,7 @@ def _index(positions: list[int]) -> slice | np.ndarray:
     return np.array(positions, dtype=int)
 
 
-def collided(gap: np.ndarray) -> np.ndarray:
-    """Which episodes (rows of the M x n gaps of `PlatoonBatch.leaders`) have a bumper overlap."""
-    return (gap < 0.0).any(axis=1)
+def collided(gap: np.ndarray, collision_gap_m: float = 0.0) -> np.ndarray:
+    """Which episodes (rows of the M x n gaps of `PlatoonBatch.leaders`) have a collision: a bumper gap
+    below ``collision_gap_m`` (`platoon.collisions_at`)."""
+    return (gap < collision_gap_m).any(axis=1)

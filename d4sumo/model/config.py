@@ -137,6 +137,9 @@ class EpisodeConfig:
     #: the episode ends, without a collision, once the attacker is this far from its start (0: never);
     #: the authors' scenarios: 760 m
     end_distance_m: float = 0.0
+    #: a pair of cars has collided (the episode ends, and the outcome is theirs) once its bumper gap is
+    #: below this [m]; 0: once they overlap. The authors' code: 0.05 (centres within 5 m of 4.95 m cars)
+    collision_gap_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -194,6 +197,7 @@ class EpisodeConfig:
         fix("attacker_cruise_offset_mps", check_number("scenario.attacker_cruise_offset_mps", self.attacker_cruise_offset_mps,
                                                        -self.speed_mps, 30.0, f"m/s (the attacker cruises at {self.speed_mps:g} + this, at least 0)"))
         fix("end_distance_m", check_number("scenario.end_distance_m", self.end_distance_m, 0.0, 1e5, "metres (0: never)"))
+        fix("collision_gap_m", check_number("scenario.collision_gap_m", self.collision_gap_m, 0.0, 5.0, "metres (0: an overlap)"))
         self.maneuver_class.check(self)
 
     @property
@@ -317,7 +321,7 @@ class EpisodeConfig:
             del scenario["attacker_declared_decel_mps2"]
         for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
             del scenario[key]  # a maneuver's settings have no effect on another
-        for key in ("attacker_cruise_offset_mps", "end_distance_m", "route"):  # stored where set: earlier campaigns keep their identity
+        for key in ("attacker_cruise_offset_mps", "end_distance_m", "collision_gap_m", "route"):  # stored where set: earlier campaigns keep their identity
             if not scenario[key]:
                 del scenario[key]
         if "route" in scenario:

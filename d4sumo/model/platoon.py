@@ -43,8 +43,9 @@ def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
 
 
 def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], speeds: list[float],
-                  ids: tuple[str, ...]) -> tuple[Collision, ...]:
-    """Every bumper overlap (a pair's gap < 0) at the end of a step, frontmost pair first.
+                  ids: tuple[str, ...], collision_gap_m: float = 0.0) -> tuple[Collision, ...]:
+    """Every collision at the end of a step, frontmost pair first: a pair whose bumper gap is below
+    ``collision_gap_m`` (`EpisodeConfig.collision_gap_m`; 0: an overlap).
 
     This is the definition of a collision, whether SUMO reports it or not (SUMO ignores overlaps up to
     1 mm). The gaps are the maneuver's pairs, from which the trace's gaps come too, so the outcome, the
@@ -52,7 +53,7 @@ def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], spee
     bumper, where it hit.
     """
     return tuple(Collision(ids[a], ids[b], time_s, positions[b], (speeds[b] - speeds[a]) * 3.6)
-                 for a, b, gap in pairs if gap < 0.0)
+                 for a, b, gap in pairs if gap < collision_gap_m)
 
 
 class PythonFollower:

@@ -685,3 +685,21 @@ def test_an_episode_written_to_fcd_is_the_episode_played_without(tmp_path):
     written = simulate(config, plan, road=road, fcd_path=tmp_path / "fcd.xml")
     for name in alone.trace.names:
         assert np.array_equal(alone.trace[name], written.trace[name]), name
+
+
+def test_as_run_an_attacker_within_five_centimetres_is_an_attacker_crash_as_the_authors_code_counts_it(road):
+    """Found by check_invariants: with the paper-as-run preset (d_safe 0.05 m) an attacker that came within
+    3.4 cm of v1 without touching it was stored as a success whose robustness was negative. The authors'
+    code counts a crash at 5 m between centres (a 0.05 m bumper gap), for the attacker too: so does the
+    preset now (scenario.collision_gap_m), and the outcome, the collision, the minimum gaps and rho agree."""
+    from d4sumo.inputs import campaign_of
+
+    campaign = campaign_of({"preset": "paper-as-run", "attack": {"family": "knots"}, "search": {"optimizer": "random"},
+                            "scenario": {"setpoint_m": 3.238852004540027, "followers": 5}})
+    assert campaign.config.collision_gap_m == campaign.d_safe_m == 0.05
+    params = np.array([-0.7894837129580512, 0.3239892227331149, -0.2807027461520679, -0.707052313034422,
+                       -0.5130223604436746, 0.4561376212447992, 0.44612071880776627, 0.3041796495393634])
+    r = Evaluator(campaign, road=road)(0, params)
+    assert r.outcome == "attacker_crash" and r.collision["pair"] == "v0-v1"
+    assert 0.0 < r.min_gaps["v0-v1"] < 0.05 and min(g for p, g in r.min_gaps.items() if p != "v0-v1") > 0.05
+    assert r.robustness < 0

@@ -104,3 +104,21 @@ def test_a_vehicle_table_for_a_car_that_does_not_exist_or_a_bad_value_names_it(v
 def test_the_attacker_declares_its_own_brakes_by_default():
     c = EpisodeConfig(vehicles={"v0": {"max_decel_mps2": 6.0}})
     assert c.attacker_declared_decel_mps2 == 6.0
+
+
+def test_the_collision_gap_is_stored_only_where_set_and_checked():
+    assert "collision_gap_m" not in EpisodeConfig().to_dict()["scenario"]
+    c = EpisodeConfig(collision_gap_m=0.05)
+    assert c.to_dict()["scenario"]["collision_gap_m"] == 0.05 and EpisodeConfig.from_dict(c.to_dict()) == c
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(collision_gap_m=-0.1)
+    assert info.value.field == "scenario.collision_gap_m"
+
+
+def test_a_pair_within_the_collision_gap_has_collided():
+    from d4sumo.model.platoon import collisions_at
+
+    pairs = [(0, 1, 0.04), (1, 2, 0.3)]
+    assert collisions_at(1.0, pairs, [20.0, 15.46, 10.0], [5.0, 6.0, 6.0], ("v0", "v1", "v2")) == ()
+    (hit,) = collisions_at(1.0, pairs, [20.0, 15.46, 10.0], [5.0, 6.0, 6.0], ("v0", "v1", "v2"), 0.05)
+    assert hit.pair == "v0-v1"
