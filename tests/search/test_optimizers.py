@@ -28,7 +28,7 @@ def best_of(name, seed, budget=100, f=bowl):
     return best
 
 
-@pytest.mark.parametrize("name", ["bo", "turbo", "ce", "cmaes"])
+@pytest.mark.parametrize("name", ["bo", "auto", "turbo", "ce", "cmaes"])
 def test_bo_turbo_ce_and_cmaes_find_the_maximum_of_a_9d_function_far_better_than_random(name):
     random = np.mean([best_of("random", s) for s in range(3)])
     found = np.mean([best_of(name, s) for s in range(3)])
@@ -75,7 +75,7 @@ def test_cross_entropy_samples_stay_in_the_box_near_its_edges():
 
 
 def test_unknown_optimizer_lists_the_allowed_ones():
-    with pytest.raises(ConfigError, match="bo, turbo, ce, ce-bucket, cmaes, random, halton"):
+    with pytest.raises(ConfigError, match="bo, auto, turbo, ce, ce-bucket, cmaes, random, halton"):
         make_optimizer("annealing", LOWER, UPPER, budget=10, rng=np.random.default_rng(0))
 
 
@@ -359,3 +359,35 @@ def test_turbo_finds_the_maximum_of_a_40d_function_where_random_search_does_not(
         play_in_batches(opt, f)
         bests[name] = max(opt.y)
     assert bests["turbo"] > bests["random"] + 3.0, bests  # random's best is around -10
+
+
+def _share_after(f, budget=120, seed=0):
+    opt = make_optimizer("auto", LOWER, UPPER, budget=budget, rng=np.random.default_rng(seed))
+    random_points = 0
+    while opt.asked < budget:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), budget - opt.asked)))]
+        random_points += sum(opt._arms[-len(xs):])
+        for x in xs:
+            opt.tell(x, f(x))
+    return opt.random_share, random_points
+
+
+def test_auto_moves_its_budget_to_bo_where_the_model_informs():
+    share, random_points = _share_after(lambda x: -float(np.sum((x - 0.3) ** 2)))
+    assert share == 0.2 and random_points < 40  # BO improved the best, random hardly ever: its floor
+
+
+def test_auto_moves_its_budget_to_random_points_on_a_plateau_with_rare_steps_up():
+    """Scores flat but for rare small steps up, anywhere in the box: only random points find them."""
+    def plateau(x):
+        cell = np.floor((x[:3] - LOWER[:3]) / (UPPER[:3] - LOWER[:3]) * 7.0)
+        return float(np.sum(cell == 3))  # a step up in each of three coordinates' middle seventh
+    share, random_points = _share_after(plateau, budget=200)
+    assert share > 0.5 and random_points > 70
+
+
+def test_auto_refuses_a_share_outside_its_bounds():
+    with pytest.raises(ConfigError) as info:
+        make_optimizer("auto", LOWER, UPPER, budget=10, rng=np.random.default_rng(0),
+                       options={"random_share": 0.9, "share_max": 0.8})
+    assert info.value.field == "search.auto.random_share"

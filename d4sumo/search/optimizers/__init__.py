@@ -16,6 +16,9 @@
   perturbations of the incumbent. It proposes ``batch_size`` points at once (5; 1 is the paper's one
   point per score) by the constant liar. ``gp_version = 1`` runs scikit-optimize's GP instead, as
   campaigns stored by d4sumo 0.3 and before did (5-20 times BO's own time).
+- ``auto``: ``bo`` and uniform random sampling as one portfolio over one GP: each point after the initial
+  design is random with a probability that moves to whichever of the two improves the best score
+  (`portfolio`); on a plateau, where BO narrows around an arbitrary incumbent, random points carry it.
 - ``turbo``: TuRBO-1, the same inside a trust region that follows the best point, grows on successes,
   shrinks on failures and restarts when it collapses: for 10-40 dimensions.
 
@@ -41,12 +44,14 @@ from .base import INDEPENDENT_BATCH, Optimizer, check_options
 from .bayes import BayesianOptimization, TrustRegionBO
 from .cmaes import CMAES
 from .crossentropy import BucketCrossEntropy, CrossEntropy
+from .portfolio import Portfolio
 from .sampling import Halton, RandomSearch
 
-OPTIMIZERS = ("bo", "turbo", "ce", "ce-bucket", "cmaes", "random", "halton")
+OPTIMIZERS = ("bo", "auto", "turbo", "ce", "ce-bucket", "cmaes", "random", "halton")
 
 _FACTORIES: dict[str, Callable[..., Optimizer]] = {
     "bo": BayesianOptimization,
+    "auto": Portfolio,
     "turbo": TrustRegionBO,
     "ce": CrossEntropy,
     "ce-bucket": BucketCrossEntropy,
@@ -96,4 +101,4 @@ def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Gener
 
 
 __all__ = ["OPTIMIZERS", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
-           "CMAES", "CrossEntropy", "Halton", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]
+           "CMAES", "CrossEntropy", "Halton", "Portfolio", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]
