@@ -46,3 +46,16 @@ def test_the_input_instances():
     assert throttle2[0].tolist() == [0.0, 0.0, x[1], 1.0]  # held 5 s a value
     throttle1, _ = arch_cc.inputs(x, 1, t)
     assert throttle1[0, 0] == 0.0 and 0.0 < throttle1[0, 1] < x[1] and throttle1[0, 3] == pytest.approx(1.0, abs=0.01)
+
+
+def test_bench_falsify_times_the_optimiser_a_campaign_makes():
+    """tools/bench_falsify.py wraps the optimiser every campaign makes; it broke silently when campaigns
+    moved where they make it."""
+    from bench_falsify import timed_optimizer
+
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.search.runner import run_campaign
+
+    with timed_optimizer() as clock:
+        run_campaign(Campaign(optimizer="bo", samples=12, seed=1))
+    assert clock[0] > 0.0

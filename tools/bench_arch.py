@@ -196,10 +196,13 @@ def arch_comp(args) -> None:
             median = f"{statistics.median(hits):.0f}" if hits else "-"
             rows[o][spec] = f"{len(hits)}/{runs}, {mean} ({median})"
             print(f"[{spec}] {o:10s}: falsified {len(hits)}/{runs}; simulations {[f for f, _, _ in results]}", flush=True)
-    print("\nfalsified runs, mean (median) simulations to falsify; own time per proposal")
-    print(f"{'optimizer':12s}" + "".join(f"{s:>22s}" for s in specs) + f"{'own ms':>9s}")
+    episode = sumo_episode_seconds()
+    print(f"\nfalsified runs, mean (median) simulations to falsify; own time per proposal (ask + tell, over every "
+          f"run), and against one SUMO episode of d4sumo's default scenario ({episode * 1e3:.1f} ms, this run)")
+    print(f"{'optimizer':12s}" + "".join(f"{s:>22s}" for s in specs) + f"{'own ms':>9s}{'own/episode':>13s}")
     for o in args.optimizers:
-        print(f"{o:12s}" + "".join(f"{rows[o][s]:>22s}" for s in specs) + f"{statistics.mean(own_time[o]) * 1e3:9.2f}")
+        own = statistics.mean(own_time[o])
+        print(f"{o:12s}" + "".join(f"{rows[o][s]:>22s}" for s in specs) + f"{own * 1e3:9.2f}{own / episode:13.2f}")
     print(f"{'FalCAuN 2024':12s}" + "".join(f"{FALCAUN[s][0]:>22s}" for s in specs))
     print(f"{'FalCAuN now':12s}" + "".join(f"{FALCAUN[s][1]:>22s}" for s in specs))
 

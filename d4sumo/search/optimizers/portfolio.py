@@ -17,12 +17,13 @@ import numpy as np
 
 from ...errors import ConfigError
 from .bayes import BayesianOptimization
+from .gp import GaussianProcess
 
 
 class Portfolio(BayesianOptimization):
     name = "auto"
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
-               "share_max": (0.8, 0.0, 1.0)}
+               "share_max": (0.8, 0.0, 1.0), "inducing": (256, 0, 100_000), "learn_points": (256, 16, 100_000)}
 
     @staticmethod
     def check_together(options: dict) -> None:
@@ -33,6 +34,8 @@ class Portfolio(BayesianOptimization):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         o = self.options
+        # thousands of scores: conditioned through inducing points, learned from a subset (`gp`)
+        self._process = GaussianProcess(self.dimension, inducing=o["inducing"], learn_points=o["learn_points"])
         #: credits of (BO, random): one each to start, so that the share starts where random_share says
         self._credits = np.array([1.0 - o["random_share"], o["random_share"]]) * 2.0
         self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked (0 BO, 1 random)
