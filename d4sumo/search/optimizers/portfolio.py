@@ -2,13 +2,18 @@
 
 On a plateau (most inputs score alike) expected improvement has nothing to go on and BO narrows around
 an incumbent that is one point of the plateau among many: ARCH-COMP's CC2 is such a case, where random
-search falsifies where BO does not. ``auto`` keeps both: after BO's initial design, each point it proposes
-is drawn uniformly in the box with probability ``random_share``, and by BO's expected improvement
-otherwise. Every score is told to the one GP, whichever arm proposed it. The share then moves to the arm
+search falsifies where BO does not. ``auto`` keeps both arms. After BO's initial design, each point is
+drawn uniformly in the box with probability ``random_share`` and proposed by BO's expected improvement
+otherwise; every score is told to the one GP, whichever arm proposed it. The share moves to the arm
 that improves the best score: each improvement credits its arm, and the share is the random arm's
-credits over all (each arm starts with one), kept within [``share_min``, ``share_max``] so that
-neither arm starves. Where BO's model informs, its points improve the best and take the budget; on a
-plateau random points find the way off it, and take the budget.
+credits over all (each arm starts with one), kept within [``share_min``, ``share_max``] so that neither
+arm starves. Where BO's model informs, its points improve the best and take the budget; on a plateau,
+random points find the way off it.
+
+The arms draw from a stream of their own (spawned, so the campaign's stream is not advanced): BO's
+proposals are bo's own until a random point is played. The GP conditions through ``inducing`` points
+and learns from ``learn_points`` (`gp`), so that its own time stays a few milliseconds a proposal at
+thousands of scores.
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ import numpy as np
 from ...errors import ConfigError
 from .bayes import BayesianOptimization
 from .gp import GaussianProcess
+
+BO, RANDOM = 0, 1
 
 
 class Portfolio(BayesianOptimization):
@@ -36,31 +43,29 @@ class Portfolio(BayesianOptimization):
         o = self.options
         # thousands of scores: conditioned through inducing points, learned from a subset (`gp`)
         self._process = GaussianProcess(self.dimension, inducing=o["inducing"], learn_points=o["learn_points"])
-        #: credits of (BO, random): one each to start, so that the share starts where random_share says
-        self._credits = np.array([1.0 - o["random_share"], o["random_share"]]) * 2.0
-        self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked (0 BO, 1 random)
+        #: credits of (BO, random), two in all to start, split as random_share says
+        self.credits = np.array([1.0 - o["random_share"], o["random_share"]]) * 2.0
+        self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked
+        self._arm_rng = self.rng.spawn(1)[0]
 
     @property
     def random_share(self) -> float:
         """The probability that the next point after the initial design is drawn uniformly."""
-        share = self._credits[1] / self._credits.sum()
+        share = self.credits[RANDOM] / self.credits.sum()
         return float(np.clip(share, self.options["share_min"], self.options["share_max"]))
 
     def _ask(self) -> np.ndarray:
-        if len(self.y) - self._run < self.initial_points:
-            self._arms.append(0)
+        if len(self.y) - self._run < self.initial_points or self._arm_rng.random() >= self.random_share:
+            self._arms.append(BO)
             return super()._ask()
-        if self.rng.random() < self.random_share:
-            z = self.rng.random(self.dimension)
-            self._pending.append(z)
-            self._arms.append(1)
-            return self._unit_to_box(z)
-        self._arms.append(0)
-        return super()._ask()
+        z = self._arm_rng.random(self.dimension)
+        self._pending.append(z)
+        self._arms.append(RANDOM)
+        return self._unit_to_box(z)
 
     def tell(self, x: np.ndarray, score: float) -> None:
         best = max(self.y) if self.y else -np.inf
         super().tell(x, score)
         arm = self._arms.pop(0)
         if len(self.y) > self.initial_points and self.y[-1] > best:
-            self._credits[arm] += 1.0
+            self.credits[arm] += 1.0
