@@ -51,7 +51,7 @@ FACTORS = {
     "start from rest, attacker 5 m/s slower": {"scenario.start": "steady", "scenario.attacker_cruise_offset_mps": 0.0},
     "attacks as coded": {"attack.family": None},  # the family as printed
     "25/100 s episodes ending at 760 m": {"scenario.duration_s": 60.0, "scenario.end_distance_m": 0.0},
-    "scoring at 5 m between centres": {"spec.d_safe_m": 0.0},
+    "crashes and scoring at 5 m between centres": {"spec.d_safe_m": 0.0, "scenario.collision_gap_m": 0.0},
 }
 SWEEPS = {  # name -> (sweep file, grid values replaced, fixed values set)
     "parametric": ("paper_parametric.toml", {}, {}),
