@@ -429,9 +429,10 @@ def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
 
 
 @pytest.mark.parametrize("earlier", [
-    {"ce": "noise_fraction = 0.0"},  # 0.4
-    {"bo": "gp_version = 1", "ce": "noise_fraction = 0.0"},  # 0.3
-    {"bo": "gp_version = 1\nbatch_size = 1", "ce": "noise_fraction = 0.0"},  # 0.2
+    {"bo": "inducing = 0"},  # 0.5-0.6
+    {"bo": "inducing = 0", "ce": "noise_fraction = 0.0"},  # 0.4
+    {"bo": "gp_version = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.3
+    {"bo": "gp_version = 1\nbatch_size = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.2
 ])
 def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):
     """A sweep database an earlier d4sumo wrote has another grid (bo's and ce's options then), and the

@@ -65,12 +65,15 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: definition leaves such an option out at that value, and a stored definition without it gets it back,
 #: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
 #: ran scikit-optimize's GP; ce added no noise)
-OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1}, "ce": {"noise_fraction": 0.0}}
+OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1, "inducing": 0},
+                                              "ce": {"noise_fraction": 0.0}}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
-#: (bo in 0.3: scikit-optimize's GP; in 0.2 also one point per score; ce in 0.4 and before: no noise)
-EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"gp_version": 1}, {"gp_version": 1, "batch_size": 1}),
+#: (bo in 0.6 and before: the exact GP however many scores; in 0.3: scikit-optimize's GP; in 0.2 also one
+#: point per score; ce in 0.4 and before: no noise)
+EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 0}, {"gp_version": 1, "inducing": 0},
+                                                                   {"gp_version": 1, "batch_size": 1, "inducing": 0}),
                                                             "ce": ({"noise_fraction": 0.0},)}
 
 

@@ -47,7 +47,7 @@ class GaussianProcessSearch(Optimizer):
         self._gp = None
         self._fitted = 0  # the scores told when the GP was last fitted
         self._learned = 0  # the scores modelled when the hyperparameters were last learned
-        self._process = GaussianProcess(self.dimension)
+        self._process = GaussianProcess(self.dimension, inducing=o.get("inducing", 0))
         self._run = 0  # the first sample of the current run (turbo starts new runs)
 
     def ready(self) -> int:
@@ -110,7 +110,7 @@ class BayesianOptimization(GaussianProcessSearch):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2)}
+               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (256, 0, 100_000)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
