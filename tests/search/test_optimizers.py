@@ -403,3 +403,17 @@ def test_auto_proposes_what_bo_does_until_it_plays_a_random_point():
         for a, b in zip(xs, ys):
             auto.tell(a, f(a))
             bo.tell(b, f(b))
+
+
+@pytest.mark.parametrize("inducing, sparse", [(256, True), (0, False)])
+def test_bo_conditions_through_inducing_points_past_that_many_scores(inducing, sparse):
+    """Issue 25: at thousands of scores the exact GP cost 60-120 ms a proposal; past `inducing` scores it is
+    conditioned through that many (0: exact, as campaigns stored before the option ran)."""
+    opt = make_optimizer("bo", LOWER, UPPER, budget=300, rng=np.random.default_rng(0), options={"inducing": inducing})
+    rng = np.random.default_rng(1)
+    for _ in range(290):
+        x = rng.uniform(LOWER, UPPER)
+        opt.tell(x, -float(np.sum(x ** 2)))
+    opt.asked = 290
+    opt.ask()
+    assert opt._gp.sparse == sparse and len(opt._gp.t) == 290

@@ -11,9 +11,8 @@ arm starves. Where BO's model informs, its points improve the best and take the 
 random points find the way off it.
 
 The arms draw from a stream of their own (spawned, so the campaign's stream is not advanced): BO's
-proposals are bo's own until a random point is played. The GP conditions through ``inducing`` points
-and learns from ``learn_points`` (`gp`), so that its own time stays a few milliseconds a proposal at
-thousands of scores.
+proposals are bo's own until a random point is played. Its GP is bo's, conditioned through
+``inducing`` points past that many scores (`gp`).
 """
 
 from __future__ import annotations
@@ -22,7 +21,6 @@ import numpy as np
 
 from ...errors import ConfigError
 from .bayes import BayesianOptimization
-from .gp import GaussianProcess
 
 BO, RANDOM = 0, 1
 
@@ -30,7 +28,7 @@ BO, RANDOM = 0, 1
 class Portfolio(BayesianOptimization):
     name = "auto"
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
-               "share_max": (0.8, 0.0, 1.0), "inducing": (256, 0, 100_000), "learn_points": (256, 16, 100_000)}
+               "share_max": (0.8, 0.0, 1.0)}
 
     @staticmethod
     def check_together(options: dict) -> None:
@@ -41,8 +39,6 @@ class Portfolio(BayesianOptimization):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         o = self.options
-        # thousands of scores: conditioned through inducing points, learned from a subset (`gp`)
-        self._process = GaussianProcess(self.dimension, inducing=o["inducing"], learn_points=o["learn_points"])
         #: credits of (BO, random), two in all to start, split as random_share says
         self.credits = np.array([1.0 - o["random_share"], o["random_share"]]) * 2.0
         self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked
