@@ -73,7 +73,7 @@ def check_document(doc: Mapping[str, Any], source: str = "config", extra_keys: t
             raise ConfigError(f"{source}: [{key}]", _short(value), "a table")
         allowed = TABLE_KEYS.get(key)
         for k, v in value.items():
-            if key == "vehicle" and isinstance(v, Mapping):  # [vehicle.vI]: a car's own table, checked with the episode
+            if key == "vehicle" and isinstance(v, Mapping) and k not in allowed:  # [vehicle.vI]: a car's own table
                 continue
             if allowed is not None and k not in allowed:
                 raise ConfigError(f"{key}.{k}", _short(v), f"a key of [{key}]: {', '.join(allowed)}")
@@ -132,6 +132,30 @@ def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
     return EpisodeConfig.from_dict(apply_preset(doc))
 
 
+def link_collision_distance(doc: Mapping[str, Any]) -> dict:
+    """The document with the paper's psi and the collisions drawing their line at one distance: the psi
+    scores a success where the outcome counts one only if ``spec.d_safe_m`` is ``scenario.collision_gap_m``.
+    One given sets the other; both given and different is refused. A formula of one's own scores what it
+    says, and leaves both as given."""
+    doc = copy.deepcopy(dict(doc))
+    spec, scenario = doc.get("spec", {}), doc.get("scenario", {})
+    if not isinstance(spec, Mapping) or not isinstance(scenario, Mapping) or spec.get("formula") is not None:
+        return doc
+    d_safe, gap = spec.get("d_safe_m"), scenario.get("collision_gap_m")
+    if d_safe is not None and gap is not None:
+        if is_number(d_safe) and is_number(gap) and float(d_safe) != float(gap):
+            raise ConfigError("spec.d_safe_m", d_safe, f"scenario.collision_gap_m ({gap!r} m): the paper's psi scores a success "
+                                                       "where a collision is (or give spec.formula, a formula of your own)")
+    elif d_safe is not None:
+        if not (is_number(d_safe) and 0.0 <= float(d_safe) <= 5.0):
+            raise ConfigError("spec.d_safe_m", _short(d_safe), "a number in [0, 5] m with the paper's psi (it is where a collision "
+                                                               "is, scenario.collision_gap_m), or give spec.formula")
+        doc.setdefault("scenario", {})["collision_gap_m"] = d_safe
+    elif gap is not None:
+        doc.setdefault("spec", {})["d_safe_m"] = gap
+    return doc
+
+
 def _family(doc: Mapping[str, Any], choices=FAMILIES) -> AttackFamily:
     name = _get(doc, "attack.family", "knots")
     if not isinstance(name, str) or name not in choices:
@@ -170,7 +194,7 @@ def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray |
 
 def campaign_of(doc: Mapping[str, Any]) -> Campaign:
     """The campaign a document describes (the optimiser chooses the attack's parameters)."""
-    doc = apply_preset(doc, campaign=True)
+    doc = apply_preset(link_collision_distance(doc), campaign=True)  # what the document sets wins over a preset
     if "params" in doc.get("attack", {}):
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
     config = episode_config(doc)

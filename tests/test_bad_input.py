@@ -37,7 +37,9 @@ SIMULATE = [
     # a platoon of different vehicles: a car that does not exist, a key or value [vehicle] does not take
     ["--set", "vehicle.v7.length_m=12"], ["--set", "vehicle.lead.length_m=12"], ["--set", "vehicle.v2.length=12"],
     ["--set", "vehicle.v2.length_m=50"], ["--set", "vehicle.v2.vclass=tram"], ["--set", "vehicle.v2.shape=ship"],
-    ["--set", "vehicle.v2=3"], ["--set", "vehicle.vclass=rail"],
+    ["--set", "vehicle.v2=3"], ["--set", "vehicle.vclass=rail"], ["--set", "vehicle.shape={a=1}"],
+    # the paper's psi and the collisions draw their line at one distance
+    ["--set", "scenario.collision_gap_m=0.5", "--d-safe", "0.2"], ["--d-safe", "-1"], ["--d-safe", "7"],
 ]
 
 

@@ -136,3 +136,21 @@ def test_a_bad_preset_is_one_line(doc, message):
 
     with pytest.raises(ConfigError, match=re.escape(message)):
         campaign_of(doc)
+
+
+def test_the_papers_psi_and_the_collisions_draw_their_line_at_one_distance():
+    """Found in review: collision_gap_m 1.5 with d_safe 0 stored successes whose robustness was negative.
+    One given sets the other; both given and different is refused; a formula of one's own leaves both."""
+    from d4sumo.inputs import campaign_of
+
+    c = campaign_of({"spec": {"d_safe_m": 0.3}})
+    assert c.d_safe_m == c.config.collision_gap_m == 0.3
+    c = campaign_of({"scenario": {"collision_gap_m": 1.5}})
+    assert c.d_safe_m == c.config.collision_gap_m == 1.5
+    with pytest.raises(ConfigError) as info:
+        campaign_of({"scenario": {"collision_gap_m": 1.5}, "spec": {"d_safe_m": 0.0}})
+    assert info.value.field == "spec.d_safe_m"
+    c = campaign_of({"scenario": {"collision_gap_m": 1.5}, "spec": {"formula": "always(gap_1 > 0)"}})
+    assert c.d_safe_m == 0.0 and c.config.collision_gap_m == 1.5
+    preset = campaign_of({"preset": "paper-as-run", "attack": {"family": "persistent"}, "spec": {"d_safe_m": 0.0}})
+    assert preset.d_safe_m == preset.config.collision_gap_m == 0.0  # what the document sets wins over the preset

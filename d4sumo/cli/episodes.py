@@ -28,12 +28,12 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from ..engine.scenarios import build_road
     from ..engine.simulation import simulate
-    from ..inputs import attack_of, episode_config
+    from ..inputs import attack_of, episode_config, link_collision_distance
     from ..search.spec import Specification
 
     from ..presets import apply_preset
 
-    doc = apply_preset(document(args)[0])  # the spec's values too
+    doc = apply_preset(link_collision_distance(document(args)[0]))  # the spec's values too
     config = episode_config(doc)
     family, params = attack_of(doc)
     spec_table = doc.get("spec", {})

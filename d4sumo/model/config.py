@@ -340,7 +340,9 @@ class EpisodeConfig:
         scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in _TABLES]
         _check_keys("scenario", tables["scenario"], scenario_keys)
         # [vehicle.vI]: a car's own table (the config checks the car); any other key is one of [vehicle]
-        cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"]) if isinstance(tables["vehicle"][k], Mapping)}
+        keys = [f.name for f in dataclasses.fields(VehicleParams)]
+        cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"])
+                if isinstance(tables["vehicle"][k], Mapping) and k not in keys}
         _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)] + ["vI (a car's own table)"])
         given = doc.get("controller", {})
         if isinstance(given, (list, tuple)):

@@ -73,6 +73,10 @@ class PythonFollower:
         self.has_mode = hasattr(self.controller, "mode")
 
 
+#: SUMO's default comfortable deceleration of a passenger car, which its models plan with
+PASSENGER_DECEL_MPS2 = 4.5
+
+
 class SumoFollower:
     """A follower driven by one of SUMO's car-following models: d4sumo senses it and commands nothing.
 
@@ -100,8 +104,13 @@ class SumoFollower:
         attributes = carfollowing.vtype_attributes(self.model, self.params, lanes=lanes)
         attributes.update(length=repr(v.length_m), accel=repr(v.max_accel_mps2), emergencyDecel=repr(v.max_decel_mps2),
                           maxSpeed=repr(self.episode.speed_mps), speedFactor="1", speedDev="0")
-        if v.vclass != "passenger" or v.shape:  # a class's defaults reach only what is not set above
+        if v.vclass != "passenger" or v.shape:
             attributes.update(vClass=v.vclass, width=repr(CAR_WIDTH_M), **({"guiShape": v.shape} if v.shape else {}))
+        if v.vclass != "passenger" or v.max_decel_mps2 < PASSENGER_DECEL_MPS2:
+            # a class brings its own defaults (a truck brakes at 4 m/s^2 by choice, a motorcycle at 10): the
+            # model's comfortable deceleration stays the passenger car's unless its table sets one, and never
+            # above what the car can brake
+            attributes.setdefault("decel", repr(min(PASSENGER_DECEL_MPS2, v.max_decel_mps2)))
         return attributes
 
     @property

@@ -648,7 +648,8 @@ def test_a_sumo_driven_truck_follows_with_its_own_body_and_limits(road, tmp_path
     episode = simulate(config, np.full(config.steps, -1.0), road=road, fcd_path=fcd)
     types = {v.id: v.type for _, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "type"])}
     assert types["v2"] != types["v1"] and types["v1"] == types["v3"]
-    # the truck brakes at no more than its own 4 m/s^2 (SUMO's ACC may ask for more; the truck cannot give it)
+    # the truck brakes at no more than its own 4 m/s^2: SUMO's model plans with the passenger car's 4.5 only
+    # where the car can brake that hard
     assert np.min(episode.trace["accel_v2"]) >= -4.0 - 1e-9 and np.min(episode.trace["accel_v1"]) < -4.5
     assert np.array_equal(episode.trace["gap_1"], episode.trace["pos_v1"] - 4.5 - episode.trace["pos_v2"])
     assert np.array_equal(episode.trace["gap_2"], episode.trace["pos_v2"] - 12.0 - episode.trace["pos_v3"])
@@ -703,3 +704,13 @@ def test_as_run_an_attacker_within_five_centimetres_is_an_attacker_crash_as_the_
     assert r.outcome == "attacker_crash" and r.collision["pair"] == "v0-v1"
     assert 0.0 < r.min_gaps["v0-v1"] < 0.05 and min(g for p, g in r.min_gaps.items() if p != "v0-v1") > 0.05
     assert r.robustness < 0
+
+
+def test_a_sumo_driven_follower_of_another_class_keeps_the_passenger_cars_comfortable_deceleration(road):
+    """Found in review: a truck's vClass gave SUMO's Krauss its class default decel (4 m/s^2, not 4.5),
+    so the class changed how the follower drove; only the lanes it may use are the class's."""
+    config = EpisodeConfig(controller=ControllerConfig("sumo:Krauss"), start="steady", duration_s=20.0)
+    brake = np.full(config.steps, -1.0)
+    car = simulate(config, brake, road=road)
+    truck = simulate(dataclasses.replace(config, vehicles={"v2": {"vclass": "truck"}}), brake, road=road)
+    assert truck.min_gaps_m() == car.min_gaps_m()

@@ -122,3 +122,9 @@ def test_a_pair_within_the_collision_gap_has_collided():
     assert collisions_at(1.0, pairs, [20.0, 15.46, 10.0], [5.0, 6.0, 6.0], ("v0", "v1", "v2")) == ()
     (hit,) = collisions_at(1.0, pairs, [20.0, 15.46, 10.0], [5.0, 6.0, 6.0], ("v0", "v1", "v2"), 0.05)
     assert hit.pair == "v0-v1"
+
+
+def test_a_vehicle_key_given_a_table_is_that_key_refused_not_a_car():
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig.from_dict({"vehicle": {"shape": {"a": 1}}})
+    assert info.value.field == "vehicle.shape"
