@@ -110,7 +110,7 @@ class BayesianOptimization(GaussianProcessSearch):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (256, 0, 100_000)}
+               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
