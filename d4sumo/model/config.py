@@ -343,7 +343,7 @@ class EpisodeConfig:
         keys = [f.name for f in dataclasses.fields(VehicleParams)]
         cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"])
                 if isinstance(tables["vehicle"][k], Mapping) and k not in keys}
-        _check_keys("vehicle", tables["vehicle"], [f.name for f in dataclasses.fields(VehicleParams)] + ["vI (a car's own table)"])
+        _check_keys("vehicle", tables["vehicle"], keys + ["vI (a car's own table)"])
         given = doc.get("controller", {})
         if isinstance(given, (list, tuple)):
             controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
