@@ -361,10 +361,11 @@ def test_turbo_finds_the_maximum_of_a_40d_function_where_random_search_does_not(
     assert bests["turbo"] > bests["random"] + 3.0, bests  # random's best is around -10
 
 
-def _arms_after(f, budget=120, seed=0):
-    """The points each arm of auto proposed after its initial design (BO, random), and its final share."""
-    opt = make_optimizer("auto", LOWER, UPPER, budget=budget, rng=np.random.default_rng(seed))
-    arms = [0, 0]
+def _arms_after(f, budget=120, seed=0, **options):
+    """The points each arm of auto proposed after its initial design (BO, held sampling or uniform, piece
+    moves), and its final exploring share."""
+    opt = make_optimizer("auto", LOWER, UPPER, budget=budget, rng=np.random.default_rng(seed), options=options)
+    arms = [0, 0, 0]
     while opt.asked < budget:
         xs = [opt.ask() for _ in range(max(1, min(opt.ready(), budget - opt.asked)))]
         if len(opt.y) >= opt.initial_points:
@@ -375,14 +376,70 @@ def _arms_after(f, budget=120, seed=0):
     return arms, opt.random_share
 
 
-def test_auto_moves_its_budget_to_bo_where_the_model_informs():
-    (bo, random), share = _arms_after(lambda x: -float(np.sum((x - 0.3) ** 2)))
-    assert share == 0.2 and bo > random  # BO improved the best, random hardly ever: the share at its floor
+@pytest.mark.parametrize("version", [1, 2])
+def test_auto_moves_its_budget_to_bo_where_the_model_informs(version):
+    (bo, *explore), share = _arms_after(lambda x: -float(np.sum((x - 0.3) ** 2)), version=version)
+    assert share == 0.2 and bo > sum(explore)  # BO improved the best, exploring hardly ever: the share at its floor
 
 
-def test_auto_keeps_half_its_budget_random_on_a_plateau_where_nothing_improves():
-    (bo, random), share = _arms_after(lambda x: 1.0, budget=200)
-    assert share == 0.5 and 0.4 < random / (bo + random) < 0.6
+@pytest.mark.parametrize("version", [1, 2])
+def test_auto_keeps_half_its_budget_exploring_on_a_plateau_where_nothing_improves(version):
+    (bo, random, piece), share = _arms_after(lambda x: -1.0, budget=200, version=version)
+    assert share == 0.5 and 0.4 < (random + piece) / (bo + random + piece) < 0.6
+    assert (piece > 0) == (version == 2)
+
+
+def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
+    """Exploring serves the first falsification; past a positive score BO collects attacks around it."""
+    (bo, random, piece), share = _arms_after(lambda x: 1.0, budget=60)
+    assert share == 0.0 and random + piece == 0 and bo == 50
+    (_, random, _), share = _arms_after(lambda x: 1.0, budget=200, version=1)
+    assert share == 0.5 and random > 0  # version 1 explored whatever the scores
+
+
+def test_auto_held_points_hold_pieces_at_bounds_or_one_value():
+    """Held sampling: each point is at most 0.4 d pieces of equal values, a third of them at each bound."""
+    opt = make_optimizer("auto", -np.ones(40), np.ones(40), budget=10, rng=np.random.default_rng(0))
+    values = []
+    for _ in range(300):
+        z = opt._held()
+        pieces = 1 + int(np.count_nonzero(np.diff(z)))
+        assert 1 <= pieces <= 16
+        values.extend(z[np.r_[0, np.flatnonzero(np.diff(z)) + 1]])
+    at_bounds = np.mean(np.isin(values, [0.0, 1.0]))
+    assert 0.55 < at_bounds < 0.78, at_bounds
+
+
+def test_auto_piece_moves_change_one_piece_or_span_of_the_incumbent():
+    opt = make_optimizer("auto", LOWER, UPPER, budget=10, rng=np.random.default_rng(1))
+    best = np.repeat([0.0, 0.7, 1.0, 0.2], [3, 2, 4, 1])[: opt.dimension]
+    for _ in range(200):
+        z = opt._piece_move(best)
+        changed = np.flatnonzero(z != best)
+        assert changed.size == 0 or np.all(np.diff(changed) == 1)  # one contiguous span
+        if changed.size:
+            assert np.all(z[changed] == z[changed[0]])  # set to one value
+
+
+def test_auto_falsifies_arch_comps_cc4():
+    """Issue 25: ARCH-COMP's chasing cars, CC4 (tools/arch_cc.py): no uniform search of 1,500 simulations
+    falsified it in 80 runs; auto's held inputs and piece moves do, in a few hundred."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
+    import arch_cc
+
+    opt = make_optimizer("auto", np.zeros(40), np.ones(40), budget=1500, rng=np.random.default_rng(3))
+    found = None
+    while found is None and opt.asked < 1500:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 1500 - opt.asked)))]
+        robustness = arch_cc.robustness("CC4", arch_cc.simulate(np.array(xs), 2))
+        for x, r in zip(xs, robustness):
+            opt.tell(x, -float(r))
+        if (robustness < 0).any():
+            found = opt.asked
+    assert found is not None
 
 
 def test_auto_refuses_a_share_outside_its_bounds():
@@ -392,8 +449,8 @@ def test_auto_refuses_a_share_outside_its_bounds():
     assert info.value.field == "search.auto.random_share"
 
 
-def test_auto_proposes_what_bo_does_until_it_plays_a_random_point():
-    """Its arms draw from a stream of their own: with no random point, auto is bo, proposal for proposal."""
+def test_auto_proposes_what_bo_does_until_it_plays_an_exploring_point():
+    """Its arms draw from a stream of their own: with no exploring point, auto is bo, proposal for proposal."""
     f = lambda x: -float(np.sum((x - 0.3) ** 2))  # noqa: E731
     auto = make_optimizer("auto", LOWER, UPPER, budget=100, rng=np.random.default_rng(3), options={"random_share": 0.0, "share_min": 0.0})
     bo = make_optimizer("bo", LOWER, UPPER, budget=100, rng=np.random.default_rng(3))

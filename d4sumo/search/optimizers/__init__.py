@@ -16,9 +16,11 @@
   perturbations of the incumbent. It proposes ``batch_size`` points at once (5; 1 is the paper's one
   point per score) by the constant liar. ``gp_version = 1`` runs scikit-optimize's GP instead, as
   campaigns stored by d4sumo 0.3 and before did (5-20 times BO's own time).
-- ``auto``: ``bo`` and uniform random sampling as one portfolio over one GP: each point after the initial
-  design is random with a probability that moves to whichever of the two improves the best score
-  (`portfolio`); on a plateau, where BO narrows around an arbitrary incumbent, random points carry it.
+- ``auto``: ``bo`` and exploring arms as one portfolio over one GP: each point after the initial design
+  explores with a probability that moves to whichever arms improve the best score (`portfolio`). The
+  exploring arms propose held inputs (pieces held at a bound or a value) and piece moves on the
+  incumbent; on a plateau, where BO narrows around an arbitrary incumbent, they carry it. Once a score
+  is positive (an attack found), every point is BO's.
 - ``turbo``: TuRBO-1, the same inside a trust region that follows the best point, grows on successes,
   shrinks on failures and restarts when it collapses: for 10-40 dimensions.
 
@@ -66,7 +68,7 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
 #: ran scikit-optimize's GP; ce added no noise)
 OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1, "inducing": 0},
-                                              "ce": {"noise_fraction": 0.0}}
+                                              "ce": {"noise_fraction": 0.0}, "auto": {"version": 1}}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
@@ -74,7 +76,7 @@ OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_versio
 #: point per score; ce in 0.4 and before: no noise)
 EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 0}, {"gp_version": 1, "inducing": 0},
                                                                    {"gp_version": 1, "batch_size": 1, "inducing": 0}),
-                                                            "ce": ({"noise_fraction": 0.0},)}
+                                                            "ce": ({"noise_fraction": 0.0},), "auto": ({"version": 1},)}
 
 
 def as_set_flags(name: str, options: dict) -> str:

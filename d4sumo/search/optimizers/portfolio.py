@@ -1,17 +1,35 @@
-"""``auto``: Bayesian optimisation and uniform random sampling as one portfolio over one model.
+"""``auto``: Bayesian optimisation and exploring arms as one portfolio over one model.
 
 On a plateau (most inputs score alike) expected improvement has nothing to go on and BO narrows around
 an incumbent that is one point of the plateau among many: ARCH-COMP's CC2 is such a case, where random
-search falsifies where BO does not. ``auto`` keeps both arms. After BO's initial design, each point is
-drawn uniformly in the box with probability ``random_share`` and proposed by BO's expected improvement
-otherwise; every score is told to the one GP, whichever arm proposed it. The share moves to the arm
-that improves the best score: each improvement credits its arm, and the share is the random arm's
-credits over all (each arm starts with one), kept within [``share_min``, ``share_max``] so that neither
-arm starves. Where BO's model informs, its points improve the best and take the budget; on a plateau,
-random points find the way off it.
+search falsifies where BO does not. ``auto`` keeps BO and arms that explore. After BO's initial design,
+each point is explored with probability ``random_share`` and proposed by BO's expected improvement
+otherwise; every score is told to the one GP, whichever arm proposed it. The share moves to the arms
+that improve the best score: each improvement credits its arm, and the share is the exploring arms'
+credits over all (each arm starts with one), kept within [``share_min``, ``share_max``] so that no arm
+starves. Where BO's model informs, its points improve the best and take the budget; on a plateau, the
+exploring points find the way off it.
+
+The exploring arms read the parameters as a signal in time order (an attack's knots, a
+pedal's values segment by segment) and propose held inputs, as falsification tools of the field do
+(FalCAuN holds values from a small alphabet; extreme inputs falsify often):
+- held sampling: the parameters cut at random into 1 to ``0.4 d`` pieces, each piece held at the lower
+  bound, the upper bound or a uniform value, a third of the time each;
+- piece moves on the incumbent: one of its pieces (a run of equal values) redrawn, cut from a random
+  point to its end, or a random span set to one new value.
+An exploring point is a piece move with probability the two arms' credits say. On ARCH-COMP's chasing
+cars, held inputs falsify CC1-CC3 one time in three or four, where uniform inputs do one time in 25 to
+100, and the piece moves reach CC4, which no uniform search does.
+
+Exploring serves falsification, finding a first attack; a campaign then goes on to collect attacks
+around the ones found, which BO does best (it finds the most distinct attacks on d4sumo's campaigns).
+So once a score is positive (the attack specification satisfied, the benchmark falsified), every
+point is BO's.
+
+``version = 1`` is ``auto`` as d4sumo 0.7 ran it: uniform random exploration, whatever the scores.
 
 The arms draw from a stream of their own (spawned, so the campaign's stream is not advanced): BO's
-proposals are bo's own until a random point is played. Its GP is bo's, conditioned through
+proposals are bo's own until an exploring point is played. Its GP is bo's, conditioned through
 ``inducing`` points past that many scores (`gp`).
 """
 
@@ -22,13 +40,14 @@ import numpy as np
 from ...errors import ConfigError
 from .bayes import BayesianOptimization
 
-BO, RANDOM = 0, 1
+BO, RANDOM, PIECE = 0, 1, 2  # RANDOM: held sampling (version 2) or uniform sampling (version 1)
+PIECES_PER_DIMENSION = 0.4  # held sampling cuts d parameters into at most this many pieces per parameter
 
 
 class Portfolio(BayesianOptimization):
     name = "auto"
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
-               "share_max": (0.8, 0.0, 1.0)}
+               "share_max": (0.8, 0.0, 1.0), "version": (2, 1, 2)}
 
     @staticmethod
     def check_together(options: dict) -> None:
@@ -39,25 +58,66 @@ class Portfolio(BayesianOptimization):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         o = self.options
-        #: credits of (BO, random), two in all to start, split as random_share says
-        self.credits = np.array([1.0 - o["random_share"], o["random_share"]]) * 2.0
+        self.held = o["version"] == 2
+        # credits of (BO, exploring arms), two in all to start, split as random_share says; the exploring
+        # share is split between held sampling and piece moves by their own credits
+        explore = o["random_share"] * 2.0
+        self.credits = np.array([2.0 - explore, explore / 2, explore / 2] if self.held else [2.0 - explore, explore, 0.0])
         self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked
         self._arm_rng = self.rng.spawn(1)[0]
+        self._max_pieces = max(1, int(round(PIECES_PER_DIMENSION * self.dimension)))
 
     @property
     def random_share(self) -> float:
-        """The probability that the next point after the initial design is drawn uniformly."""
-        share = self.credits[RANDOM] / self.credits.sum()
+        """The probability that the next point after the initial design is an exploring arm's."""
+        if self.held and self.y and max(self.y) > 0.0:
+            return 0.0
+        share = self.credits[1:].sum() / self.credits.sum()
         return float(np.clip(share, self.options["share_min"], self.options["share_max"]))
 
     def _ask(self) -> np.ndarray:
-        if len(self.y) - self._run < self.initial_points or self._arm_rng.random() >= self.random_share:
+        rng = self._arm_rng
+        if len(self.y) - self._run < self.initial_points or rng.random() >= self.random_share:
             self._arms.append(BO)
             return super()._ask()
-        z = self._arm_rng.random(self.dimension)
+        if not self.held:
+            arm, z = RANDOM, rng.random(self.dimension)
+        elif self.y and rng.random() < self.credits[PIECE] / self.credits[1:].sum():
+            arm, z = PIECE, self._piece_move(self._told[int(np.argmax(self.y))])
+        else:
+            arm, z = RANDOM, self._held()
         self._pending.append(z)
-        self._arms.append(RANDOM)
+        self._arms.append(arm)
         return self._unit_to_box(z)
+
+    def _value(self) -> float:
+        """A piece's value in the unit box: a bound, or uniform."""
+        kind = self._arm_rng.integers(3)
+        return 0.0 if kind == 0 else 1.0 if kind == 1 else float(self._arm_rng.random())
+
+    def _held(self) -> np.ndarray:
+        rng, d = self._arm_rng, self.dimension
+        pieces = int(rng.integers(1, self._max_pieces + 1))
+        cuts = np.sort(rng.choice(np.arange(1, d), pieces - 1, replace=False)) if pieces > 1 else []
+        z = np.empty(d)
+        for a, b in zip([0, *cuts], [*cuts, d]):
+            z[a:b] = self._value()
+        return z
+
+    def _piece_move(self, best: np.ndarray) -> np.ndarray:
+        rng, d, z = self._arm_rng, self.dimension, best.copy()
+        starts = [0, *np.flatnonzero(np.diff(z) != 0.0) + 1]
+        move = rng.integers(3)
+        if move == 2:  # a random span set to one new value
+            a = int(rng.integers(d))
+            z[a:int(rng.integers(a + 1, d + 1))] = self._value()
+            return z
+        i = int(rng.integers(len(starts)))
+        a, b = starts[i], (starts[i + 1] if i + 1 < len(starts) else d)
+        if move == 1:  # cut the piece: from a point in it to its end
+            a = int(rng.integers(a, b))
+        z[a:b] = self._value()
+        return z
 
     def tell(self, x: np.ndarray, score: float) -> None:
         best = max(self.y) if self.y else -np.inf
