@@ -32,7 +32,7 @@ from .model.config import EpisodeConfig, VehicleParams, read_toml
 from .model.maneuvers import maneuver_of
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
-from .search.optimizers import OPTIMIZERS, resolve_options
+from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
 
 SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
 SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "vehicles", "controller"))
@@ -199,7 +199,7 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
     config = episode_config(doc)
     family = _family(doc, tuple(f for f in FAMILIES if f != "constant"))
-    optimizer = _get(doc, "search.optimizer", "bo")
+    optimizer = _get(doc, "search.optimizer", DEFAULT_OPTIMIZER)
     if not isinstance(optimizer, str) or optimizer not in OPTIMIZERS:
         raise ConfigError("search.optimizer", _short(optimizer), f"one of {', '.join(OPTIMIZERS)}")
     for name in OPTIMIZERS:  # every optimiser's table is checked, not only the one used

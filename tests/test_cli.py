@@ -405,3 +405,17 @@ def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_im
     assert ("its follower controller myctl:Gentle cannot be simulated here: myctl did not import here "
             "(No module named 'myctl'): run from the folder that holds myctl.py, or put its folder on PYTHONPATH"
             in refused.stderr)
+
+
+@pytest.mark.sumo
+def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(tmp_path):
+    """The default optimiser became auto: a database whose campaign ran by default with bo (d4sumo 0.7
+    and before) is named, and --optimizer bo goes on with it."""
+    db = str(tmp_path / "r.sqlite")
+    assert run("falsify", "--optimizer", "bo", "--samples", "3", "--db", db, "--quiet").returncode == 0
+    now = run("falsify", "--samples", "3", "--db", db, "--quiet")
+    assert now.returncode == 0, now.stderr
+    assert "holds this campaign run with bo, the default optimiser of d4sumo 0.7 and before" in now.stderr
+    assert "--optimizer bo" in now.stderr
+    again = run("falsify", "--optimizer", "bo", "--samples", "3", "--db", db, "--quiet")
+    assert again.returncode == 0 and "holds this campaign run with" not in again.stderr

@@ -489,3 +489,17 @@ def test_a_campaign_that_kills_its_worker_is_found_alone_and_named(tmp_path):
         counts = {cid: store.count_samples(cid) for cid in setpoints}
     assert setpoints[named] == 9.0 and counts[named] == 0
     assert all(n in (0, 6) for n in counts.values())  # whatever else ran was stored whole
+
+
+def test_a_database_of_a_sweep_run_with_the_earlier_default_optimizer_says_how_to_go_on_with_it(tmp_path):
+    """A sweep file that names no optimiser ran bo in d4sumo 0.7 and before, auto now: the refusal says
+    to name bo."""
+    text = TINY.replace('optimizer = ["random"]\n', "")
+    now = Sweep.load(write(tmp_path, text, "now.toml"))
+    before = Sweep.load(write(tmp_path, text.replace("[search]\n", '[search]\noptimizer = "bo"\n'), "before.toml"))
+    assert {c.optimizer for c in now.campaigns} == {"auto"} and {c.optimizer for c in before.campaigns} == {"bo"}
+    with Store(tmp_path / "r.sqlite") as store:
+        store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
+        with pytest.raises(StoreError, match=re.escape('set `optimizer = "bo"` in the sweep file to go on with it')):
+            claim(store, now)
+        claim(store, before)

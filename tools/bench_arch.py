@@ -142,7 +142,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--samples", type=int, help="simulations per run [300; arch-comp-cc: 1500, the competition's]")
-    parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "turbo"])
+    parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "auto", "turbo"])
     parser.add_argument("--specs", nargs="+", choices=(*SPECS, *arch_cc.SPECS))
     parser.add_argument("--benchmark", choices=("plateaus", "arch-comp-cc"), default="plateaus")
     parser.add_argument("--instance", type=int, choices=(1, 2), default=2, help="arch-comp-cc's input instance [2]")

@@ -8,7 +8,7 @@ import json
 import sys
 
 from ..errors import ConfigError, check_number
-from ..search.optimizers import EARLIER_OPTIONS, as_set_flags
+from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, as_set_flags
 from .common import check_batch, document
 
 
@@ -49,6 +49,11 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
         if known is None:
+            if campaign.optimizer == DEFAULT_OPTIMIZER and store.find_campaign(
+                    campaign.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER).definition()) is not None:
+                bar.write(f"d4sumo: note: {args.db} holds this campaign run with {EARLIER_DEFAULT_OPTIMIZER}, the default "
+                          f"optimiser of d4sumo 0.7 and before; this starts a new one with {DEFAULT_OPTIMIZER}. To go on "
+                          f"with that one: --optimizer {EARLIER_DEFAULT_OPTIMIZER}", file=sys.stderr)
             for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
                 before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
                 if before != campaign and store.find_campaign(before.definition()) is not None:

@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--attack", choices=[f for f in FAMILIES if f != "constant"], help="attack family [knots]")
     _add_knot_options(g)
     g.add_argument("--optimizer", choices=OPTIMIZERS,
-                   help="bo, turbo (trust-region BO, for many parameters), ce, ce-bucket (the paper's VerifAI sampler), cmaes, random or halton [bo]")
+                   help="auto (BO, exploring held inputs until a first attack), bo (the paper's), turbo (trust-region BO, for many parameters), ce, ce-bucket (the paper's VerifAI sampler), cmaes, random or halton [auto]")
     g.add_argument("--samples", type=int, help="budget: episodes to simulate [100]")
     g.add_argument("--seed", type=int, help="seed: the same seed repeats the campaign exactly [0]")
     _add_spec_options(g)

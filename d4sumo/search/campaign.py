@@ -19,7 +19,7 @@ from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_
 from ..model.config import EpisodeConfig
 from ..model.control import ControllerImportError, names_only, user_module
 from ..model.maneuvers import maneuver_of
-from .optimizers import OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
+from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
 
@@ -33,7 +33,7 @@ _ANNOUNCED: set[str] = set()  # users' controller modules this process said it i
 class Campaign:
     config: EpisodeConfig = field(default_factory=EpisodeConfig)
     attack: str = "knots"
-    optimizer: str = "bo"
+    optimizer: str = DEFAULT_OPTIMIZER
     samples: int = 100
     seed: int = 0
     d_safe_m: float = 0.0

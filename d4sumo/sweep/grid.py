@@ -18,6 +18,7 @@ from ..inputs import campaign_of, check_document, with_overrides
 from ..model.config import read_toml
 from ..model.maneuvers import MANEUVERS
 from ..search.campaign import Campaign
+from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER
 from ..search.store import campaign_key
 
 log = logging.getLogger(__name__)
@@ -59,6 +60,14 @@ class Sweep:
         return dataclasses.replace(self, campaigns=tuple(
             c.replace(optimizer_options=tuple({**dict(c.optimizer_options), **earlier}.items()))
             if c.optimizer == optimizer else c for c in self.campaigns))
+
+    def with_default_of_before(self) -> "Sweep":
+        """The sweep as d4sumo 0.7 and before ran it where the file names no optimiser: every campaign of
+        today's default optimiser, with its default options, run by the earlier default instead."""
+        return dataclasses.replace(self, campaigns=tuple(
+            c.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
+            if c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == Campaign(optimizer=DEFAULT_OPTIMIZER).optimizer_options
+            else c for c in self.campaigns))
 
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":

@@ -21,7 +21,7 @@ from typing import Callable
 from ..engine.scenarios import NetworkSource, network_source
 from ..model.batch import DEFAULT_BATCH
 from ..search.campaign import SampleResult, open_store
-from ..search.optimizers import EARLIER_OPTIONS
+from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import stored_results
 from ..search.store import Store, StoreError
 from .dask_cluster import _dask_client, _run_dask, check_dask_address
@@ -63,6 +63,9 @@ def claim(store: Store, sweep: Sweep) -> None:
                     tables = "; ".join(", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed)
                     hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
                     break
+            if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.with_default_of_before().fingerprint():
+                hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
+                        f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"` in the sweep file to go on with it, or use another --db")
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"

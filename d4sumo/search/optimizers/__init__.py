@@ -79,6 +79,11 @@ EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 
                                                             "ce": ({"noise_fraction": 0.0},), "auto": ({"version": 1},)}
 
 
+#: the optimiser a campaign runs when none is named, and the one earlier d4sumo versions ran instead
+#: (bo, in 0.7 and before): a database of campaigns run by default then is found again by it
+DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER = "auto", "bo"
+
+
 def as_set_flags(name: str, options: dict) -> str:
     """``--set search.<name>.<key>=<value>`` for each option."""
     return " ".join(f"--set search.{name}.{k}={v}" for k, v in options.items())
@@ -105,5 +110,5 @@ def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Gener
     return _FACTORIES[name](np.asarray(lower, float), np.asarray(upper, float), budget, rng, **(options or {}))
 
 
-__all__ = ["OPTIMIZERS", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
+__all__ = ["OPTIMIZERS", "DEFAULT_OPTIMIZER", "EARLIER_DEFAULT_OPTIMIZER", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
            "CMAES", "CrossEntropy", "Halton", "Portfolio", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]
