@@ -408,14 +408,15 @@ def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_im
 
 
 @pytest.mark.sumo
-def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(tmp_path):
+@pytest.mark.parametrize("earlier", [[], ["--set", "search.bo.inducing=0"]])  # bo now, and as 0.7.0 stored it
+def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(tmp_path, earlier):
     """The default optimiser became auto: a database whose campaign ran by default with bo (d4sumo 0.7
-    and before) is named, and --optimizer bo goes on with it."""
+    and before, whose bo had no inducing points) is named, with the flags that go on with it."""
     db = str(tmp_path / "r.sqlite")
-    assert run("falsify", "--optimizer", "bo", "--samples", "3", "--db", db, "--quiet").returncode == 0
+    assert run("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", db, "--quiet").returncode == 0
     now = run("falsify", "--samples", "3", "--db", db, "--quiet")
     assert now.returncode == 0, now.stderr
     assert "holds this campaign run with bo, the default optimiser of d4sumo 0.7 and before" in now.stderr
-    assert "--optimizer bo" in now.stderr
-    again = run("falsify", "--optimizer", "bo", "--samples", "3", "--db", db, "--quiet")
+    assert now.stderr.rstrip().endswith("To go on with that one: --optimizer bo" + (" --set search.bo.inducing=0" if earlier else ""))
+    again = run("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", db, "--quiet")
     assert again.returncode == 0 and "holds this campaign run with" not in again.stderr

@@ -491,15 +491,17 @@ def test_a_campaign_that_kills_its_worker_is_found_alone_and_named(tmp_path):
     assert all(n in (0, 6) for n in counts.values())  # whatever else ran was stored whole
 
 
-def test_a_database_of_a_sweep_run_with_the_earlier_default_optimizer_says_how_to_go_on_with_it(tmp_path):
+@pytest.mark.parametrize("earlier", ["", "[search.bo]\ninducing = 0\n"])  # bo now, and as 0.7.0 ran it
+def test_a_database_of_a_sweep_run_with_the_earlier_default_optimizer_says_how_to_go_on_with_it(tmp_path, earlier):
     """A sweep file that names no optimiser ran bo in d4sumo 0.7 and before, auto now: the refusal says
-    to name bo."""
+    to name bo (with the options bo ran with then)."""
     text = TINY.replace('optimizer = ["random"]\n', "")
     now = Sweep.load(write(tmp_path, text, "now.toml"))
-    before = Sweep.load(write(tmp_path, text.replace("[search]\n", '[search]\noptimizer = "bo"\n'), "before.toml"))
+    before = Sweep.load(write(tmp_path, text.replace("[search]\n", '[search]\noptimizer = "bo"\n') + earlier, "before.toml"))
     assert {c.optimizer for c in now.campaigns} == {"auto"} and {c.optimizer for c in before.campaigns} == {"bo"}
+    said = 'set `optimizer = "bo"`' + (", `inducing = 0` in [search.bo]" if earlier else "") + " in the sweep file to go on with it"
     with Store(tmp_path / "r.sqlite") as store:
         store.set_meta("sweep", json.dumps({"name": now.name, "fingerprint": before.fingerprint()}))
-        with pytest.raises(StoreError, match=re.escape('set `optimizer = "bo"` in the sweep file to go on with it')):
+        with pytest.raises(StoreError, match=re.escape(said)):
             claim(store, now)
         claim(store, before)

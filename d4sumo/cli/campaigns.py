@@ -49,11 +49,16 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
         if known is None:
-            if campaign.optimizer == DEFAULT_OPTIMIZER and store.find_campaign(
-                    campaign.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER).definition()) is not None:
-                bar.write(f"d4sumo: note: {args.db} holds this campaign run with {EARLIER_DEFAULT_OPTIMIZER}, the default "
-                          f"optimiser of d4sumo 0.7 and before; this starts a new one with {DEFAULT_OPTIMIZER}. To go on "
-                          f"with that one: --optimizer {EARLIER_DEFAULT_OPTIMIZER}", file=sys.stderr)
+            if campaign.optimizer == DEFAULT_OPTIMIZER:
+                default_before = campaign.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
+                for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
+                    before = default_before.replace(optimizer_options=tuple({**dict(default_before.optimizer_options), **earlier}.items()))
+                    if store.find_campaign(before.definition()) is not None:
+                        flags = " ".join(f for f in (f"--optimizer {EARLIER_DEFAULT_OPTIMIZER}", as_set_flags(EARLIER_DEFAULT_OPTIMIZER, earlier)) if f)
+                        bar.write(f"d4sumo: note: {args.db} holds this campaign run with {EARLIER_DEFAULT_OPTIMIZER}, the default "
+                                  f"optimiser of d4sumo 0.7 and before; this starts a new one with {DEFAULT_OPTIMIZER}. To go on "
+                                  f"with that one: {flags}", file=sys.stderr)
+                        break
             for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
                 before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
                 if before != campaign and store.find_campaign(before.definition()) is not None:

@@ -64,10 +64,12 @@ class Sweep:
     def with_default_of_before(self) -> "Sweep":
         """The sweep as d4sumo 0.7 and before ran it where the file names no optimiser: every campaign of
         today's default optimiser, with its default options, run by the earlier default instead."""
+        default = Campaign(optimizer=DEFAULT_OPTIMIZER).optimizer_options
+        if not any(c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == default for c in self.campaigns):
+            return self
         return dataclasses.replace(self, campaigns=tuple(
             c.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
-            if c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == Campaign(optimizer=DEFAULT_OPTIMIZER).optimizer_options
-            else c for c in self.campaigns))
+            if c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == default else c for c in self.campaigns))
 
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":

@@ -63,9 +63,15 @@ def claim(store: Store, sweep: Sweep) -> None:
                     tables = "; ".join(", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed)
                     hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
                     break
-            if theirs["name"] == sweep.name and theirs["fingerprint"] == sweep.with_default_of_before().fingerprint():
-                hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
-                        f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"` in the sweep file to go on with it, or use another --db")
+            default_before = sweep.with_default_of_before()
+            for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
+                if default_before is sweep or theirs["name"] != sweep.name:
+                    break
+                if theirs["fingerprint"] == default_before.as_run_before(EARLIER_DEFAULT_OPTIMIZER, earlier).fingerprint():
+                    table = "".join(f", `{k} = {v}` in [search.{EARLIER_DEFAULT_OPTIMIZER}]" for k, v in earlier.items())
+                    hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
+                            f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"`{table} in the sweep file to go on with it, or use another --db")
+                    break
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"

@@ -397,6 +397,36 @@ def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
     assert share == 0.5 and random > 0  # version 1 explored whatever the scores
 
 
+def test_auto_is_bo_point_for_point_once_its_initial_design_holds_an_attack():
+    """d4sumo's campaigns: an attack among the initial design, and auto with its defaults proposes what bo does."""
+    f = lambda x: 1.0 - float(np.sum((x - 0.3) ** 2)) / 100.0  # noqa: E731  (positive in the whole box)
+    auto = make_optimizer("auto", LOWER, UPPER, budget=60, rng=np.random.default_rng(5))
+    bo = make_optimizer("bo", LOWER, UPPER, budget=60, rng=np.random.default_rng(5))
+    while bo.asked < 60:
+        xs, ys = [auto.ask() for _ in range(auto.ready())], [bo.ask() for _ in range(bo.ready())]
+        assert np.array_equal(np.array(xs), np.array(ys))
+        for a, b in zip(xs, ys):
+            auto.tell(a, f(a))
+            bo.tell(b, f(b))
+
+
+@pytest.mark.parametrize("dimension", [1, 3, 9])
+def test_auto_never_proposes_a_point_twice_while_it_explores(dimension):
+    """Regression: with a few parameters held points are few (one piece when d <= 3), and a piece move
+    could give the incumbent back: a fifth of a plateau's budget went to points already played."""
+    opt = make_optimizer("auto", np.zeros(dimension), np.ones(dimension), budget=200, rng=np.random.default_rng(0))
+    explored = 0
+    while opt.asked < 200:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 200 - opt.asked)))]
+        for i, arm in enumerate(opt._arms[-len(xs):]):
+            if arm != 0:  # an exploring arm's point (BO's are expected improvement's business)
+                explored += 1
+                assert not any(np.array_equal(xs[i], p) for p in [*opt.X, *xs[:i]])
+        for x in xs:
+            opt.tell(x, -1.0)
+    assert explored > 50
+
+
 def test_auto_held_points_hold_pieces_at_bounds_or_one_value():
     """Held sampling: each point is at most 0.4 d pieces of equal values, a third of them at each bound."""
     opt = make_optimizer("auto", -np.ones(40), np.ones(40), budget=10, rng=np.random.default_rng(0))

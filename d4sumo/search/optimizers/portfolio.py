@@ -6,7 +6,7 @@ search falsifies where BO does not. ``auto`` keeps BO and arms that explore. Aft
 each point is explored with probability ``random_share`` and proposed by BO's expected improvement
 otherwise; every score is told to the one GP, whichever arm proposed it. The share moves to the arms
 that improve the best score: each improvement credits its arm, and the share is the exploring arms'
-credits over all (each arm starts with one), kept within [``share_min``, ``share_max``] so that no arm
+credits over all (two credits to start, split as ``random_share`` says), kept within [``share_min``, ``share_max``] so that no arm
 starves. Where BO's model informs, its points improve the best and take the budget; on a plateau, the
 exploring points find the way off it.
 
@@ -17,7 +17,8 @@ pedal's values segment by segment) and propose held inputs, as falsification too
   bound, the upper bound or a uniform value, a third of the time each;
 - piece moves on the incumbent: one of its pieces (a run of equal values) redrawn, cut from a random
   point to its end, or a random span set to one new value.
-An exploring point is a piece move with probability the two arms' credits say. On ARCH-COMP's chasing
+An exploring point is a piece move with probability the two arms' credits say; one that repeats a point
+played or pending (a few parameters leave few held points) is replaced by a uniform one. On ARCH-COMP's chasing
 cars, held inputs falsify CC1-CC3 one time in three or four, where uniform inputs do one time in 25 to
 100, and the piece moves reach CC4, which no uniform search does.
 
@@ -42,6 +43,7 @@ from .bayes import BayesianOptimization
 
 BO, RANDOM, PIECE = 0, 1, 2  # RANDOM: held sampling (version 2) or uniform sampling (version 1)
 PIECES_PER_DIMENSION = 0.4  # held sampling cuts d parameters into at most this many pieces per parameter
+SAME = 1e-9  # values in the unit box this close are one value (a point's values come back from the box)
 
 
 class Portfolio(BayesianOptimization):
@@ -82,18 +84,28 @@ class Portfolio(BayesianOptimization):
             return super()._ask()
         if not self.held:
             arm, z = RANDOM, rng.random(self.dimension)
-        elif self.y and rng.random() < self.credits[PIECE] / self.credits[1:].sum():
-            arm, z = PIECE, self._piece_move(self._told[int(np.argmax(self.y))])
         else:
-            arm, z = RANDOM, self._held()
+            if self.y and rng.random() < self.credits[PIECE] / self.credits[1:].sum():
+                arm, z = PIECE, self._piece_move(self._told[int(np.argmax(self.y))])
+            else:
+                arm, z = RANDOM, self._held()
+            if self._seen(z):  # a point already played or pending (a few parameters, few pieces): a uniform one
+                z = rng.random(self.dimension)
         self._pending.append(z)
         self._arms.append(arm)
         return self._unit_to_box(z)
 
-    def _value(self) -> float:
-        """A piece's value in the unit box: a bound, or uniform."""
-        kind = self._arm_rng.integers(3)
-        return 0.0 if kind == 0 else 1.0 if kind == 1 else float(self._arm_rng.random())
+    def _value(self, other_than: float | None = None) -> float:
+        """A piece's value in the unit box: a bound, or uniform; never ``other_than`` (a move changes)."""
+        while True:
+            kind = self._arm_rng.integers(3)
+            value = 0.0 if kind == 0 else 1.0 if kind == 1 else float(self._arm_rng.random())
+            if other_than is None or abs(value - other_than) > SAME:
+                return value
+
+    def _seen(self, z: np.ndarray) -> bool:
+        played = np.array([*self._told, *self._pending])
+        return bool(np.any(np.all(np.abs(played - z) <= SAME, axis=1)))
 
     def _held(self) -> np.ndarray:
         rng, d = self._arm_rng, self.dimension
@@ -106,17 +118,17 @@ class Portfolio(BayesianOptimization):
 
     def _piece_move(self, best: np.ndarray) -> np.ndarray:
         rng, d, z = self._arm_rng, self.dimension, best.copy()
-        starts = [0, *np.flatnonzero(np.diff(z) != 0.0) + 1]
+        starts = [0, *np.flatnonzero(np.abs(np.diff(z)) > SAME) + 1]  # pieces: runs of equal values
         move = rng.integers(3)
         if move == 2:  # a random span set to one new value
             a = int(rng.integers(d))
-            z[a:int(rng.integers(a + 1, d + 1))] = self._value()
+            z[a:int(rng.integers(a + 1, d + 1))] = self._value(other_than=z[a])
             return z
         i = int(rng.integers(len(starts)))
         a, b = starts[i], (starts[i + 1] if i + 1 < len(starts) else d)
         if move == 1:  # cut the piece: from a point in it to its end
             a = int(rng.integers(a, b))
-        z[a:b] = self._value()
+        z[a:b] = self._value(other_than=z[a])
         return z
 
     def tell(self, x: np.ndarray, score: float) -> None:
