@@ -420,3 +420,15 @@ def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(tmp_path,
     assert now.stderr.rstrip().endswith("To go on with that one: --optimizer bo" + (" --set search.bo.inducing=0" if earlier else ""))
     again = run("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", db, "--quiet")
     assert again.returncode == 0 and "holds this campaign run with" not in again.stderr
+
+
+@pytest.mark.sumo
+def test_falsify_says_when_an_optimizers_options_go_unused(tmp_path):
+    """Earlier notes said `--set search.bo.inducing=0`; with auto the default, bo's table alone would go
+    unused without a word."""
+    db = str(tmp_path / "r.sqlite")
+    said = run("falsify", "--samples", "2", "--db", db, "--quiet", "--set", "search.bo.inducing=0")
+    assert said.returncode == 0
+    assert "note: the options of [search.bo] are unused: this campaign runs auto (--optimizer bo runs bo)" in said.stderr
+    quiet = run("falsify", "--optimizer", "bo", "--samples", "2", "--db", db, "--quiet", "--set", "search.bo.inducing=0")
+    assert quiet.returncode == 0 and "unused" not in quiet.stderr

@@ -8,7 +8,7 @@ import json
 import sys
 
 from ..errors import ConfigError, check_number
-from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, as_set_flags
+from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
 from .common import check_batch, document
 
 
@@ -22,6 +22,10 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     doc, _ = document(args)
     campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    unused = sorted(k for k in doc.get("search", {}) if k in OPTIMIZERS and k != campaign.optimizer)
+    if unused:  # e.g. --set search.bo.x with no --optimizer, since the default became auto
+        print(f"d4sumo: note: the options of {', '.join(f'[search.{k}]' for k in unused)} are unused: this campaign runs "
+              f"{campaign.optimizer} (--optimizer {unused[0]} runs {unused[0]})", file=sys.stderr)
     check_batch(args.batch)
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
