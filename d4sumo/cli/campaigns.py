@@ -56,15 +56,14 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             if campaign.optimizer == DEFAULT_OPTIMIZER:
                 default_before = campaign.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
                 for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
-                    before = default_before.replace(optimizer_options=tuple({**dict(default_before.optimizer_options), **earlier}.items()))
-                    if store.find_campaign(before.definition()) is not None:
+                    if store.find_campaign(default_before.with_options(earlier).definition()) is not None:
                         flags = " ".join(f for f in (f"--optimizer {EARLIER_DEFAULT_OPTIMIZER}", as_set_flags(EARLIER_DEFAULT_OPTIMIZER, earlier)) if f)
                         bar.write(f"d4sumo: note: {args.db} holds this campaign run with {EARLIER_DEFAULT_OPTIMIZER}, the default "
                                   f"optimiser of d4sumo 0.7 and before; this starts a new one with {DEFAULT_OPTIMIZER}. To go on "
                                   f"with that one: {flags}", file=sys.stderr)
                         break
             for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
-                before = campaign.replace(optimizer_options=tuple({**dict(campaign.optimizer_options), **earlier}.items()))
+                before = campaign.with_options(earlier)
                 if before != campaign and store.find_campaign(before.definition()) is not None:
                     bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
                               f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)

@@ -146,6 +146,10 @@ class Campaign:
             changes["optimizer_options"] = ()
         return dataclasses.replace(self, **changes)
 
+    def with_options(self, options: dict) -> "Campaign":
+        """The campaign with ``options`` of its optimiser changed (as an earlier version ran it, say)."""
+        return self.replace(optimizer_options=tuple({**dict(self.optimizer_options), **options}.items()))
+
 
 def check_definition(definition: dict[str, Any], where: str) -> None:
     """A stored definition describes a valid campaign (every value checked, nothing imported), else a

@@ -58,18 +58,15 @@ class Sweep:
     def as_run_before(self, optimizer: str, earlier: dict) -> "Sweep":
         """The sweep with ``earlier`` options (`optimizers.EARLIER_OPTIONS`) for every ``optimizer`` campaign."""
         return dataclasses.replace(self, campaigns=tuple(
-            c.replace(optimizer_options=tuple({**dict(c.optimizer_options), **earlier}.items()))
-            if c.optimizer == optimizer else c for c in self.campaigns))
+            c.with_options(earlier) if c.optimizer == optimizer else c for c in self.campaigns))
 
     def with_default_of_before(self) -> "Sweep":
         """The sweep as d4sumo 0.7 and before ran it where the file names no optimiser: every campaign of
         today's default optimiser, with its default options, run by the earlier default instead."""
         default = Campaign(optimizer=DEFAULT_OPTIMIZER).optimizer_options
-        if not any(c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == default for c in self.campaigns):
-            return self
-        return dataclasses.replace(self, campaigns=tuple(
-            c.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
-            if c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == default else c for c in self.campaigns))
+        campaigns = tuple(c.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
+                          if c.optimizer == DEFAULT_OPTIMIZER and c.optimizer_options == default else c for c in self.campaigns)
+        return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 
     @classmethod
     def load(cls, path: str | Path) -> "Sweep":

@@ -64,9 +64,8 @@ def claim(store: Store, sweep: Sweep) -> None:
                     hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
                     break
             default_before = sweep.with_default_of_before()
-            for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
-                if default_before is sweep or theirs["name"] != sweep.name:
-                    break
+            earliers = ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ()))  # bo as each earlier version ran it
+            for earlier in earliers if default_before is not sweep and theirs["name"] == sweep.name else ():
                 if theirs["fingerprint"] == default_before.as_run_before(EARLIER_DEFAULT_OPTIMIZER, earlier).fingerprint():
                     table = "".join(f", `{k} = {v}` in [search.{EARLIER_DEFAULT_OPTIMIZER}]" for k, v in earlier.items())
                     hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
