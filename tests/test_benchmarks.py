@@ -59,3 +59,13 @@ def test_bench_falsify_times_the_optimiser_a_campaign_makes():
     with timed_optimizer() as clock:
         run_campaign(Campaign(optimizer="bo", samples=12, seed=1))
     assert clock[0] > 0.0
+
+
+def test_cc4_2019_the_formula_falcauns_figures_use_needs_dips_every_5_s_where_the_competitions_needs_20():
+    """The last gap dipping to 6 m for 1 s every 15 s: within every 20 s window (CC4 falsified, -2), not
+    within every 5 s one (CC4-2019, FalStar 2019's formula, satisfied by the standing gap, 10 - 8)."""
+    t = np.arange(1001) * arch_cc.SAMPLE_S
+    y = np.tile([0.0, 10.0, 20.0, 30.0, 40.0], (1, 1001, 1)).astype(float)
+    y[0, :, 4] = np.where(t % 15.0 < 1.0, 36.0, 40.0)
+    assert arch_cc.robustness("CC4", y)[0] == pytest.approx(-2.0)
+    assert arch_cc.robustness("CC4-2019", y)[0] == pytest.approx(2.0)
