@@ -7,6 +7,7 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.search.optimizers import OPTIMIZERS, CrossEntropy, make_optimizer
+from d4sumo.search.optimizers.portfolio import PIECE, RANDOM
 
 LOWER, UPPER = -np.ones(9), np.ones(9)
 TARGET = np.random.default_rng(2024).uniform(-0.8, 0.8, 9)
@@ -378,15 +379,39 @@ def _arms_after(f, budget=120, seed=0, **options):
 
 @pytest.mark.parametrize("version", [1, 2])
 def test_auto_moves_its_budget_to_bo_where_the_model_informs(version):
-    (bo, *explore), share = _arms_after(lambda x: -float(np.sum((x - 0.3) ** 2)), version=version)
+    (bo, *explore), share = _arms_after(lambda x: -float(np.sum((x - 0.3) ** 2)), version=version, stall=0)
     assert share == 0.2 and bo > sum(explore)  # BO improved the best, exploring hardly ever: the share at its floor
+    (bo, *explore), _ = _arms_after(lambda x: -float(np.sum((x - 0.3) ** 2)), version=version)
+    assert bo > sum(explore)  # with stalls too (BO converged near the end: its last points explore)
 
 
-@pytest.mark.parametrize("version", [1, 2])
-def test_auto_keeps_half_its_budget_exploring_on_a_plateau_where_nothing_improves(version):
-    (bo, random, piece), share = _arms_after(lambda x: -1.0, budget=200, version=version)
-    assert share == 0.5 and 0.4 < (random + piece) / (bo + random + piece) < 0.6
+@pytest.mark.parametrize("version, stall, expected", [(1, 25, 0.5), (2, 0, 0.5), (2, 25, 0.8)])
+def test_auto_keeps_half_its_budget_exploring_on_a_plateau_and_more_once_it_stalls(version, stall, expected):
+    """Nothing improves: the share stays where it started, then (held sampling, ``stall`` scores without a new
+    best) goes to ``share_max``; uniform exploration (version 1) knows no stalls."""
+    (bo, random, piece), share = _arms_after(lambda x: -1.0, budget=200, version=version, stall=stall)
+    assert share == expected and expected - 0.1 < (random + piece) / (bo + random + piece) < expected + 0.05
     assert (piece > 0) == (version == 2)
+
+
+def test_a_stall_turns_every_exploring_point_to_a_fresh_held_one_until_a_new_best():
+    """CC4's failed runs: piece moves crept up a dead end for a thousand scores, held sampling got a tenth of
+    the budget. Stalled, the exploring points are held samples at share_max; a new best ends the stall."""
+    opt = make_optimizer("auto", LOWER, UPPER, budget=200, rng=np.random.default_rng(2), options={"stall": 20})
+    arms_stalled = []
+    while opt.asked < 150:
+        xs = [opt.ask() for _ in range(max(1, opt.ready()))]
+        stalled = opt.stalled
+        if stalled:
+            arms_stalled += opt._arms[-len(xs):]
+        for x in xs:
+            opt.tell(x, -1.0)
+        assert stalled == (len(opt.y) - len(xs) >= 21)  # the first score was the best: 20 more without one
+    assert opt.random_share == 0.8 and len(arms_stalled) > 50
+    assert PIECE not in arms_stalled and 0.6 < arms_stalled.count(RANDOM) / len(arms_stalled) < 0.95
+    x = opt.ask()
+    opt.tell(x, -0.5)
+    assert not opt.stalled and opt.random_share < 0.8
 
 
 def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
