@@ -433,11 +433,13 @@ def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
     {"bo": "inducing = 0", "ce": "noise_fraction = 0.0"},  # 0.4
     {"bo": "gp_version = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.3
     {"bo": "gp_version = 1\nbatch_size = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.2
+    {"auto": "stall = 0"},  # 0.8
+    {"auto": "version = 1"},  # 0.7
 ])
 def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):
-    """A sweep database an earlier d4sumo wrote has another grid (bo's and ce's options then), and the
-    refusal says which options give it back."""
-    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["bo", "ce"]')
+    """A sweep database an earlier d4sumo wrote has another grid (bo's, ce's and auto's options then), and
+    the refusal says which options give it back."""
+    text = TINY.replace('optimizer = ["random"]', f'optimizer = {json.dumps(["bo", "ce"] if "auto" not in earlier else ["auto"])}')
     tables = "".join(f"\n[search.{o}]\n{lines}\n" for o, lines in earlier.items())
     before = Sweep.load(write(tmp_path, text + tables, "before.toml"))
     now = Sweep.load(write(tmp_path, text, "now.toml"))

@@ -26,6 +26,7 @@ competition counts, and prints FalCAuN's published figures beside ours.
 
 Usage: python tools/bench_arch.py [--runs 10] [--samples 300] [--optimizers ...] [--specs gap close held]
        python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--samples 1500] [--specs CC1 ...]
+       python tools/bench_arch.py --benchmark arch-comp-cc --held 40000   (how rare falsifying inputs are)
 """
 
 from __future__ import annotations
@@ -100,8 +101,8 @@ SPECS = ("gap", "close", "held")
 #: FalStar 2019's CC4 (inner window 5 s, `CC4-2019` here), not the competition's (20 s): its CC4 figures
 #: are printed beside both, marked.
 FALCAUN = {"CC1": ("10/10, 396", "198"), "CC2": ("10/10, 76", "38"), "CC3": ("10/10, 122", "61"),
-           "CC4": ("4/10, 1256*", "10/10, 474*"), "CC4-2019": ("4/10, 1256", "10/10, 474"), "CC5": ("-", "-"),
-           "CCx": ("-", "-")}
+           "CC4-2019": ("4/10, 1256", "10/10, 474"), "CC5": ("-", "-"), "CCx": ("-", "-")}
+FALCAUN["CC4"] = tuple(f"{figure}*" for figure in FALCAUN["CC4-2019"])
 ROBUSTNESS = None  # the benchmark's robustness(spec, inputs), set by main
 
 
@@ -128,6 +129,22 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
     return found, own, opt.asked
 
 
+def held_rates(args) -> None:
+    """How rare each specification's falsifying inputs are: the share of held inputs (as `auto`'s held
+    sampling draws them) and of uniform ones that falsify it."""
+    specs = args.specs or [*arch_cc.SPECS, *arch_cc.EARLIER_SPECS]
+    held = make_optimizer("auto", np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS), budget=1, rng=np.random.default_rng(0))
+    draws = {"held": lambda: held._held(), "uniform": lambda: held._arm_rng.random(2 * SEGMENTS)}
+    print(f"chasing cars, instance {args.instance}: {args.held} inputs of each kind (seed 0)", flush=True)
+    for kind, draw in draws.items():
+        hits = dict.fromkeys(specs, 0)
+        for start in range(0, args.held, 500):
+            y = arch_cc.simulate(np.array([draw() for _ in range(min(500, args.held - start))]), args.instance)
+            for spec in specs:
+                hits[spec] += int((arch_cc.robustness(spec, y) < 0).sum())
+        print(f"{kind:8s}" + "".join(f"  {spec} {100 * h / args.held:.2f}% ({h})" for spec, h in hits.items()), flush=True)
+
+
 def sumo_episode_seconds(repeats: int = 20) -> float:
     """One episode of d4sumo's default scenario (random knot attacks, played alone), simulation and scoring."""
     from d4sumo.search.campaign import Campaign
@@ -149,11 +166,13 @@ def main() -> None:
     parser.add_argument("--specs", nargs="+", choices=(*SPECS, *arch_cc.SPECS, *arch_cc.EARLIER_SPECS))
     parser.add_argument("--benchmark", choices=("plateaus", "arch-comp-cc"), default="plateaus")
     parser.add_argument("--instance", type=int, choices=(1, 2), default=2, help="arch-comp-cc's input instance [2]")
+    parser.add_argument("--held", type=int, metavar="N", help="arch-comp-cc: the share of N held inputs (auto's "
+                        "held sampling) and N uniform ones that falsify each specification, instead of the runs")
     args = parser.parse_args()
     global ROBUSTNESS
     if args.benchmark == "arch-comp-cc":
         ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, args.instance))  # noqa: E731
-        return arch_comp(args)
+        return held_rates(args) if args.held else arch_comp(args)
     ROBUSTNESS = robustness
     args.specs = args.specs or list(SPECS)
     args.samples = args.samples or 300

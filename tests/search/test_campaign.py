@@ -283,17 +283,20 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
     assert "batch_size" in campaign.definition()["optimizer_options"]
 
 
-def test_an_auto_campaign_0_8_stored_replays_without_stalls_under_its_key():
-    """d4sumo 0.8 stored auto's definition without ``stall`` (it made piece moves through stalls)."""
+@pytest.mark.parametrize("removed, kept", [(("stall",), {"stall": 0}), (("stall", "version"), {"version": 1})])
+def test_an_auto_campaign_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(removed, kept):
+    """d4sumo 0.8 stored auto's definition without ``stall`` (piece moves through stalls), 0.7 without
+    ``version`` either (uniform exploration, which knows no stalls)."""
     from d4sumo.search.store import campaign_key
 
     new = Campaign(optimizer="auto")
     assert new.definition()["optimizer_options"]["stall"] == 25
     old = copy.deepcopy(new.definition())
-    del old["optimizer_options"]["stall"]
+    for key in removed:
+        del old["optimizer_options"][key]
     stored = Campaign.from_definition(old, samples=12)
     assert dict(stored.optimizer_options)["stall"] == 0 and campaign_key(stored.definition()) == campaign_key(old)
-    assert Campaign(optimizer="auto", optimizer_options={"stall": 0}, samples=12).definition() == stored.definition()
+    assert Campaign(optimizer="auto", optimizer_options=kept, samples=12).definition() == stored.definition()
 
 
 @pytest.mark.parametrize("version, removed, kept", [

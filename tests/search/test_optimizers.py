@@ -227,7 +227,8 @@ def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
     assert run(split=True) == run(split=False)
 
 
-@pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("turbo", {"failure_tolerance": 1})])
+@pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("turbo", {"failure_tolerance": 1}),
+                                           ("auto", {"stall": 3})])
 def test_a_bayesian_optimisers_state_pickles_inside_a_batch_and_goes_on_exactly(name, options):
     """A sweep sends the state between chunks; a chunk may end with points asked and not told."""
     import pickle
@@ -450,6 +451,42 @@ def test_auto_never_proposes_a_point_twice_while_it_explores(dimension):
         for x in xs:
             opt.tell(x, -1.0)
     assert explored > 50
+
+
+def test_auto_with_stall_0_proposes_what_0_8_proposed():
+    """Campaigns d4sumo 0.8 stored replay with ``stall = 0`` only if its proposals are unchanged: these are
+    0.8's (the same seed, terraced objective and batches), and the default's stalls change some."""
+    def run(options):
+        opt = make_optimizer("auto", -np.ones(9), np.ones(9), budget=60, rng=np.random.default_rng(11), options=options)
+        asked = []
+        while opt.asked < opt.budget:
+            xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
+            asked += xs
+            for x in xs:
+                opt.tell(x, -round(float(np.sum((x - 0.2) ** 2)), 1))
+        return asked
+
+    asked = run({"stall": 0})
+    before = {30: [0.324114162, -0.033240747, 0.205220014], 45: [0.597427849, -0.695566738, 0.740590427],
+              59: [-0.902263529, 0.129662642, -0.235677894]}
+    for i, x in before.items():
+        assert np.allclose(asked[i][:3], x, atol=1e-8), i
+    assert any(not np.array_equal(a, b) for a, b in zip(asked, run({})))
+
+
+def test_auto_a_nan_score_is_no_progress_and_holds_no_stall():
+    """A first NaN is told as 0 (nothing seen to be worse than); the stall counts from real scores."""
+    opt = make_optimizer("auto", LOWER, UPPER, budget=40, rng=np.random.default_rng(0), options={"stall": 3})
+    for i in range(30):
+        x = opt.ask()
+        opt.tell(x, float("nan") if i == 0 else -100.0 + i)  # every real score a new best
+        assert not opt.stalled, i
+
+
+def test_auto_uniform_exploration_knows_no_stalls():
+    from d4sumo.search.optimizers import resolve_options
+
+    assert resolve_options("auto", {"version": 1})["stall"] == 0 and resolve_options("auto", {})["stall"] == 25
 
 
 def test_auto_held_points_hold_pieces_at_bounds_or_one_value():

@@ -78,7 +78,7 @@ OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_versio
 EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 0}, {"gp_version": 1, "inducing": 0},
                                                                    {"gp_version": 1, "batch_size": 1, "inducing": 0}),
                                                             "ce": ({"noise_fraction": 0.0},),
-                                                            "auto": ({"stall": 0}, {"version": 1, "stall": 0})}
+                                                            "auto": ({"stall": 0}, {"version": 1})}
 
 
 #: the optimiser a campaign runs when none is named, and the one earlier d4sumo versions ran instead
@@ -101,9 +101,7 @@ def resolve_options(name: str, options: dict | None) -> dict:
     """Every option of optimiser ``name``, defaults filled in, each value checked."""
     if name not in _FACTORIES:
         raise ConfigError("search.optimizer", name, f"one of {', '.join(OPTIMIZERS)}")
-    resolved = check_options(name, _FACTORIES[name].OPTIONS, options)
-    _FACTORIES[name].check_together(resolved)
-    return resolved
+    return _FACTORIES[name].resolve_together(check_options(name, _FACTORIES[name].OPTIONS, options))
 
 
 def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Generator, options: dict | None = None) -> Optimizer:

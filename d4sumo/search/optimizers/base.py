@@ -20,15 +20,16 @@ class Optimizer:
         self.dimension = self.lower.size
         self.budget = budget
         self.rng = rng
-        self.options = check_options(self.name, self.OPTIONS, options)
-        self.check_together(self.options)
+        self.options = self.resolve_together(check_options(self.name, self.OPTIONS, options))
         self.asked = 0
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
 
     @staticmethod
-    def check_together(options: dict) -> None:
-        """Refuse options that are each allowed but not together (a ConfigError)."""
+    def resolve_together(options: dict) -> dict:
+        """The options, refused where each is allowed but not together (a ConfigError), and an option
+        that does nothing given the others set to the value that says so (one behaviour, one definition)."""
+        return options
 
     @property
     def outstanding(self) -> int:

@@ -203,12 +203,13 @@ class TrustRegionBO(GaussianProcessSearch):
                "failure_tolerance": (0, 0, 1000)}
 
     @staticmethod
-    def check_together(options: dict) -> None:
+    def resolve_together(options: dict) -> dict:
         if not options["length_min"] < options["length_init"]:
             raise ConfigError("search.turbo.length_min", options["length_min"],
                               f"below length_init ({options['length_init']}): else every batch restarts the search")
         if not options["length_init"] <= options["length_max"]:
             raise ConfigError("search.turbo.length_max", options["length_max"], f"at least length_init ({options['length_init']})")
+        return options
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

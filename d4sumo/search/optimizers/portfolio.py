@@ -25,7 +25,8 @@ cars, held inputs falsify CC1-CC3 one time in three or four, where uniform input
 A stall (no new best over the last ``stall`` scores) marks the incumbent's neighbourhood as spent. In
 CC4's failed runs piece moves crept up a dead end, a new best every 50 to 200 scores, while held
 sampling got a tenth of the budget. Stalled, every exploring point is a fresh held one and the share is
-``share_max``; a new best ends the stall. On CC4 (40 seeds) this took ``auto`` from 35 runs to 38.
+``share_max``, whatever the credits (``share_max = 0``: BO alone throughout); a new best ends the stall.
+Uniform exploration (``version = 1``) knows no stalls: its ``stall`` is 0. On CC4 (40 seeds) this took ``auto`` from 35 runs to 38.
 
 Exploring serves falsification, finding a first attack; a campaign then goes on to collect attacks
 around the ones found, which BO does best (it finds the most distinct attacks on d4sumo's campaigns).
@@ -58,10 +59,11 @@ class Portfolio(BayesianOptimization):
                "share_max": (0.8, 0.0, 1.0), "version": (2, 1, 2), "stall": (25, 0, 100_000)}
 
     @staticmethod
-    def check_together(options: dict) -> None:
+    def resolve_together(options: dict) -> dict:
         if not options["share_min"] <= options["random_share"] <= options["share_max"]:
             raise ConfigError("search.auto.random_share", options["random_share"],
                               f"a share within [share_min, share_max] = [{options['share_min']}, {options['share_max']}]")
+        return {**options, "stall": 0} if options["version"] == 1 else options  # uniform exploration knows no stalls
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -74,13 +76,13 @@ class Portfolio(BayesianOptimization):
         self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked
         self._arm_rng = self.rng.spawn(1)[0]
         self._max_pieces = max(1, int(round(PIECES_PER_DIMENSION * self.dimension)))
-        self._best_at = 0  # how many scores there were when the best was last improved
+        self._best, self._best_at = -np.inf, 0  # the best finite score, and how many scores there were then
 
     @property
     def stalled(self) -> bool:
-        """No new best over the last ``stall`` scores (held sampling only; 0: never)."""
+        """No new best over the last ``stall`` scores (0: never)."""
         stall = self.options["stall"]
-        return self.held and stall > 0 and len(self.y) - self._best_at >= stall
+        return stall > 0 and len(self.y) - self._best_at >= stall
 
     @property
     def random_share(self) -> float:
@@ -150,7 +152,7 @@ class Portfolio(BayesianOptimization):
         best = max(self.y) if self.y else -np.inf
         super().tell(x, score)
         arm = self._arms.pop(0)
-        if self.y[-1] > best:
-            self._best_at = len(self.y)
-            if len(self.y) > self.initial_points:
-                self.credits[arm] += 1.0
+        if len(self.y) > self.initial_points and self.y[-1] > best:
+            self.credits[arm] += 1.0
+        if np.isfinite(score) and score > self._best:  # as told: NaN or inf (told as the worst seen, 0 if first) is none
+            self._best, self._best_at = float(score), len(self.y)
