@@ -26,7 +26,8 @@ A stall (no new best over the last ``stall`` scores) marks the incumbent's neigh
 CC4's failed runs piece moves crept up a dead end, a new best every 50 to 200 scores, while held
 sampling got a tenth of the budget. Stalled, every exploring point is a fresh held one and the share is
 ``share_max``, whatever the credits (``share_max = 0``: BO alone throughout); a new best ends the stall.
-Uniform exploration (``version = 1``) knows no stalls: its ``stall`` is 0. On CC4 (40 seeds) this took ``auto`` from 35 runs to 38.
+Uniform exploration (``version = 1``) knows no stalls: its ``stall`` is 0. On CC4 (40 seeds) this took
+``auto`` from 35 runs falsified to 38.
 
 Exploring serves falsification, finding a first attack; a campaign then goes on to collect attacks
 around the ones found, which BO does best (it finds the most distinct attacks on d4sumo's campaigns).
@@ -63,7 +64,8 @@ class Portfolio(BayesianOptimization):
         if not options["share_min"] <= options["random_share"] <= options["share_max"]:
             raise ConfigError("search.auto.random_share", options["random_share"],
                               f"a share within [share_min, share_max] = [{options['share_min']}, {options['share_max']}]")
-        return {**options, "stall": 0} if options["version"] == 1 else options  # uniform exploration knows no stalls
+        # uniform exploration knows no stalls: one definition for one behaviour
+        return {**options, "stall": 0} if options["version"] == 1 else options
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
