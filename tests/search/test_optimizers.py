@@ -458,13 +458,8 @@ def test_auto_with_stall_0_proposes_what_0_8_proposed():
     0.8's (the same seed, terraced objective and batches), and the default's stalls change some."""
     def run(options):
         opt = make_optimizer("auto", -np.ones(9), np.ones(9), budget=60, rng=np.random.default_rng(11), options=options)
-        asked = []
-        while opt.asked < opt.budget:
-            xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
-            asked += xs
-            for x in xs:
-                opt.tell(x, -round(float(np.sum((x - 0.2) ** 2)), 1))
-        return asked
+        play_in_batches(opt, lambda x: -round(float(np.sum((x - 0.2) ** 2)), 1))
+        return opt.X  # the points in the order asked
 
     asked = run({"stall": 0})
     before = {30: [0.324114162, -0.033240747, 0.205220014], 45: [0.597427849, -0.695566738, 0.740590427],
