@@ -49,6 +49,13 @@ class AttackFamily:
         return tuple(p.name for p in self.parameters)
 
     @property
+    def signals(self) -> tuple[int, ...]:
+        """How the parameters lay out in time, for an optimiser that reads them as signals (`auto`):
+        consecutive runs of this many parameters, each one signal in time order (a scalar is a run of
+        one). A family's parameters are one signal unless it says otherwise (knots are)."""
+        return (self.dimension,)
+
+    @property
     def lower(self) -> np.ndarray:
         return np.array([p.low for p in self.parameters], dtype=float)
 

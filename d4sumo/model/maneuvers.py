@@ -224,6 +224,10 @@ class LaneChangeAttack(AttackFamily):
         self._lane_change = self.names.index(LANE_CHANGE_PARAMETER)
         self._signal_index = [i for i in range(self.dimension) if i != self._lane_change]
 
+    @property
+    def signals(self) -> tuple[int, ...]:  # the lane change's time is a scalar after the longitudinal ones
+        return (*self.longitudinal.signals, 1)
+
     def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
         return self.longitudinal._signal(x[self._signal_index], t)
 

@@ -202,7 +202,7 @@ class CampaignRunner:
         rng = np.random.default_rng(campaign.seed)
         family = evaluator.family
         self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
-                                        options=dict(campaign.optimizer_options))
+                                        options=dict(campaign.optimizer_options), signals=family.signals)
         self.scores: list[float] = []
         self.queue: list[np.ndarray] = []  # asked for, not played yet: samples done, done + 1, ..
         self._replay()

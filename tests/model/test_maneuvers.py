@@ -97,7 +97,7 @@ def test_the_lane_change_time_joins_the_attack_box_and_becomes_a_step():
     config = EpisodeConfig(maneuver="cutin", start="warmup", warmup_s=5.0)
     family = Campaign(config=config, attack="knots").family()
     assert family.name == "knots" and family.names[-1] == "t_lc_s" and family.dimension == 10
-    assert family.upper[-1] == config.duration_s
+    assert family.upper[-1] == config.duration_s and family.signals == (9, 1)  # the knots, then a scalar
     x = np.zeros(10)
     x[-1] = 3.02  # the step nearest to 3.02 s after the attack's start (5 s)
     plan = attack_plan(family, x, config)

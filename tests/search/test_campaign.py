@@ -283,19 +283,23 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
     assert "batch_size" in campaign.definition()["optimizer_options"]
 
 
-@pytest.mark.parametrize("removed, kept", [(("stall",), {"stall": 0}), (("stall", "version"), {"version": 1})])
-def test_an_auto_campaign_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(removed, kept):
-    """d4sumo 0.8 stored auto's definition without ``stall`` (piece moves through stalls), 0.7 without
-    ``version`` either (uniform exploration, which knows no stalls)."""
+@pytest.mark.parametrize("removed, kept, stall", [(("suffix",), {"suffix": 0.0}, 25),
+                                                  (("suffix", "stall"), {"stall": 0, "suffix": 0.0}, 0),
+                                                  (("suffix", "stall", "version"), {"version": 1}, 0)])
+def test_an_auto_campaign_0_9_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(removed, kept, stall):
+    """d4sumo 0.9 stored auto's definition without ``suffix`` (no suffix moves), 0.8 without ``stall`` either
+    (piece moves through stalls), 0.7 without ``version`` either (uniform exploration: no stalls, no piece
+    moves)."""
     from d4sumo.search.store import campaign_key
 
     new = Campaign(optimizer="auto")
-    assert new.definition()["optimizer_options"]["stall"] == 25
+    assert new.definition()["optimizer_options"]["stall"] == 25 and new.definition()["optimizer_options"]["suffix"] == 0.25
     old = copy.deepcopy(new.definition())
     for key in removed:
         del old["optimizer_options"][key]
     stored = Campaign.from_definition(old, samples=12)
-    assert dict(stored.optimizer_options)["stall"] == 0 and campaign_key(stored.definition()) == campaign_key(old)
+    options = dict(stored.optimizer_options)
+    assert (options["stall"], options["suffix"]) == (stall, 0.0) and campaign_key(stored.definition()) == campaign_key(old)
     assert Campaign(optimizer="auto", optimizer_options=kept, samples=12).definition() == stored.definition()
 
 
@@ -379,3 +383,14 @@ def test_campaigns_stepped_together_store_the_samples_each_gives_alone():
         for r, expected in zip(runners, alone):
             assert full_signature(campaign_module.CampaignSummary(None, together[id(r)])) == expected
             assert sorted(heard[id(r)]) == list(range(9))
+
+
+def test_the_optimiser_reads_the_attack_familys_layout_in_time():
+    """A lane-changing attack's time of change is a scalar after its knots: auto's suffix moves cut the
+    knots at a time, and the scalar as a signal of its own."""
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.search.runner import CampaignRunner, Evaluator
+
+    for config, signals in ((EpisodeConfig(maneuver="cutin", start="warmup", warmup_s=5.0), (9, 1)), (EpisodeConfig(), (9,))):
+        campaign = Campaign(config=config, optimizer="auto", samples=4)
+        assert CampaignRunner(campaign, Evaluator(campaign)).optimizer.signals == signals == campaign.family().signals

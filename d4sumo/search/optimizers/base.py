@@ -8,16 +8,24 @@ from ...errors import ConfigError, check_int, check_number
 
 
 class Optimizer:
-    """Ask for a point in [lower, upper], tell its score (higher is better)."""
+    """Ask for a point in [lower, upper], tell its score (higher is better).
+
+    ``signals`` says how the parameters lay out in time, for an optimiser that reads them as signals:
+    consecutive runs of that many values, each run one signal in time order (a scalar is a run of one).
+    By default all the parameters are one signal."""
 
     name = ""
     #: option -> (default, low, high); an int default means a whole number
     OPTIONS: dict[str, tuple[float, float, float]] = {}
 
-    def __init__(self, lower: np.ndarray, upper: np.ndarray, budget: int, rng: np.random.Generator, **options):
+    def __init__(self, lower: np.ndarray, upper: np.ndarray, budget: int, rng: np.random.Generator, *,
+                 signals: tuple[int, ...] | None = None, **options):
         self.lower = np.asarray(lower, dtype=float)
         self.upper = np.asarray(upper, dtype=float)
         self.dimension = self.lower.size
+        self.signals = tuple(signals) if signals is not None else (self.dimension,)
+        if sum(self.signals) != self.dimension or min(self.signals, default=1) < 1:
+            raise ValueError(f"signals {self.signals}: runs of at least one value, {self.dimension} in all")
         self.budget = budget
         self.rng = rng
         self.options = self.resolve_together(check_options(self.name, self.OPTIONS, options))
