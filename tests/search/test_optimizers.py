@@ -7,7 +7,7 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.search.optimizers import OPTIMIZERS, CrossEntropy, make_optimizer
-from d4sumo.search.optimizers.portfolio import PIECE, RANDOM
+from d4sumo.search.optimizers.portfolio import BO, PIECE, RANDOM
 
 LOWER, UPPER = -np.ones(9), np.ones(9)
 TARGET = np.random.default_rng(2024).uniform(-0.8, 0.8, 9)
@@ -415,6 +415,28 @@ def test_a_stall_turns_every_exploring_point_to_a_fresh_held_one_until_a_new_bes
     assert not opt.stalled and opt.random_share < 0.8
 
 
+@pytest.mark.parametrize("patience", [5, 12])
+def test_auto_explores_once_bos_points_stop_improving(patience):
+    """Every point after the design is BO's until ``patience`` of BO's points in a row bring no new best
+    (its scores stopped informing); from then on the arms explore, however BO does later."""
+    from d4sumo.search.optimizers import resolve_options
+
+    opt = make_optimizer("auto", LOWER, UPPER, budget=200, rng=np.random.default_rng(4), options={"patience": patience})
+    arms = []
+    while opt.asked < 200:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 200 - opt.asked)))]
+        arms += opt._arms[-len(xs):]
+        for x in xs:
+            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < 40 else -1000.0)  # every score a new best, then none
+    after_design = arms[opt.initial_points:]
+    first = next(i for i, arm in enumerate(after_design) if arm != BO)
+    assert first >= 40 - opt.initial_points + patience - 1  # BO alone while every point improved, then patience more
+    # then the arms explore: at share_min while BO's credits hold it down, at share_max from the stall on
+    assert first < 40 - opt.initial_points + max(patience, opt.options["stall"]) + 10
+    assert after_design[first:].count(BO) < 0.7 * len(after_design[first:])
+    assert resolve_options("auto", {"version": 1})["patience"] == 0 and resolve_options("auto", {})["patience"] == 5
+
+
 def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
     """Exploring serves the first falsification; past a positive score BO collects attacks around it."""
     (bo, random, piece), share = _arms_after(lambda x: 1.0, budget=60)
@@ -455,10 +477,10 @@ def test_auto_never_proposes_a_point_twice_while_it_explores(dimension):
 
 #: auto's proposals 30, 45 and 59 (first three values) on the terraced objective below, seed 11, as each
 #: earlier version made them
-EARLIER_AUTO = {"0.8": ({"stall": 0, "suffix": 0.0}, {30: [0.324114162, -0.033240747, 0.205220014],
+EARLIER_AUTO = {"0.8": ({"stall": 0, "suffix": 0.0, "patience": 0}, {30: [0.324114162, -0.033240747, 0.205220014],
                                                       45: [0.597427849, -0.695566738, 0.740590427],
                                                       59: [-0.902263529, 0.129662642, -0.235677894]}),
-                "0.9": ({"suffix": 0.0}, {30: [0.324114162, -0.033240747, 0.205220014],
+                "0.9": ({"suffix": 0.0, "patience": 0}, {30: [0.324114162, -0.033240747, 0.205220014],
                                           45: [0.597427849, -0.695566738, 0.740590427],
                                           59: [-0.837753192, -0.837753192, -0.837753192]})}
 
