@@ -437,6 +437,17 @@ def test_auto_explores_once_bos_points_stop_improving(patience):
     assert resolve_options("auto", {"version": 1})["patience"] == 0 and resolve_options("auto", {})["patience"] == 5
 
 
+def test_bo_alone_earns_no_credit_before_exploring_starts():
+    """Credits say which arm improves while the arms compete: improvements BO made alone (before
+    ``patience`` of its points brought nothing) do not hold the exploring share at its floor afterwards."""
+    opt = make_optimizer("auto", LOWER, UPPER, budget=60, rng=np.random.default_rng(4))
+    while opt.asked < 60:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 60 - opt.asked)))]
+        for x in xs:
+            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < 40 else -1000.0)
+    assert opt._explores and opt.credits.tolist() == [1.0, 0.5, 0.5] and opt.random_share == 0.5
+
+
 def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
     """Exploring serves the first falsification; past a positive score BO collects attacks around it."""
     (bo, random, piece), share = _arms_after(lambda x: 1.0, budget=60)

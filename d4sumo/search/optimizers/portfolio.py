@@ -35,15 +35,16 @@ Suffix moves search in time order, as time-causal falsifiers do (FalStar's adapt
 an input segment by segment; Ernst et al. 2019): an input that falsifies often needs a good prefix, and
 the incumbent's prefix is the best one known. The parameters' layout in time comes from the attack
 family (``signals``, `Optimizer`): throttle and brake are two signals of 20 values on ARCH-COMP's chasing
-cars, cut at the same time. On CC4 (40 seeds) they took ``auto`` from 38 runs falsified to 40, in 403
-simulations on average instead of 475.
+cars, cut at the same time. On CC4 (40 seeds, exploring from the design on) they took ``auto`` from 38
+runs falsified to 40, in 403 simulations on average instead of 475.
 
 Exploring starts once the scores stop informing: until ``patience`` of BO's points in a row (after its
 design) bring no new best, every point is BO's. Where BO's model informs, as on d4sumo's campaigns, it
 finds the first attack on its own: exploring from the design on cost ``auto`` 0.8 distinct attacks a
 campaign at the hard condition of `bench_falsify` (237 seeds), all of it in the fifth of the campaigns
 whose design held no attack. On a plateau BO's points bring nothing and exploring starts a few points
-after the design (``patience = 0``: at once, as 0.9 did).
+after the design (``patience = 0``: at once, as 0.9 did). The arms compete from then on: BO earns no
+credit for the improvements it made alone, which would hold the exploring share at its floor.
 
 Exploring serves falsification, finding a first attack; a campaign then goes on to collect attacks
 around the ones found, which BO does best (it finds the most distinct attacks on d4sumo's campaigns).
@@ -193,8 +194,8 @@ class Portfolio(BayesianOptimization):
         best = max(self.y) if self.y else -np.inf
         super().tell(x, score)
         arm = self._arms.pop(0)
-        if len(self.y) > self.initial_points and self.y[-1] > best:
-            self.credits[arm] += 1.0
+        if self._explores and len(self.y) > self.initial_points and self.y[-1] > best:
+            self.credits[arm] += 1.0  # the arms compete from when exploring starts: BO alone earns no credit
         if np.isfinite(score) and score > self._best:  # as told: NaN or inf (told as the worst seen, 0 if first) is none
             self._best, self._best_at = float(score), len(self.y)
             self._bo_idle = 0
