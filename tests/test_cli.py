@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from d4sumo.cli import main
+from d4sumo.search.optimizers import EARLIER_OPTIONS
 
 
 def run(*argv):
@@ -288,10 +289,7 @@ def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_doc
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("optimizer, earlier", [("bo", {"inducing": 0}), ("bo", {"gp_version": 1, "inducing": 0}),
-                                                ("bo", {"gp_version": 1, "batch_size": 1, "inducing": 0}),
-                                                ("ce", {"noise_fraction": 0.0}), ("auto", {"suffix": 0.0, "patience": 0}),
-                                                ("auto", {"stall": 0, "suffix": 0.0, "patience": 0}), ("auto", {"version": 1})])
+@pytest.mark.parametrize("optimizer, earlier", [(o, e) for o, earliers in EARLIER_OPTIONS.items() for e in earliers])
 def test_falsify_says_how_to_go_on_with_a_campaign_an_earlier_version_ran(tmp_path, capsys, optimizer, earlier):
     """d4sumo 0.2 ran bo one point per score with scikit-optimize's GP, 0.3 five at a time with it, 0.6 and
     before with the exact GP however many scores; 0.4 ran ce without noise; 0.9 ran auto without suffix

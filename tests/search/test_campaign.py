@@ -288,9 +288,8 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
                                                   (("suffix", "patience", "stall", "version"), {"version": 1}, 0)])
 def test_an_auto_campaign_0_9_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(removed, kept, stall):
     """d4sumo 0.9 stored auto's definition without ``suffix`` and ``patience`` (no suffix moves, exploring
-    from the design on), 0.8 without ``stall`` either
-    (piece moves through stalls), 0.7 without ``version`` either (uniform exploration: no stalls, no piece
-    moves)."""
+    from the design on), 0.8 without ``stall`` either (piece moves through stalls), 0.7 without ``version``
+    either (uniform exploration: no stalls, no piece moves)."""
     from d4sumo.search.store import campaign_key
 
     new = Campaign(optimizer="auto")

@@ -415,6 +415,18 @@ def test_a_stall_turns_every_exploring_point_to_a_fresh_held_one_until_a_new_bes
     assert not opt.stalled and opt.random_share < 0.8
 
 
+def _rising_then_flat(opt, rising: int = 40) -> list[int]:
+    """Play auto to its budget on scores that are each a new best for the first ``rising``, then none: the
+    arm of every point, in the order asked."""
+    arms = []
+    while opt.asked < opt.budget:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
+        arms += opt._arms[-len(xs):]
+        for x in xs:
+            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < rising else -1000.0)
+    return arms
+
+
 @pytest.mark.parametrize("patience", [5, 12])
 def test_auto_explores_once_bos_points_stop_improving(patience):
     """Every point after the design is BO's until ``patience`` of BO's points in a row bring no new best
@@ -422,13 +434,7 @@ def test_auto_explores_once_bos_points_stop_improving(patience):
     from d4sumo.search.optimizers import resolve_options
 
     opt = make_optimizer("auto", LOWER, UPPER, budget=200, rng=np.random.default_rng(4), options={"patience": patience})
-    arms = []
-    while opt.asked < 200:
-        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 200 - opt.asked)))]
-        arms += opt._arms[-len(xs):]
-        for x in xs:
-            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < 40 else -1000.0)  # every score a new best, then none
-    after_design = arms[opt.initial_points:]
+    after_design = _rising_then_flat(opt)[opt.initial_points:]
     first = next(i for i, arm in enumerate(after_design) if arm != BO)
     assert first >= 40 - opt.initial_points + patience - 1  # BO alone while every point improved, then patience more
     # then the arms explore: at share_min while BO's credits hold it down, at share_max from the stall on
@@ -441,10 +447,7 @@ def test_bo_alone_earns_no_credit_before_exploring_starts():
     """Credits say which arm improves while the arms compete: improvements BO made alone (before
     ``patience`` of its points brought nothing) do not hold the exploring share at its floor afterwards."""
     opt = make_optimizer("auto", LOWER, UPPER, budget=60, rng=np.random.default_rng(4))
-    while opt.asked < 60:
-        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), 60 - opt.asked)))]
-        for x in xs:
-            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < 40 else -1000.0)
+    _rising_then_flat(opt)
     assert opt._explores and opt.credits.tolist() == [1.0, 0.5, 0.5] and opt.random_share == 0.5
 
 
