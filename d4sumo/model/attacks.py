@@ -50,10 +50,10 @@ class AttackFamily:
 
     @property
     def signals(self) -> tuple[int, ...]:
-        """How the parameters lay out in time, for an optimiser that reads them as signals (`auto`):
-        consecutive runs of this many parameters, each one signal in time order (a scalar is a run of
-        one). A family's parameters are one signal unless it says otherwise (knots are)."""
-        return (self.dimension,)
+        """How the parameters lay out in time, for an optimiser that reads them as signals (`auto`'s
+        suffix moves; `Optimizer`): each parameter a scalar unless the family holds a signal (knots do).
+        Part of how its campaigns replay: a family keeps its layout."""
+        return (1,) * self.dimension
 
     @property
     def lower(self) -> np.ndarray:
@@ -185,6 +185,10 @@ class Knots(AttackFamily):
         self.knot_times_s = np.arange(int(round(count)) + 1) * self.delta_s
         self.parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(self.knot_times_s.size))
 
+    @property
+    def signals(self) -> tuple[int, ...]:  # the knots: one signal
+        return (self.dimension,)
+
     def _signal(self, x, t):
         tk = self.knot_times_s
         tc = np.clip(t, tk[0], tk[-1])  # hold the last value after the horizon
@@ -275,6 +279,7 @@ class KnotsCoded(AttackFamily):
     name = "knots-coded"
     parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(8))
     knot_times_s = np.linspace(0.0, 40.0, 8)
+    signals = (8,)  # the knots: one signal
 
     def _signal(self, x, t):
         from scipy.interpolate import splev, splrep

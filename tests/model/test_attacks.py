@@ -154,3 +154,11 @@ def test_the_coded_knot_attack_is_an_interpolating_cubic_spline_through_8_knots_
     assert family.signal(x, np.array([80.0])).tolist() in ([-1.0], [1.0])  # extrapolated past the last knot, as splev does
     wild = np.array([0.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
     assert np.abs(family.signal(wild, t)).max() == 1.0  # its overshoot clipped, as the code clips each pedal
+
+
+def test_knots_are_one_signal_and_every_other_familys_parameters_scalars():
+    """The layout `auto`'s suffix moves read: a time to cut at exists only in a signal."""
+    assert make_attack("knots").signals == (9,) and make_attack("spline").signals == (9,)
+    assert make_attack("knots-coded").signals == (8,)
+    assert make_attack("sine").signals == (1,) * make_attack("sine").dimension
+    assert make_attack("intermittent").signals == (1,) * 6

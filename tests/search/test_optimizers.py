@@ -363,19 +363,23 @@ def test_turbo_finds_the_maximum_of_a_40d_function_where_random_search_does_not(
     assert bests["turbo"] > bests["random"] + 3.0, bests  # random's best is around -10
 
 
-def _arms_after(f, budget=120, seed=0, **options):
-    """The points each arm of auto proposed after its initial design (BO, held sampling or uniform, piece
-    moves), and its final exploring share."""
-    opt = make_optimizer("auto", LOWER, UPPER, budget=budget, rng=np.random.default_rng(seed), options=options)
-    arms = [0, 0, 0]
-    while opt.asked < budget:
-        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), budget - opt.asked)))]
-        if len(opt.y) >= opt.initial_points:
-            for arm in opt._arms[-len(xs):]:
-                arms[arm] += 1
+def _arms_played(opt, f) -> list[int]:
+    """Play auto to its budget as a campaign does: the arm of every point (BO, held sampling or uniform,
+    piece moves), in the order asked."""
+    arms = []
+    while opt.asked < opt.budget:
+        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
+        arms += opt._arms[-len(xs):]
         for x in xs:
             opt.tell(x, f(x))
-    return arms, opt.random_share
+    return arms
+
+
+def _arms_after(f, budget=120, seed=0, **options):
+    """How many points each arm of auto proposed after its initial design, and its final exploring share."""
+    opt = make_optimizer("auto", LOWER, UPPER, budget=budget, rng=np.random.default_rng(seed), options=options)
+    arms = _arms_played(opt, f)[opt.initial_points:]
+    return [arms.count(arm) for arm in (BO, RANDOM, PIECE)], opt.random_share
 
 
 @pytest.mark.parametrize("version", [1, 2])
@@ -415,16 +419,9 @@ def test_a_stall_turns_every_exploring_point_to_a_fresh_held_one_until_a_new_bes
     assert not opt.stalled and opt.random_share < 0.8
 
 
-def _rising_then_flat(opt, rising: int = 40) -> list[int]:
-    """Play auto to its budget on scores that are each a new best for the first ``rising``, then none: the
-    arm of every point, in the order asked."""
-    arms = []
-    while opt.asked < opt.budget:
-        xs = [opt.ask() for _ in range(max(1, min(opt.ready(), opt.budget - opt.asked)))]
-        arms += opt._arms[-len(xs):]
-        for x in xs:
-            opt.tell(x, -1000.0 + len(opt.y) if len(opt.y) < rising else -1000.0)
-    return arms
+def _rising_then_flat(opt, rising: int = 40):
+    """Scores that are each a new best for the first ``rising`` told, then none."""
+    return lambda x: -1000.0 + len(opt.y) if len(opt.y) < rising else -1000.0
 
 
 @pytest.mark.parametrize("patience", [5, 12])
@@ -434,7 +431,7 @@ def test_auto_explores_once_bos_points_stop_improving(patience):
     from d4sumo.search.optimizers import resolve_options
 
     opt = make_optimizer("auto", LOWER, UPPER, budget=200, rng=np.random.default_rng(4), options={"patience": patience})
-    after_design = _rising_then_flat(opt)[opt.initial_points:]
+    after_design = _arms_played(opt, _rising_then_flat(opt))[opt.initial_points:]
     first = next(i for i, arm in enumerate(after_design) if arm != BO)
     assert first >= 40 - opt.initial_points + patience - 1  # BO alone while every point improved, then patience more
     # then the arms explore: at share_min while BO's credits hold it down, at share_max from the stall on
@@ -447,7 +444,7 @@ def test_bo_alone_earns_no_credit_before_exploring_starts():
     """Credits say which arm improves while the arms compete: improvements BO made alone (before
     ``patience`` of its points brought nothing) do not hold the exploring share at its floor afterwards."""
     opt = make_optimizer("auto", LOWER, UPPER, budget=60, rng=np.random.default_rng(4))
-    _rising_then_flat(opt)
+    _arms_played(opt, _rising_then_flat(opt))
     assert opt._explores and opt.credits.tolist() == [1.0, 0.5, 0.5] and opt.random_share == 0.5
 
 
@@ -574,6 +571,18 @@ def test_auto_suffix_moves_keep_the_incumbent_up_to_a_time_in_every_signal(signa
             assert np.all(z[start:start + a] == 0.5) and np.all(z[start + a:start + n] != 0.5), (signals, cut)
             start += n
     assert cuts == set(range(1, longest))  # every time but the start
+
+
+def test_auto_makes_no_suffix_moves_where_every_parameter_is_a_scalar():
+    """A family of scalars (a sine's amplitude, period, phase) has no time to cut at: auto proposes what it
+    does without suffix moves."""
+    def run(options):
+        opt = make_optimizer("auto", LOWER, UPPER, budget=80, rng=np.random.default_rng(5), options=options,
+                             signals=(1,) * LOWER.size)
+        play_in_batches(opt, lambda x: -1.0)
+        return np.array(opt.X)
+
+    assert np.array_equal(run({}), run({"suffix": 0.0}))
 
 
 def test_the_layout_in_time_is_runs_that_cover_the_parameters():

@@ -16,8 +16,9 @@
   perturbations of the incumbent. It proposes ``batch_size`` points at once (5; 1 is the paper's one
   point per score) by the constant liar. ``gp_version = 1`` runs scikit-optimize's GP instead, as
   campaigns stored by d4sumo 0.3 and before did (5-20 times BO's own time).
-- ``auto``: ``bo`` and exploring arms as one portfolio over one GP: each point after the initial design
-  explores with a probability that moves to whichever arms improve the best score (`portfolio`). The
+- ``auto``: ``bo`` and exploring arms as one portfolio over one GP: once BO's points stop improving
+  (``patience``), each point explores with a probability that moves to whichever arms improve the best
+  score (`portfolio`). The
   exploring arms propose held inputs (pieces held at a bound or a value) and piece moves on the
   incumbent; on a plateau, where BO narrows around an arbitrary incumbent, they carry it. Once a score
   is positive (an attack found), every point is BO's.

@@ -26,7 +26,8 @@ cars, held inputs falsify CC1-CC3 one time in three or four, where uniform input
 
 A stall (no new best over the last ``stall`` scores) marks the incumbent's neighbourhood as spent. In
 CC4's failed runs piece moves crept up a dead end, a new best every 50 to 200 scores, while held
-sampling got a tenth of the budget. Stalled, every exploring point is a fresh held one and the share is
+sampling got a tenth of the budget (the count runs from the last new best, BO's points before exploring
+starts included). Stalled, every exploring point is a fresh held one and the share is
 ``share_max``, whatever the credits (``share_max = 0``: BO alone throughout); a new best ends the stall.
 Uniform exploration (``version = 1``, 0.7's) knows no stalls, makes no piece moves and explores from
 the design on: its ``stall``, ``suffix`` and ``patience`` are 0. On CC4 (40 seeds) stalls took ``auto`` from 35 runs falsified to 38.
@@ -72,6 +73,11 @@ PIECES_PER_DIMENSION = 0.4  # held sampling cuts d parameters into at most this 
 SAME = 1e-9  # values in the unit box this close are one value (a point's values come back from the box)
 
 
+def _max_pieces(length: int) -> int:
+    """The most pieces held sampling cuts ``length`` values into."""
+    return max(1, int(round(PIECES_PER_DIMENSION * length)))
+
+
 class Portfolio(BayesianOptimization):
     name = "auto"
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
@@ -97,9 +103,8 @@ class Portfolio(BayesianOptimization):
         self.credits = np.array([2.0 - explore, explore / 2, explore / 2] if self.held else [2.0 - explore, explore, 0.0])
         self._arms: list[int] = []  # the arm of each point asked and not told yet, in the order asked
         self._arm_rng = self.rng.spawn(1)[0]
-        self._max_pieces = max(1, int(round(PIECES_PER_DIMENSION * self.dimension)))
+        self._max_pieces = _max_pieces(self.dimension)
         self._best, self._best_at = -np.inf, 0  # the best finite score, and how many scores there were then
-        self._bo_idle = 0  # BO's points after the design told since the last new best
         self._explores = self.options["patience"] == 0  # BO's points have gone ``patience`` without a new best
 
     @property
@@ -162,14 +167,16 @@ class Portfolio(BayesianOptimization):
             values[a:b] = self._value()
 
     def _suffix_move(self, best: np.ndarray) -> np.ndarray:
-        """The incumbent up to a random time, every signal after it redrawn as held pieces."""
+        """The incumbent up to a random time, every signal after it redrawn as held pieces (a scalar, a
+        signal of one value, when the time falls in its first half). It may redraw the incumbent itself:
+        a repeat, replaced as any other."""
         z, longest = best.copy(), max(self.signals)
         cut = int(self._arm_rng.integers(1, longest))
         start = 0
         for n in self.signals:  # a signal of n values is cut at the same time: cut / longest of its length
             a = start + int(round(cut * n / longest))
             if a < start + n:
-                self._hold(z[a:start + n], max(1, int(round(PIECES_PER_DIMENSION * (start + n - a)))))
+                self._hold(z[a:start + n], _max_pieces(start + n - a))
             start += n
         return z
 
@@ -198,7 +205,5 @@ class Portfolio(BayesianOptimization):
             self.credits[arm] += 1.0  # the arms compete from when exploring starts: BO alone earns no credit
         if np.isfinite(score) and score > self._best:  # as told: NaN or inf (told as the worst seen, 0 if first) is none
             self._best, self._best_at = float(score), len(self.y)
-            self._bo_idle = 0
-        elif arm == BO and len(self.y) > self.initial_points:
-            self._bo_idle += 1
-            self._explores = self._explores or self._bo_idle >= self.options["patience"]
+        if not self._explores:  # every point after the design is BO's until then
+            self._explores = len(self.y) - max(self._best_at, self.initial_points) >= self.options["patience"]
