@@ -79,3 +79,14 @@ def test_falcauns_published_cc4_counterexample_does_not_falsify_cc4_here():
     y = arch_cc.simulate(x, 2)
     assert arch_cc.robustness("CC4", y)[0] == pytest.approx(0.873, abs=0.002)
     assert arch_cc.robustness("CC4-2019", y)[0] == pytest.approx(1.402, abs=0.002)
+
+
+def test_the_chasing_cars_integrate_at_a_finer_step_on_request():
+    """simulate(dt=...) checks how far a verdict moves with the integration step: the same samples every
+    0.1 s, the same trajectory where no chart switches (car 1 alone moves under a constant push)."""
+    x = np.r_[np.full(20, 0.5), np.zeros(20)]
+    coarse, fine = arch_cc.simulate(x, 2), arch_cc.simulate(x, 2, dt=0.001)
+    assert coarse.shape == fine.shape == (1, 1001, 5)
+    assert np.allclose(coarse[0, :, 0], fine[0, :, 0], rtol=0, atol=0.3)  # y1 = -t^2 / 4; Euler is off by dt t / 4
+    exact = -0.25 * 100.0**2
+    assert abs(fine[0, -1, 0] - exact) < 0.2 * abs(coarse[0, -1, 0] - exact) < 0.1  # ten times finer, ten times closer

@@ -16,11 +16,12 @@ sampled every ``SAMPLE_S`` for the specifications. Simulink integrates with a va
 locates the transitions, and these charts make the difference felt: a car in Keeping backs away at its
 speed and in Chasing speeds up, so a car that hovers between the two oscillates faster and faster, and a
 transition taken a step late overshoots its threshold by speed x ``DT``. CC4's verdict near its
-threshold moves with the step: of 12 held inputs that falsify it here, 11 still do at 1 ms and 10 at
-0.2 ms (each mode's motion integrated exactly). FalCAuN's published counterexample to its CC4 (throttle 1
-for 10 s then 0, brake 1: MasWag/FalCAuN-ARCH-COMP, FalCAuN_ARCH2024_validation.csv) scores 0.87 here
-and 2.3 at 1 ms or less, where car 5 never leaves Keeping: Simulink's trajectory differs from both, and
-CC4's figures compare across tools only roughly.
+threshold moves with the step (``simulate(..., dt=)``): of the 29 held inputs in 20,000 that falsify it
+here, 23 still do at 1 ms, and CC4-2019's 8 all do (`bench_arch.py --held 20000 --recheck-dt 0.001`).
+FalCAuN's published counterexample to its CC4 (throttle 1 for 10 s then 0, brake 1:
+MasWag/FalCAuN-ARCH-COMP, FalCAuN_ARCH2024_validation.csv) scores 0.87 here and 2.3 at 1 ms, where car 5
+never leaves Keeping: Simulink's trajectory differs from both, and CC4's figures compare across tools
+only roughly.
 
 The specifications as the competition states them (ARCH-COMP 2021's falsification category; quoted from
 the benchmark file of STGEM, a participant: mshaheryarmalik/stgem,
@@ -68,19 +69,20 @@ def inputs(params: np.ndarray, instance: int, times_s: np.ndarray) -> tuple[np.n
     return interp(throttle), interp(brake)
 
 
-def simulate(params: np.ndarray, instance: int = 2) -> np.ndarray:
-    """Positions y1..y5 (runs x samples x 5) every SAMPLE_S over 100 s, for rows of 40 parameters."""
+def simulate(params: np.ndarray, instance: int = 2, dt: float = DT) -> np.ndarray:
+    """Positions y1..y5 (runs x samples x 5) every SAMPLE_S over 100 s, for rows of 40 parameters, by
+    Euler steps of ``dt`` (a divisor of SAMPLE_S; finer than DT to see how far a verdict moves with it)."""
     params = np.atleast_2d(np.asarray(params, dtype=float))
-    steps = int(round(DURATION_S / DT))
-    throttle, brake = inputs(params, instance, np.arange(steps) * DT)
-    return np.array([_one_run(throttle[r].tolist(), brake[r].tolist()) for r in range(len(params))])
+    steps = int(round(DURATION_S / dt))
+    throttle, brake = inputs(params, instance, np.arange(steps) * dt)
+    return np.array([_one_run(throttle[r].tolist(), brake[r].tolist(), dt) for r in range(len(params))])
 
 
-def _one_run(throttle: list[float], brake: list[float]) -> np.ndarray:
+def _one_run(throttle: list[float], brake: list[float], dt: float) -> np.ndarray:
     """One run, step by step in plain floats: the charts switch every few steps (about 460 times a car in
     100 s of random inputs), which keeps numpy's arrays of 5 cars busy with overhead; this loop is 25 times
     faster than one over arrays and gives the same numbers."""
-    every = int(round(SAMPLE_S / DT))
+    every = int(round(SAMPLE_S / dt))
     y = [0.0, 10.0, 20.0, 30.0, 40.0]
     v = [0.0] * 5
     mode = [KEEPING] * 5  # cars 2-5 (index 0 unused)
@@ -99,18 +101,18 @@ def _one_run(throttle: list[float], brake: list[float]) -> np.ndarray:
                 m = CHASING
             mode[i] = m
         lead = v[0]
-        v[0] = lead + DT * (-throttle[k] - brake[k] * lead)
-        y[0] = y[0] + DT * lead
+        v[0] = lead + dt * (-throttle[k] - brake[k] * lead)
+        y[0] = y[0] + dt * lead
         for i in range(1, 5):
             vi = v[i]
             if mode[i] == KEEPING:  # v' = 0, y' = v
-                y[i] = y[i] + DT * vi
+                y[i] = y[i] + dt * vi
             elif mode[i] == CHASING:  # v' = 1, y' = -v
-                y[i] = y[i] + DT * -vi
-                v[i] = vi + DT * 1.0
+                y[i] = y[i] + dt * -vi
+                v[i] = vi + dt * 1.0
             else:  # Braking: v' = -v, y' = -v
-                y[i] = y[i] + DT * -vi
-                v[i] = vi + DT * -vi
+                y[i] = y[i] + dt * -vi
+                v[i] = vi + dt * -vi
         if (k + 1) % every == 0:
             out.append(list(y))
     return np.array(out)

@@ -27,6 +27,7 @@ competition counts, and prints FalCAuN's published figures beside ours.
 Usage: python tools/bench_arch.py [--runs 10] [--samples 300] [--optimizers ...] [--specs gap close held]
        python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--samples 1500] [--specs CC1 ...]
        python tools/bench_arch.py --benchmark arch-comp-cc --held 40000   (how rare falsifying inputs are)
+       python tools/bench_arch.py --benchmark arch-comp-cc --held 20000 --recheck-dt 0.001   (and do they at 1 ms)
 """
 
 from __future__ import annotations
@@ -132,18 +133,28 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
 
 def held_rates(args) -> None:
     """How rare each specification's falsifying inputs are: the share of held inputs (as `auto`'s held
-    sampling draws them) and of uniform ones that falsify it."""
+    sampling draws them) and of uniform ones that falsify it; with ``--recheck-dt``, how many of the held
+    ones that falsify it at the model's step still do at a finer one."""
     specs = args.specs or [*arch_cc.SPECS, *arch_cc.EARLIER_SPECS]
     held = make_optimizer("auto", np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS), budget=1, rng=np.random.default_rng(0))
     draws = {"held": lambda: held._held(), "uniform": lambda: held._arm_rng.random(2 * SEGMENTS)}
     print(f"chasing cars, instance {args.instance}: {args.held} inputs of each kind (seed 0)", flush=True)
+    falsifying = {spec: [] for spec in specs}  # the held inputs that falsify each specification
     for kind, draw in draws.items():
         hits = dict.fromkeys(specs, 0)
         for start in range(0, args.held, 500):
-            y = arch_cc.simulate(np.array([draw() for _ in range(min(500, args.held - start))]), args.instance)
+            x = np.array([draw() for _ in range(min(500, args.held - start))])
+            y = arch_cc.simulate(x, args.instance)
             for spec in specs:
-                hits[spec] += int((arch_cc.robustness(spec, y) < 0).sum())
+                falsified = arch_cc.robustness(spec, y) < 0
+                hits[spec] += int(falsified.sum())
+                if kind == "held":
+                    falsifying[spec] += list(x[falsified])
         print(f"{kind:8s}" + "".join(f"  {spec} {100 * h / args.held:.2f}% ({h})" for spec, h in hits.items()), flush=True)
+    if args.recheck_dt:
+        print(f"held inputs falsifying at {arch_cc.DT * 1e3:g} ms that still do at {args.recheck_dt * 1e3:g} ms:"
+              + "".join(f"  {spec} {int((arch_cc.robustness(spec, arch_cc.simulate(np.array(x), args.instance, args.recheck_dt)) < 0).sum())}"
+                        f"/{len(x)}" for spec, x in falsifying.items() if x), flush=True)
 
 
 def sumo_episode_seconds(repeats: int = 20) -> float:
@@ -169,6 +180,8 @@ def main() -> None:
     parser.add_argument("--instance", type=int, choices=(1, 2), default=2, help="arch-comp-cc's input instance [2]")
     parser.add_argument("--held", type=int, metavar="N", help="arch-comp-cc: the share of N held inputs (auto's "
                         "held sampling) and N uniform ones that falsify each specification, instead of the runs")
+    parser.add_argument("--recheck-dt", type=float, metavar="S", help="with --held: how many of the falsifying held "
+                        "inputs still falsify at this integration step [s] (the model's: 0.01)")
     args = parser.parse_args()
     global ROBUSTNESS
     if args.benchmark == "arch-comp-cc":
