@@ -154,7 +154,8 @@ def held_rates(args) -> None:
     if args.recheck_dt:
         print(f"held inputs falsifying at {arch_cc.DT * 1e3:g} ms that still do at {args.recheck_dt * 1e3:g} ms:"
               + "".join(f"  {spec} {int((arch_cc.robustness(spec, arch_cc.simulate(np.array(x), args.instance, args.recheck_dt)) < 0).sum())}"
-                        f"/{len(x)}" for spec, x in falsifying.items() if x), flush=True)
+                        f"/{len(x)}" for spec, x in falsifying.items() if x)
+              + ("" if any(falsifying.values()) else "  none falsified at 10 ms"), flush=True)
 
 
 def sumo_episode_seconds(repeats: int = 20) -> float:
@@ -183,6 +184,9 @@ def main() -> None:
     parser.add_argument("--recheck-dt", type=float, metavar="S", help="with --held: how many of the falsifying held "
                         "inputs still falsify at this integration step [s] (the model's: 0.01)")
     args = parser.parse_args()
+    dt = args.recheck_dt
+    if dt is not None and not (0 < dt <= arch_cc.DT and abs(arch_cc.SAMPLE_S / dt - round(arch_cc.SAMPLE_S / dt)) < 1e-9):
+        parser.error(f"--recheck-dt: {dt} s given; allowed: a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s")
     global ROBUSTNESS
     if args.benchmark == "arch-comp-cc":
         ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, args.instance))  # noqa: E731
