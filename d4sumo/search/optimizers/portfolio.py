@@ -24,13 +24,14 @@ played or pending (a few parameters leave few held points) is replaced by a unif
 cars, held inputs falsify CC1-CC3 one time in three or four, where uniform inputs do one time in 25 to
 100, and the piece moves reach CC4, which no uniform search does.
 
-A stall (no new best over the last ``stall`` scores) marks the incumbent's neighbourhood as spent. In
-CC4's failed runs piece moves crept up a dead end, a new best every 50 to 200 scores, while held
-sampling got a tenth of the budget (the count runs from the last new best, BO's points before exploring
-starts included). Stalled, every exploring point is a fresh held one and the share is
-``share_max``, whatever the credits (``share_max = 0``: BO alone throughout); a new best ends the stall.
-Uniform exploration (``version = 1``, 0.7's) knows no stalls, makes no piece moves and explores from
-the design on: its ``stall``, ``suffix`` and ``patience`` are 0. On CC4 (40 seeds) stalls took ``auto`` from 35 runs falsified to 38.
+A stall (no new best over the last ``stall`` scores, counted from the last new best, BO's points before
+exploring starts included) marks the incumbent's neighbourhood as spent. In CC4's failed runs piece
+moves crept up a dead end, a new best every 50 to 200 scores, while held sampling got a tenth of the
+budget. Stalled, every exploring point is a fresh held one and the share is ``share_max``, whatever the
+credits (``share_max = 0``: BO alone throughout); a new best ends the stall. Uniform exploration
+(``version = 1``, 0.7's) knows no stalls, makes no piece moves and explores from the design on: its
+``stall``, ``suffix`` and ``patience`` are 0. On CC4 (40 seeds) stalls took ``auto`` from 35 runs
+falsified to 38.
 
 Suffix moves search in time order, as time-causal falsifiers do (FalStar's adaptive tree search builds
 an input segment by segment; Ernst et al. 2019): an input that falsifies often needs a good prefix, and
