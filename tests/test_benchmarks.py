@@ -90,3 +90,20 @@ def test_the_chasing_cars_integrate_at_a_finer_step_on_request():
     assert np.allclose(coarse[0, :, 0], fine[0, :, 0], rtol=0, atol=0.3)  # y1 = -t^2 / 4; Euler is off by dt t / 4
     exact = -0.25 * 100.0**2
     assert abs(fine[0, -1, 0] - exact) < 0.2 * abs(coarse[0, -1, 0] - exact) < 0.1  # ten times finer, ten times closer
+
+
+def test_the_interval_of_the_mean_simulations_holds_the_mean_narrows_with_runs_and_is_the_same_each_time():
+    """bench_arch prints it beside the ten-run means the competition publishes: CC4's ten-run mean moves by
+    a hundred and more between sets of seeds."""
+    from bench_arch import mean_interval
+
+    ten = [911, 803, 417, 324, 336, 939, 723, 553, 292, 222]
+    low, high = mean_interval(ten)
+    assert low < np.mean(ten) < high and high - low > 200  # a wide one: these runs spread from 222 to 939
+    assert mean_interval(ten) == (low, high)
+    forty_low, forty_high = mean_interval(ten * 4)
+    assert low < forty_low < forty_high < high
+    # failed runs count in the resampling, not in the mean (ARCH-COMP's mean is over the falsified runs)
+    with_failures = mean_interval([None, 100, None, 300])
+    assert 100 <= with_failures[0] < with_failures[1] <= 300
+    assert mean_interval([None, None]) is None and mean_interval([50]) == (50.0, 50.0)

@@ -14,7 +14,7 @@ equilibrium). Specifications (y_i the position of car i, front to back):
 About 0.3% of uniformly random inputs falsify each; most leave the gaps near their equilibrium, where
 the robustness is nearly constant (a plateau).
 
-For each optimiser and specification, ``--runs`` runs (seeds 0, 1, ...) of at most ``--samples``
+For each optimiser and specification, ``--runs`` runs (seeds ``--first-seed``, the next, ...) of at most ``--samples``
 simulations each, stopped at the first falsification, as ARCH-COMP counts: falsified runs and the
 median simulations to falsify. Then each optimiser's own time (ask + tell) per proposal over one run of
 the full budget on the ``gap`` specification, against a SUMO episode of d4sumo's default scenario
@@ -22,10 +22,11 @@ measured in the same run (target: at most half an episode).
 
 ``--benchmark arch-comp-cc`` runs ARCH-COMP's chasing cars instead (`arch_cc.py`: the competition's
 model and CC1-CC5, CCx, input instance 1 or 2), 10 runs of up to 1,500 simulations by default as the
-competition counts, and prints FalCAuN's published figures beside ours.
+competition counts, with each mean's 95% interval (`mean_interval`), and prints FalCAuN's published
+figures beside ours.
 
-Usage: python tools/bench_arch.py [--runs 10] [--samples 300] [--optimizers ...] [--specs gap close held]
-       python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--samples 1500] [--specs CC1 ...]
+Usage: python tools/bench_arch.py [--runs 10] [--first-seed 0] [--samples 300] [--optimizers ...] [--specs gap close held]
+       python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--first-seed 0] [--samples 1500] [--specs CC1 ...]
        python tools/bench_arch.py --benchmark arch-comp-cc --held 40000   (how rare falsifying inputs are)
        python tools/bench_arch.py --benchmark arch-comp-cc --held 20000 --recheck-dt 0.001   (and do they at 1 ms)
 """
@@ -131,6 +132,20 @@ def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple
     return found, own, opt.asked
 
 
+def mean_interval(found: list[int | None], resamples: int = 10_000) -> tuple[float, float] | None:
+    """The 95% interval of the mean simulations to falsify, as ARCH-COMP counts it (over the falsified
+    runs), by the percentile bootstrap over runs (a fixed stream: the same runs, the same interval); None
+    when no run falsified. Ten runs of a rare-event search are a small sample: CC4's mean moves by a
+    hundred and more between sets of ten seeds."""
+    runs = np.array([np.nan if f is None else f for f in found], dtype=float)
+    if np.all(np.isnan(runs)):
+        return None
+    draws = runs[np.random.default_rng(0).integers(len(runs), size=(resamples, len(runs)))]
+    kept = ~np.all(np.isnan(draws), axis=1)  # a resample of failed runs only has no mean
+    means = np.nanmean(draws[kept], axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
 def held_rates(args) -> None:
     """How rare each specification's falsifying inputs are: the share of held inputs (as `auto`'s held
     sampling draws them) and of uniform ones that falsify it; with ``--recheck-dt``, how many of the held
@@ -174,6 +189,7 @@ def sumo_episode_seconds(repeats: int = 20) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--first-seed", type=int, default=0, help="the runs' seeds are this and the next ones [0]")
     parser.add_argument("--samples", type=int, help="simulations per run [300; arch-comp-cc: 1500, the competition's]")
     parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "auto", "turbo"])
     parser.add_argument("--specs", nargs="+", choices=(*SPECS, *arch_cc.SPECS, *arch_cc.EARLIER_SPECS))
@@ -187,6 +203,10 @@ def main() -> None:
     dt = args.recheck_dt
     if dt is not None and not (0 < dt <= arch_cc.DT and abs(arch_cc.SAMPLE_S / dt - round(arch_cc.SAMPLE_S / dt)) < 1e-9):
         parser.error(f"--recheck-dt: {dt} s given; allowed: a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s")
+    for flag, value, least in (("--runs", args.runs, 1), ("--first-seed", args.first_seed, 0), ("--samples", args.samples, 1),
+                                ("--held", args.held, 1)):
+        if value is not None and value < least:
+            parser.error(f"{flag}: {value} given; allowed: an integer of at least {least}")
     global ROBUSTNESS
     if args.benchmark == "arch-comp-cc":
         ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, args.instance))  # noqa: E731
@@ -200,7 +220,7 @@ def main() -> None:
     falsified: dict[str, dict[str, str]] = {o: {} for o in args.optimizers}
     for spec in args.specs:
         for o in args.optimizers:
-            found = [run(o, spec, seed, args.samples, stop=True)[0] for seed in range(args.runs)]
+            found = [run(o, spec, seed, args.samples, stop=True)[0] for seed in range(args.first_seed, args.first_seed + args.runs)]
             hits = [f for f in found if f is not None]
             median = f"{statistics.median(hits):.0f}" if hits else "-"
             falsified[o][spec] = f"{len(hits)}/{args.runs} ({median})"
@@ -225,16 +245,20 @@ def arch_comp(args) -> None:
     print(f"chasing cars, instance {args.instance}: {(time.perf_counter() - t0) * 1e3:.0f} ms a simulation; "
           f"{runs} runs of up to {samples} simulations", flush=True)
     rows = {o: {} for o in args.optimizers}
+    intervals = {o: {} for o in args.optimizers}
     own_time = {}
+    seeds = range(args.first_seed, args.first_seed + runs)
     for spec in specs:
         for o in args.optimizers:
-            results = [run(o, spec, seed, samples, stop=True) for seed in range(runs)]
+            results = [run(o, spec, seed, samples, stop=True) for seed in seeds]
             hits = [f for f, _, _ in results if f is not None]
             own = sum(t for _, t, _ in results) / max(sum(n for _, _, n in results), 1)
             own_time.setdefault(o, []).append(own)
             mean = f"{statistics.mean(hits):.0f}" if hits else "-"
             median = f"{statistics.median(hits):.0f}" if hits else "-"
             rows[o][spec] = f"{len(hits)}/{runs}, {mean} ({median})"
+            interval = mean_interval([f for f, _, _ in results])
+            intervals[o][spec] = f"{interval[0]:.0f}-{interval[1]:.0f}" if interval else "-"
             print(f"[{spec}] {o:10s}: falsified {len(hits)}/{runs}; simulations {[f for f, _, _ in results]}", flush=True)
     episode = sumo_episode_seconds()
     print(f"\nfalsified runs, mean (median) simulations to falsify; own time per proposal (ask + tell, over every "
@@ -243,6 +267,11 @@ def arch_comp(args) -> None:
     for o in args.optimizers:
         own = statistics.mean(own_time[o])
         print(f"{o:12s}" + "".join(f"{rows[o][s]:>22s}" for s in specs) + f"{own * 1e3:9.2f}{own / episode:13.2f}")
+    print(f"\n95% interval of the mean simulations to falsify (bootstrap over the {runs} runs, seeds "
+          f"{seeds.start}-{seeds.stop - 1})")
+    for o in args.optimizers:
+        print(f"{o:12s}" + "".join(f"{intervals[o][s]:>22s}" for s in specs))
+    print(f"\nFalCAuN's published figures (10 runs each)")
     print(f"{'FalCAuN 2024':12s}" + "".join(f"{FALCAUN[s][0]:>22s}" for s in specs))
     print(f"{'FalCAuN now':12s}" + "".join(f"{FALCAUN[s][1]:>22s}" for s in specs))
     if "CC4" in specs:
