@@ -271,7 +271,7 @@ def arch_comp(args) -> None:
           f"{seeds.start}-{seeds.stop - 1})")
     for o in args.optimizers:
         print(f"{o:12s}" + "".join(f"{intervals[o][s]:>22s}" for s in specs))
-    print(f"\nFalCAuN's published figures (10 runs each)")
+    print("\nFalCAuN's published figures (10 runs each)")
     print(f"{'FalCAuN 2024':12s}" + "".join(f"{FALCAUN[s][0]:>22s}" for s in specs))
     print(f"{'FalCAuN now':12s}" + "".join(f"{FALCAUN[s][1]:>22s}" for s in specs))
     if "CC4" in specs:
