@@ -107,3 +107,17 @@ def test_the_interval_of_the_mean_simulations_holds_the_mean_narrows_with_runs_a
     with_failures = mean_interval([None, 100, None, 300])
     assert 100 <= with_failures[0] < with_failures[1] <= 300
     assert mean_interval([None, None]) is None and mean_interval([50]) == (50.0, 50.0)
+
+
+def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
+    """--jobs: the same seeds, the same simulations to falsify, in the same order."""
+    from types import SimpleNamespace
+
+    import bench_arch
+
+    tasks = [("auto", "CC3", seed, 40, True) for seed in (0, 1, 2)]
+    alone = SimpleNamespace(jobs=1, benchmark="arch-comp-cc", instance=2)
+    bench_arch.use_benchmark(alone.benchmark, alone.instance)
+    found_alone = [f for f, _, _ in bench_arch.run_all(tasks, alone)]
+    found_workers = [f for f, _, _ in bench_arch.run_all(tasks, SimpleNamespace(**{**vars(alone), "jobs": 2}))]
+    assert found_workers == found_alone and any(f is not None for f in found_alone)

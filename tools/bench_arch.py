@@ -25,8 +25,8 @@ model and CC1-CC5, CCx, input instance 1 or 2), 10 runs of up to 1,500 simulatio
 competition counts, with each mean's 95% interval (`mean_interval`), and prints FalCAuN's published
 figures beside ours.
 
-Usage: python tools/bench_arch.py [--runs 10] [--first-seed 0] [--samples 300] [--optimizers ...] [--specs gap close held]
-       python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--first-seed 0] [--samples 1500] [--specs CC1 ...]
+Usage: python tools/bench_arch.py [--runs 10] [--first-seed 0] [--jobs 1] [--samples 300] [--optimizers ...] [--specs gap close held]
+       python tools/bench_arch.py --benchmark arch-comp-cc [--instance 2] [--runs 10] [--first-seed 0] [--jobs 1] [--samples 1500] [--specs CC1 ...]
        python tools/bench_arch.py --benchmark arch-comp-cc --held 40000   (how rare falsifying inputs are)
        python tools/bench_arch.py --benchmark arch-comp-cc --held 20000 --recheck-dt 0.001   (and do they at 1 ms)
 """
@@ -34,7 +34,9 @@ Usage: python tools/bench_arch.py [--runs 10] [--first-seed 0] [--samples 300] [
 from __future__ import annotations
 
 import argparse
+import signal
 import statistics
+import sys
 import time
 
 import numpy as np
@@ -42,6 +44,7 @@ import arch_cc  # tools/ is on the path of a script run from it
 from bench_falsify import optimizer_of
 
 from d4sumo.search.optimizers import make_optimizer
+from d4sumo.sweep.workers import kill_pool, new_pool
 
 DT, DURATION, SEGMENTS = 0.1, 100.0, 20
 STEPS = int(round(DURATION / DT))
@@ -105,7 +108,34 @@ SPECS = ("gap", "close", "held")
 FALCAUN = {"CC1": ("10/10, 396", "198"), "CC2": ("10/10, 76", "38"), "CC3": ("10/10, 122", "61"),
            "CC4-2019": ("4/10, 1256", "10/10, 474"), "CC5": ("-", "-"), "CCx": ("-", "-")}
 FALCAUN["CC4"] = tuple(f"{figure}*" for figure in FALCAUN["CC4-2019"])
-ROBUSTNESS = None  # the benchmark's robustness(spec, inputs), set by main
+ROBUSTNESS = None  # the benchmark's robustness(spec, inputs), set by use_benchmark
+
+
+def use_benchmark(benchmark: str, instance: int) -> None:
+    """The benchmark `run` scores on, in this process (a worker of ``--jobs`` sets it again)."""
+    global ROBUSTNESS
+    if benchmark == "arch-comp-cc":
+        ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, instance))  # noqa: E731
+    else:
+        ROBUSTNESS = robustness
+
+
+def _run_on(benchmark: str, instance: int, *task) -> tuple[int | None, float, int]:
+    use_benchmark(benchmark, instance)
+    return run(*task)
+
+
+def run_all(tasks: list[tuple], args) -> list[tuple[int | None, float, int]]:
+    """`run` of each task (optimizer, spec, seed, samples, stop), in order; on ``--jobs`` worker processes
+    when more than one (they die with this one; Ctrl-C stops them at once)."""
+    if args.jobs == 1:
+        return [run(*task) for task in tasks]
+    pool = new_pool(args.jobs)
+    try:
+        futures = [pool.submit(_run_on, args.benchmark, args.instance, *task) for task in tasks]
+        return [future.result() for future in futures]
+    finally:
+        kill_pool(pool)
 
 
 def run(optimizer: str, spec: str, seed: int, samples: int, stop: bool) -> tuple[int | None, float, int]:
@@ -190,6 +220,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0, help="the runs' seeds are this and the next ones [0]")
+    parser.add_argument("--jobs", type=int, default=1, help="runs at once, on this many worker processes [1]; "
+                        "own times are then measured under their shared load")
     parser.add_argument("--samples", type=int, help="simulations per run [300; arch-comp-cc: 1500, the competition's]")
     parser.add_argument("--optimizers", nargs="+", default=["random", "halton", "ce", "ce-bucket", "cmaes", "bo", "auto", "turbo"])
     parser.add_argument("--specs", nargs="+", choices=(*SPECS, *arch_cc.SPECS, *arch_cc.EARLIER_SPECS))
@@ -203,15 +235,14 @@ def main() -> None:
     dt = args.recheck_dt
     if dt is not None and not (0 < dt <= arch_cc.DT and abs(arch_cc.SAMPLE_S / dt - round(arch_cc.SAMPLE_S / dt)) < 1e-9):
         parser.error(f"--recheck-dt: {dt} s given; allowed: a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s")
-    for flag, value, least in (("--runs", args.runs, 1), ("--first-seed", args.first_seed, 0), ("--samples", args.samples, 1),
+    for flag, value, least in (("--runs", args.runs, 1), ("--first-seed", args.first_seed, 0), ("--jobs", args.jobs, 1),
+                                ("--samples", args.samples, 1),
                                 ("--held", args.held, 1)):
         if value is not None and value < least:
             parser.error(f"{flag}: {value} given; allowed: an integer of at least {least}")
-    global ROBUSTNESS
+    use_benchmark(args.benchmark, args.instance)
     if args.benchmark == "arch-comp-cc":
-        ROBUSTNESS = lambda spec, x: arch_cc.robustness(spec, arch_cc.simulate(x, args.instance))  # noqa: E731
         return held_rates(args) if args.held else arch_comp(args)
-    ROBUSTNESS = robustness
     args.specs = args.specs or list(SPECS)
     args.samples = args.samples or 300
     t0 = time.perf_counter()
@@ -220,7 +251,8 @@ def main() -> None:
     falsified: dict[str, dict[str, str]] = {o: {} for o in args.optimizers}
     for spec in args.specs:
         for o in args.optimizers:
-            found = [run(o, spec, seed, args.samples, stop=True)[0] for seed in range(args.first_seed, args.first_seed + args.runs)]
+            seeds = range(args.first_seed, args.first_seed + args.runs)
+            found = [f for f, _, _ in run_all([(o, spec, seed, args.samples, True) for seed in seeds], args)]
             hits = [f for f in found if f is not None]
             median = f"{statistics.median(hits):.0f}" if hits else "-"
             falsified[o][spec] = f"{len(hits)}/{args.runs} ({median})"
@@ -250,7 +282,7 @@ def arch_comp(args) -> None:
     seeds = range(args.first_seed, args.first_seed + runs)
     for spec in specs:
         for o in args.optimizers:
-            results = [run(o, spec, seed, samples, stop=True) for seed in seeds]
+            results = run_all([(o, spec, seed, samples, True) for seed in seeds], args)
             hits = [f for f, _, _ in results if f is not None]
             own = sum(t for _, t, _ in results) / max(sum(n for _, _, n in results), 1)
             own_time.setdefault(o, []).append(own)
@@ -280,4 +312,8 @@ def arch_comp(args) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # as Ctrl-C: the workers stopped on the way out
+    try:
+        main()
+    except KeyboardInterrupt:
+        sys.exit("bench_arch: interrupted")

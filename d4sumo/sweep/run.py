@@ -8,13 +8,10 @@ import itertools
 import json
 import logging
 import os
-import signal
-import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable
 
@@ -27,6 +24,7 @@ from ..search.store import Store, StoreError
 from .dask_cluster import _dask_client, _run_dask, check_dask_address
 from .grid import Sweep
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
+from .workers import kill_pool, new_pool
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +165,7 @@ def _run_local(todo: list[_Active], store_results, workers: int) -> None:
     queue = _gangs(todo, workers)
     suspects: list[list[_Active]] = []
     running: dict[Future, list[_Active]] = {}
-    pool = _new_pool(workers)
+    pool = new_pool(workers)
     try:
         while queue or running or suspects:
             if suspects:
@@ -190,8 +188,8 @@ def _run_local(todo: list[_Active], store_results, workers: int) -> None:
                     else:
                         suspects[:0] = [gang, *running.values()]
                     running.clear()
-                    _kill_pool(pool)
-                    pool = _new_pool(workers)
+                    kill_pool(pool)
+                    pool = new_pool(workers)
                     break
                 if alone:
                     suspects.pop(0)
@@ -202,47 +200,7 @@ def _run_local(todo: list[_Active], store_results, workers: int) -> None:
                     gang = _share(gang, queue, len(running) + 1, workers)
                     running[pool.submit(run_chunks, _task(gang))] = gang
     finally:
-        _kill_pool(pool)
-
-
-def _new_pool(workers: int) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
-                               initargs=(os.getpid(),))
-
-
-def _kill_pool(pool: ProcessPoolExecutor) -> None:
-    """Stop a pool now: queued chunks are dropped and running ones killed (workers never write, so
-    nothing half-written is left); waits until the processes are gone."""
-    processes = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for p in processes:
-        if p.is_alive():
-            p.kill()
-    for p in processes:
-        p.join(timeout=5)
-
-
-def _worker_init(parent_pid: int) -> None:
-    """A local worker: Ctrl-C is the client's to handle, and the worker dies with the client."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:  # Linux: the kernel kills the worker when its parent dies, even by kill -9
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent_pid:  # the parent died before the line above took effect
-        os._exit(1)
-
-    def watch() -> None:  # everywhere else: notice within a second
-        while True:
-            time.sleep(1.0)
-            if os.getppid() != parent_pid:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+        kill_pool(pool)
 
 
 # --- Dask --------------------------------------------------------------------------------------

@@ -1,0 +1,53 @@
+"""Local worker processes that never outlive the process that started them: sweeps' workers, and the
+benchmark scripts' in tools/."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+
+
+def new_pool(workers: int) -> ProcessPoolExecutor:
+    """``workers`` local processes, spawned clean (libsumo keeps one simulation per process), that ignore
+    Ctrl-C (the caller's to handle) and die with the caller."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                               initargs=(os.getpid(),))
+
+
+def kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool now: queued tasks are dropped and running ones killed (workers leave writing to the
+    caller, so nothing half-written is left); waits until the processes are gone."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        if p.is_alive():
+            p.kill()
+    for p in processes:
+        p.join(timeout=5)
+
+
+def _worker_init(parent_pid: int) -> None:
+    """A local worker: Ctrl-C is the client's to handle, and the worker dies with the client."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:  # Linux: the kernel kills the worker when its parent dies, even by kill -9
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+    def watch() -> None:  # everywhere else: notice within a second
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
