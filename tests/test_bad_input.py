@@ -70,6 +70,18 @@ def test_gui_without_a_display_is_one_line_at_once(monkeypatch, capsys):
     assert "DISPLAY is not set" in check_one_line(capsys)
 
 
+def test_a_results_database_path_that_cannot_be_opened_names_the_field_the_value_and_what_is_allowed(tmp_path, capsys):
+    missing = tmp_path / "no" / "r.sqlite"
+    assert main(["falsify", "--samples", "2", "--db", str(missing)]) == 2
+    assert f"results database: got '{missing}'; allowed: a file in an existing folder ({missing.parent} does not exist)" \
+        in check_one_line(capsys)
+    assert main(["report", str(tmp_path / "none.sqlite"), "--out", str(tmp_path / "r")]) == 2
+    assert "allowed: a results database d4sumo wrote (no such file)" in check_one_line(capsys)
+    assert main(["export", str(tmp_path), "--out", str(tmp_path / "x.csv")]) == 2
+    assert "allowed: a database file (this is a folder)" in check_one_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing made
+
+
 def test_output_paths_that_cannot_be_written(tmp_path, capsys):
     assert main(["simulate", "--fcd", str(tmp_path)]) == 2
     assert "this is a folder" in check_one_line(capsys)

@@ -142,12 +142,13 @@ class Store:
         self.readonly = not create
         self.check_definition = check_definition
         self._lock_fd: int | None = None
+        said = f"results database: got '{self.path}'; allowed:"  # the field, the value, what is allowed
         if self.path.is_dir():
-            raise StoreError(f"{self.path}: is a folder, not a results database")
+            raise StoreError(f"{said} a database file (this is a folder)")
         if self.readonly and not self.path.is_file():
-            raise StoreError(f"{self.path}: no such results database")
+            raise StoreError(f"{said} a results database d4sumo wrote (no such file)")
         if not self.readonly and not self.path.parent.is_dir():
-            raise StoreError(f"{self.path}: the folder {self.path.parent} does not exist")
+            raise StoreError(f"{said} a file in an existing folder ({self.path.parent} does not exist)")
         try:
             if self.readonly:
                 uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"

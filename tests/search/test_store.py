@@ -62,7 +62,7 @@ def test_a_database_from_another_schema_version_is_refused_untouched(tmp_path):
 
 
 def test_opening_a_missing_database_for_reading_is_an_error(tmp_path):
-    with pytest.raises(StoreError, match="no such results database"):
+    with pytest.raises(StoreError, match=r"results database: got '.*nope.sqlite'; allowed: a results database d4sumo wrote \(no such file\)"):
         Store(tmp_path / "nope.sqlite", create=False)
     assert not (tmp_path / "nope.sqlite").exists()
 
