@@ -121,3 +121,19 @@ def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
     found_alone = [f for f, _, _ in bench_arch.run_all(tasks, alone)]
     found_workers = [f for f, _, _ in bench_arch.run_all(tasks, SimpleNamespace(**{**vars(alone), "jobs": 2}))]
     assert found_workers == found_alone and any(f is not None for f in found_alone)
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--optimizers", "bayes"], "--optimizers: 'bayes': optimizer: got 'bayes'; allowed: one of bo,"),
+    (["--optimizers", "bo:xi"], "--optimizers: got 'bo:xi'; allowed: an optimiser's name, or name:key=value"),
+    (["--benchmark", "arch-comp-cc", "--optimizers", "auto:stall=-3"], "search.auto.stall: got -3; allowed:"),
+    (["--runs", "0"], "--runs: got 0; allowed: a number of at least 1"),
+])
+def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said):
+    """A misspelt optimiser ran the benchmark's first simulation, then ended in a traceback."""
+    import subprocess
+
+    tools = Path(__file__).resolve().parent.parent / "tools"
+    done = subprocess.run([sys.executable, str(tools / "bench_arch.py"), *argv], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr

@@ -33,7 +33,6 @@ Usage: python tools/bench_arch.py [--runs 10] [--first-seed 0] [--jobs 1] [--sam
 
 from __future__ import annotations
 
-import argparse
 import signal
 import statistics
 import sys
@@ -41,10 +40,10 @@ import time
 
 import numpy as np
 import arch_cc  # tools/ is on the path of a script run from it
-from bench_falsify import optimizer_of
 
 from d4sumo.search.optimizers import make_optimizer
 from d4sumo.sweep.workers import kill_pool, new_pool
+from toolargs import Parser, optimizer_of
 
 DT, DURATION, SEGMENTS = 0.1, 100.0, 20
 STEPS = int(round(DURATION / DT))
@@ -217,7 +216,7 @@ def sumo_episode_seconds(repeats: int = 20) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0, help="the runs' seeds are this and the next ones [0]")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once, on this many worker processes [1]; "
@@ -234,12 +233,10 @@ def main() -> None:
     args = parser.parse_args()
     dt = args.recheck_dt
     if dt is not None and not (0 < dt <= arch_cc.DT and abs(arch_cc.SAMPLE_S / dt - round(arch_cc.SAMPLE_S / dt)) < 1e-9):
-        parser.error(f"--recheck-dt: {dt} s given; allowed: a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s")
-    for flag, value, least in (("--runs", args.runs, 1), ("--first-seed", args.first_seed, 0), ("--jobs", args.jobs, 1),
-                                ("--samples", args.samples, 1),
-                                ("--held", args.held, 1)):
-        if value is not None and value < least:
-            parser.error(f"{flag}: {value} given; allowed: an integer of at least {least}")
+        parser.error(f"--recheck-dt: got {dt} s; allowed: a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s")
+    parser.check_at_least(runs=(args.runs, 1), first_seed=(args.first_seed, 0), jobs=(args.jobs, 1),
+                          samples=(args.samples, 1), held=(args.held, 1))
+    parser.check_optimizers(args.optimizers)
     use_benchmark(args.benchmark, args.instance)
     if args.benchmark == "arch-comp-cc":
         return held_rates(args) if args.held else arch_comp(args)

@@ -13,7 +13,6 @@ The last line is the ratio of the first optimiser's campaigns on the paper's def
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import time
@@ -22,6 +21,7 @@ from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
+from toolargs import Parser
 
 
 def timed(campaign: Campaign, evaluator: Evaluator, batch: int) -> tuple[float, list]:
@@ -31,13 +31,15 @@ def timed(campaign: Campaign, evaluator: Evaluator, batch: int) -> tuple[float, 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--batch", type=int, default=DEFAULT_BATCH)
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
     args = parser.parse_args()
+    parser.check_at_least(samples=(args.samples, 1), repeats=(args.repeats, 1), batch=(args.batch, 1))
+    parser.check_optimizers(args.optimizers)
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core, both ways
     except (AttributeError, OSError):

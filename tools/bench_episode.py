@@ -11,7 +11,6 @@ Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems s
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 
@@ -22,6 +21,7 @@ from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_episode, simulate
 from d4sumo.engine.sumo import load_platoon, sumo_command
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from toolargs import Parser
 
 
 def bare(config: EpisodeConfig, road) -> float:
@@ -43,7 +43,7 @@ def episode(config: EpisodeConfig, road, attack_u: np.ndarray) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--followers", type=int, default=3)
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])

@@ -17,7 +17,6 @@ An optimiser may carry options: --optimizers bo bo:batch_size=5 ce:batch_size=20
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import statistics
 import time
@@ -29,6 +28,7 @@ from d4sumo.engine.simulation import simulate
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.optimizers import Optimizer
 from d4sumo.search.runner import Evaluator, run_campaign
+from toolargs import Parser, optimizer_of
 
 
 class SkoptDefaults(Optimizer):
@@ -126,12 +126,6 @@ def timed_optimizer():
         campaign_module.make_optimizer = real
 
 
-def optimizer_of(spec: str) -> tuple[str, dict]:
-    """``name`` or ``name:key=value,key=value``: an optimiser and its options."""
-    name, _, options = spec.partition(":")
-    return name, {k: int(v) if v.lstrip("-").isdigit() else float(v) for k, v in (o.split("=") for o in options.split(",") if o)}
-
-
 def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:
     from d4sumo.model.config import EpisodeConfig
     from d4sumo.results.analysis import distinct_count
@@ -175,12 +169,14 @@ def effectiveness(seeds: int, samples: int, optimizers: list[str]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--samples", type=int, default=100)
     parser.add_argument("--skopt-defaults", action="store_true")
     parser.add_argument("--optimizers", nargs="+", default=["bo", "turbo", "ce", "ce-bucket", "cmaes", "random"])
     args = parser.parse_args()
+    parser.check_at_least(seeds=(args.seeds, 1), samples=(args.samples, 1))
+    parser.check_optimizers(args.optimizers)
     print("default scenario: highway_4lane, 3 followers, setpoint 7 m, 25 m/s, rest, knots (9), 0.05 s steps")
     rtamt_ratio()
     bo_overhead(args.samples, args.skopt_defaults)

@@ -15,7 +15,6 @@ search.ce.noise_fraction=0`) with the largest worker count, and prints the speed
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 import tomllib
@@ -26,6 +25,7 @@ from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import read_toml
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
+from toolargs import Parser
 
 HERE = Path(__file__).resolve().parent.parent
 
@@ -43,7 +43,7 @@ def load(path: str, overrides: dict) -> Sweep:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("sweeps", nargs="*", default=[str(HERE / "examples" / "sweeps" / "small.toml")])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--batch", type=int, nargs="+", default=[DEFAULT_BATCH])

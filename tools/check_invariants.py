@@ -32,7 +32,6 @@ non-zero.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import tempfile
@@ -55,6 +54,7 @@ from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
 from d4sumo.search.spec import psi_robustness
 from d4sumo.search.store import Store
+from toolargs import Parser
 
 FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 decimals
 #: the roads drawn from: the shipped 4-lane highway (one edge), and roads of several edges: a speed
@@ -270,7 +270,7 @@ def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, 
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(__doc__.splitlines()[0])
     parser.add_argument("n", type=int, nargs="?", default=2000, help="episodes [2000]")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch", type=int, default=8,

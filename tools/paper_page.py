@@ -17,7 +17,6 @@ are typed in from its LaTeX source (table and line named).
 
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
 import importlib.metadata
@@ -37,6 +36,7 @@ from d4sumo.results.figures import heatmap_columns, heatmap_panels, heatmaps
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
+from toolargs import Parser
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -342,7 +342,7 @@ def coast_table(coasting: dict) -> list[str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--runs", type=Path, default=Path("paper-runs"), help="folder of the sweeps' databases [paper-runs]")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()

@@ -12,7 +12,6 @@ replayed through SUMO into a time-space diagram under docs/systems/.
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import importlib.metadata
 import re
@@ -27,6 +26,7 @@ from d4sumo.engine.simulation import simulate
 from d4sumo.results.analysis import count_noun, group, load_records, most_severe, table_systems
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.sweep import Sweep, run_sweep
+from toolargs import Parser
 
 ROOT = Path(__file__).resolve().parent.parent
 SWEEP = ROOT / "examples" / "sweeps" / "systems.toml"
@@ -61,7 +61,7 @@ def baseline(sweep: Sweep) -> dict[str, list[str]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(__doc__)
     parser.add_argument("--db", type=Path, help="a database of examples/sweeps/systems.toml (else the sweep runs)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
