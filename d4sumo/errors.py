@@ -12,6 +12,11 @@ class D4sumoError(Exception):
     """Base class for every error d4sumo reports to its user."""
 
 
+def refusal(field: str, given: object, allowed: str) -> str:
+    """The one line that refuses a value: which field, what was given, what is allowed."""
+    return f"{field}: got {given!r}; allowed: {allowed}"
+
+
 class ConfigError(D4sumoError, ValueError):
     """A configuration value is invalid: says which field, what was given and what is allowed."""
 
@@ -19,7 +24,7 @@ class ConfigError(D4sumoError, ValueError):
         self.field = field
         self.given = given
         self.allowed = allowed
-        super().__init__(f"{field}: got {given!r}; allowed: {allowed}")
+        super().__init__(refusal(field, given, allowed))
 
 
 class SumoError(D4sumoError):

@@ -104,9 +104,10 @@ def test_the_interval_of_the_mean_simulations_holds_the_mean_narrows_with_runs_a
     forty_low, forty_high = mean_interval(ten * 4)
     assert low < forty_low < forty_high < high
     # failed runs count in the resampling, not in the mean (ARCH-COMP's mean is over the falsified runs)
-    with_failures = mean_interval([None, 100, None, 300])
+    with_failures = mean_interval([None, 100, None, 300, 200])
     assert 100 <= with_failures[0] < with_failures[1] <= 300
-    assert mean_interval([None, None]) is None and mean_interval([50]) == (50.0, 50.0)
+    # under three falsified runs, none: one run's mean would print as an interval of no width
+    assert mean_interval([None, None]) is None and mean_interval([None] * 9 + [1200]) is None
 
 
 def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
@@ -115,19 +116,24 @@ def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
 
     import bench_arch
 
-    tasks = [("auto", "CC3", seed, 40, True) for seed in (0, 1, 2)]
-    alone = SimpleNamespace(jobs=1, benchmark="arch-comp-cc", instance=2)
+    alone = SimpleNamespace(jobs=1, benchmark="arch-comp-cc", instance=2, first_seed=1, runs=3, optimizers=["auto", "random"])
     bench_arch.use_benchmark(alone.benchmark, alone.instance)
-    found_alone = [f for f, _, _ in bench_arch.run_all(tasks, alone)]
-    found_workers = [f for f, _, _ in bench_arch.run_all(tasks, SimpleNamespace(**{**vars(alone), "jobs": 2}))]
-    assert found_workers == found_alone and any(f is not None for f in found_alone)
+    found_alone = [(spec, o, [f for f, _, _ in r]) for spec, o, r in bench_arch.runs_by_pair(alone, ["CC3", "CC1"], 40)]
+    on_workers = SimpleNamespace(**{**vars(alone), "jobs": 2})
+    found_workers = [(spec, o, [f for f, _, _ in r]) for spec, o, r in bench_arch.runs_by_pair(on_workers, ["CC3", "CC1"], 40)]
+    assert found_workers == found_alone and [pair[:2] for pair in found_alone] == [
+        ("CC3", "auto"), ("CC3", "random"), ("CC1", "auto"), ("CC1", "random")]
+    assert any(f is not None for _, _, found in found_alone for f in found)
 
 
 @pytest.mark.parametrize("argv, said", [
-    (["--optimizers", "bayes"], "--optimizers: 'bayes': optimizer: got 'bayes'; allowed: one of bo,"),
+    (["--optimizers", "bayes"], "--optimizers: 'bayes': search.optimizer: got 'bayes'; allowed: one of bo,"),
     (["--optimizers", "bo:xi"], "--optimizers: got 'bo:xi'; allowed: an optimiser's name, or name:key=value"),
+    (["--optimizers", "bo:budget=3"], "search.bo.budget: got 3; allowed: a key of [search.bo]"),
     (["--benchmark", "arch-comp-cc", "--optimizers", "auto:stall=-3"], "search.auto.stall: got -3; allowed:"),
-    (["--runs", "0"], "--runs: got 0; allowed: a number of at least 1"),
+    (["--runs", "0"], "--runs: got 0; allowed: a whole number of at least 1"),
+    (["--specs", "CC1"], "--specs: got 'CC1'; allowed: with --benchmark plateaus, one of gap, close, held"),
+    (["--benchmark", "arch-comp-cc", "--held", "10", "--jobs", "2"], "--jobs: got 2; allowed: 1 with --held"),
 ])
 def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said):
     """A misspelt optimiser ran the benchmark's first simulation, then ended in a traceback."""
@@ -137,3 +143,43 @@ def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said):
     done = subprocess.run([sys.executable, str(tools / "bench_arch.py"), *argv], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
+
+
+def _children(pid: int) -> set[int]:
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.add(int(stat.parent.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc for the worker processes")
+@pytest.mark.parametrize("sig, code", [(2, 130), (15, 143)])  # SIGINT (Ctrl-C), SIGTERM
+def test_bench_arch_jobs_stop_with_it_on_ctrl_c_and_sigterm(sig, code):
+    import os
+    import subprocess
+    import time
+
+    tools = Path(__file__).resolve().parent.parent / "tools"
+    p = subprocess.Popen([sys.executable, str(tools / "bench_arch.py"), "--benchmark", "arch-comp-cc", "--specs", "CC4",
+                          "--optimizers", "auto", "--runs", "6", "--jobs", "2"], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while len(workers := _children(p.pid)) < 2 and time.monotonic() < deadline:  # the pool's workers (and tracker)
+            time.sleep(0.2)
+        assert len(workers) >= 2
+        time.sleep(1.0)  # the runs under way
+        os.kill(p.pid, sig)
+        _, err = p.communicate(timeout=20)
+    finally:
+        p.kill()
+    assert p.returncode == code and "Traceback" not in err
+    deadline = time.monotonic() + 5
+    while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(Path(f"/proc/{w}").exists() for w in workers)

@@ -21,7 +21,7 @@ from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 
 def timed(campaign: Campaign, evaluator: Evaluator, batch: int) -> tuple[float, list]:
@@ -38,7 +38,7 @@ def main() -> None:
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
     args = parser.parse_args()
-    parser.check_at_least(samples=(args.samples, 1), repeats=(args.repeats, 1), batch=(args.batch, 1))
+    parser.check_at_least({"--samples": (args.samples, 1), "--repeats": (args.repeats, 1), "--batch": (args.batch, 1)})
     parser.check_optimizers(args.optimizers)
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core, both ways
@@ -67,4 +67,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -21,7 +21,7 @@ from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_episode, simulate
 from d4sumo.engine.sumo import load_platoon, sumo_command
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 
 def bare(config: EpisodeConfig, road) -> float:
@@ -48,6 +48,7 @@ def main() -> None:
     parser.add_argument("--followers", type=int, default=3)
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
     args = parser.parse_args()
+    parser.check_at_least({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
     configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
     road = build_road(configs[0].network)
     attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length
@@ -71,4 +72,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

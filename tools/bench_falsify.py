@@ -28,7 +28,7 @@ from d4sumo.engine.simulation import simulate
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.optimizers import Optimizer
 from d4sumo.search.runner import Evaluator, run_campaign
-from toolargs import Parser, optimizer_of
+from toolargs import Parser, optimizer_of, run_main
 
 
 class SkoptDefaults(Optimizer):
@@ -175,7 +175,7 @@ def main() -> None:
     parser.add_argument("--skopt-defaults", action="store_true")
     parser.add_argument("--optimizers", nargs="+", default=["bo", "turbo", "ce", "ce-bucket", "cmaes", "random"])
     args = parser.parse_args()
-    parser.check_at_least(seeds=(args.seeds, 1), samples=(args.samples, 1))
+    parser.check_at_least({"--seeds": (args.seeds, 1), "--samples": (args.samples, 1)})
     parser.check_optimizers(args.optimizers)
     print("default scenario: highway_4lane, 3 followers, setpoint 7 m, 25 m/s, rest, knots (9), 0.05 s steps")
     rtamt_ratio()
@@ -184,4 +184,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

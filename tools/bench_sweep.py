@@ -25,7 +25,7 @@ from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import read_toml
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 HERE = Path(__file__).resolve().parent.parent
 
@@ -51,6 +51,7 @@ def main() -> None:
                         help="change a fixed value of every sweep (TOML value), e.g. search.bo.batch_size=5")
     parser.add_argument("--baseline", action="store_true", help="first run the sweeps as d4sumo 0.2 did, and compare")
     args = parser.parse_args()
+    parser.check_at_least({"--workers": (min(args.workers), 1), "--batch": (min(args.batch), 1)})
     overrides = {k: tomllib.loads(f"v = {v}")["v"] for k, v in (item.split("=", 1) for item in args.set)}
     sweeps = [load(path, overrides) for path in args.sweeps]
     print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))
@@ -92,4 +93,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -277,6 +277,7 @@ def main(argv=None) -> int:
                         help="play each episode also in a batch of K (more than engine.loop.DETACH_AT, so that the "
                              "arrays command it) [8]; 0: not")
     args = parser.parse_args(argv)
+    parser.check_at_least({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0)})
     rng = np.random.default_rng(args.seed)
     ROADS.append(netgenerate_grid())
     roads = {name: build_road(name, route=ROUTES.get(name, ())) for name in ROADS}

@@ -36,7 +36,7 @@ from d4sumo.results.figures import heatmap_columns, heatmap_panels, heatmaps
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -346,6 +346,7 @@ def main() -> None:
     parser.add_argument("--runs", type=Path, default=Path("paper-runs"), help="folder of the sweeps' databases [paper-runs]")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
+    parser.check_at_least({"--workers": (args.workers, 1)})
     walls = run_all(args.runs, args.workers)
     data = {name: load_records(dbs_of(args.runs, name)) for name in SWEEPS}
     par, non = data["parametric"], data["nonparametric"]
@@ -512,4 +513,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

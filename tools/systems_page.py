@@ -26,7 +26,7 @@ from d4sumo.engine.simulation import simulate
 from d4sumo.results.analysis import count_noun, group, load_records, most_severe, table_systems
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.sweep import Sweep, run_sweep
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 ROOT = Path(__file__).resolve().parent.parent
 SWEEP = ROOT / "examples" / "sweeps" / "systems.toml"
@@ -65,6 +65,7 @@ def main() -> None:
     parser.add_argument("--db", type=Path, help="a database of examples/sweeps/systems.toml (else the sweep runs)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
+    parser.check_at_least({"--workers": (args.workers, 1)})
     sweep = Sweep.load(SWEEP)
     if args.db is not None:
         write_page(sweep, args.db, None, args.workers)
@@ -170,4 +171,4 @@ def write_page(sweep: Sweep, db: Path, wall: float | None, workers: int) -> None
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

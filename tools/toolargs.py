@@ -1,14 +1,18 @@
-"""What the scripts in tools/ share on their command lines: a usage error is one line and exit 2 (as
-d4sumo's own), and optimiser specs (``name`` or ``name:key=value,...``) are checked before any run."""
+"""What the scripts in tools/ share on their command lines, as d4sumo's own: a usage error or a refused
+value is one line and exit 2 (`Parser`, `run_main`), Ctrl-C exits 130 and SIGTERM 143 by the same way
+out (worker pools stopped in ``finally``); optimiser specs (``name`` or ``name:key=value,...``) are checked
+before any run."""
 
 from __future__ import annotations
 
 import argparse
+import signal
+import sys
+from pathlib import Path
+from typing import Callable
 
-import numpy as np
-
-from d4sumo.errors import ConfigError
-from d4sumo.search.optimizers import make_optimizer
+from d4sumo.errors import ConfigError, D4sumoError, refusal
+from d4sumo.search.optimizers import resolve_options
 
 SPEC_FORM = "an optimiser's name, or name:key=value,key=value with its options (numbers)"
 
@@ -22,22 +26,38 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
 
-    def check_at_least(self, **least: tuple[int | float | None, int | float]) -> None:
-        """``flag=(value, least)`` for each flag: a value under its least is refused (None: not given)."""
+    def check_at_least(self, least: dict[str, tuple[int | None, int]]) -> None:
+        """``{flag: (value, least)}`` for whole-number flags: a value under its least is refused (None: not given)."""
         for flag, (value, low) in least.items():
             if value is not None and value < low:
-                self.error(f"--{flag.replace('_', '-')}: got {value}; allowed: a number of at least {low}")
+                self.error(refusal(flag, value, f"a whole number of at least {low}"))
 
     def check_optimizers(self, specs: list[str]) -> None:
         """Every optimiser spec names an optimiser and options it takes, each within its range."""
         for spec in specs:
             try:
-                name, options = optimizer_of(spec)
-                make_optimizer(name, np.zeros(1), np.ones(1), budget=1, rng=np.random.default_rng(0), options=options)
+                resolve_options(*optimizer_of(spec))
             except ConfigError as e:
                 self.error(f"--optimizers: {spec!r}: {e}")
             except ValueError:
-                self.error(f"--optimizers: got {spec!r}; allowed: {SPEC_FORM}")
+                self.error(refusal("--optimizers", spec, SPEC_FORM))
+
+
+def run_main(main: Callable[[], None]) -> None:
+    """A script's ``main``: d4sumo's refusals in one line with exit 2, Ctrl-C 130, SIGTERM 143."""
+    def terminate(*_):
+        raise SystemExit(143)  # unwinds like Ctrl-C: worker pools are stopped on the way out
+
+    signal.signal(signal.SIGTERM, terminate)
+    script = Path(sys.argv[0]).name
+    try:
+        main()
+    except D4sumoError as e:
+        print(f"{script}: error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        print(f"{script}: interrupted", file=sys.stderr)
+        sys.exit(130)
 
 
 def optimizer_of(spec: str) -> tuple[str, dict]:

@@ -27,7 +27,7 @@ from typing import Any, Callable, Iterator
 from urllib.parse import quote
 
 from .. import __version__
-from ..errors import D4sumoError
+from ..errors import D4sumoError, refusal
 
 APP_ID = "d4sumo"
 SCHEMA_VERSION = 2  # 2: collisions are any overlap, actuator without wind-up; no WAL journal
@@ -142,13 +142,13 @@ class Store:
         self.readonly = not create
         self.check_definition = check_definition
         self._lock_fd: int | None = None
-        said = f"results database: got '{self.path}'; allowed:"  # the field, the value, what is allowed
         if self.path.is_dir():
-            raise StoreError(f"{said} a database file (this is a folder)")
+            raise StoreError(refusal("results database", str(self.path), "a database file (this is a folder)"))
         if self.readonly and not self.path.is_file():
-            raise StoreError(f"{said} a results database d4sumo wrote (no such file)")
+            raise StoreError(refusal("results database", str(self.path), "a results database d4sumo wrote (no such file)"))
         if not self.readonly and not self.path.parent.is_dir():
-            raise StoreError(f"{said} a file in an existing folder ({self.path.parent} does not exist)")
+            raise StoreError(refusal("results database", str(self.path),
+                                     f"a file in an existing folder ({self.path.parent} does not exist)"))
         try:
             if self.readonly:
                 uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"
