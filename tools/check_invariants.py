@@ -54,7 +54,7 @@ from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
 from d4sumo.search.spec import psi_robustness
 from d4sumo.search.store import Store
-from toolargs import Parser
+from toolargs import Parser, run_main
 
 FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 decimals
 #: the roads drawn from: the shipped 4-lane highway (one edge), and roads of several edges: a speed
@@ -314,4 +314,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

@@ -43,21 +43,23 @@ class Parser(argparse.ArgumentParser):
                 self.error(refusal("--optimizers", spec, SPEC_FORM))
 
 
-def run_main(main: Callable[[], None]) -> None:
-    """A script's ``main``: d4sumo's refusals in one line with exit 2, Ctrl-C 130, SIGTERM 143."""
+def run_main(main: Callable[[], int | None]) -> None:
+    """A script's ``main``, its return value the exit code (None: 0): d4sumo's refusals in one line with
+    exit 2, Ctrl-C 130, SIGTERM 143."""
     def terminate(*_):
         raise SystemExit(143)  # unwinds like Ctrl-C: worker pools are stopped on the way out
 
     signal.signal(signal.SIGTERM, terminate)
     script = Path(sys.argv[0]).name
     try:
-        main()
+        code = main()
     except D4sumoError as e:
         print(f"{script}: error: {e}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
         print(f"{script}: interrupted", file=sys.stderr)
         sys.exit(130)
+    sys.exit(code)
 
 
 def optimizer_of(spec: str) -> tuple[str, dict]:
