@@ -14,6 +14,14 @@ SUCCESS_KNOTS = [0.46, -0.65, 0.73, 0.08, -0.4, -0.15, -0.94, -0.75, 0.34]
 ATTACKER_CRASH_KNOTS = [-1, 1, 1, -1, 1, -1, -1, 1, -1]
 
 
+def sigint_at_default() -> None:
+    """A child's ``preexec_fn``: Ctrl-C at its default. A shell running the tests in the background hands its
+    children SIGINT ignored, and a process started so never sees a Ctrl-C sent to it."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
     return make_attack("knots").signal(values, np.arange(config.steps) * config.step_s)
 

@@ -10,6 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import arch_cc  # noqa: E402
+from conftest import sigint_at_default  # noqa: E402
 
 
 def test_with_no_pedal_nobody_moves_and_each_specification_scores_the_standing_gaps():
@@ -161,13 +162,15 @@ def _children(pid: int) -> set[int]:
 @pytest.mark.parametrize("sig, code", [(2, 130), (15, 143)])  # SIGINT (Ctrl-C), SIGTERM
 def test_bench_arch_jobs_stop_with_it_on_ctrl_c_and_sigterm(sig, code):
     import os
+    import signal
     import subprocess
     import time
 
     tools = Path(__file__).resolve().parent.parent / "tools"
     p = subprocess.Popen([sys.executable, str(tools / "bench_arch.py"), "--benchmark", "arch-comp-cc", "--specs", "CC4",
                           "--optimizers", "auto", "--runs", "6", "--jobs", "2"], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True)
+                         stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONFAULTHANDLER": "1"},
+                         preexec_fn=sigint_at_default)  # regression: under a background shell it ignored Ctrl-C
     try:
         deadline = time.monotonic() + 30
         while len(workers := _children(p.pid)) < 2 and time.monotonic() < deadline:  # the pool's workers (and tracker)
@@ -175,7 +178,11 @@ def test_bench_arch_jobs_stop_with_it_on_ctrl_c_and_sigterm(sig, code):
         assert len(workers) >= 2
         time.sleep(1.0)  # the runs under way
         os.kill(p.pid, sig)
-        _, err = p.communicate(timeout=20)
+        try:
+            _, err = p.communicate(timeout=20)
+        except subprocess.TimeoutExpired:  # show where it hangs: faulthandler prints every thread's stack
+            p.send_signal(signal.SIGABRT)
+            pytest.fail(f"no exit 20 s after signal {sig}:\n{p.communicate(timeout=20)[1]}")
     finally:
         p.kill()
     assert p.returncode == code and "Traceback" not in err

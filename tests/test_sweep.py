@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from conftest import sigint_at_default
 from d4sumo.cli import main
 from d4sumo.errors import ConfigError
 from d4sumo.search.store import Store, StoreError
@@ -280,10 +281,8 @@ def count_samples(db):
 
 def start_sweep(path, db, *extra):
     cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "2", "--quiet", *extra]
-    # SIGINT at its default: a shell running the tests in the background hands its children SIGINT ignored
-    restore = lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)  # noqa: E731
     return cmd, subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                 preexec_fn=restore)
+                                 preexec_fn=sigint_at_default)
 
 
 def wait_for_samples(db, n, timeout=90):
@@ -492,6 +491,44 @@ def test_a_campaign_that_kills_its_worker_is_found_alone_and_named(tmp_path):
         counts = {cid: store.count_samples(cid) for cid in setpoints}
     assert setpoints[named] == 9.0 and counts[named] == 0
     assert all(n in (0, 6) for n in counts.values())  # whatever else ran was stored whole
+
+
+@pytest.mark.sumo
+def test_a_worker_that_dies_between_two_submissions_loses_nothing(tmp_path, monkeypatch):
+    """Regression: when a worker died after the sweep last looked at its pool, the next submission raised
+    BrokenProcessPool out of the sweep, a traceback. The tasks in flight now run again, as on any death."""
+    from d4sumo.sweep import run as sweep_run
+    from d4sumo.sweep import workers as sweep_workers
+
+    grid = "[grid]\nsetpoint_m = [" + ", ".join(f"{s:.1f}" for s in range(3, 11)) + "]\n"  # 8 campaigns
+    text = TINY.replace("[grid]\nsetpoint_m = [5.0, 7.0]\n", grid).replace('start = ["rest", "steady"]', 'start = ["rest"]')
+    path = write(tmp_path, text)
+    pools = []
+
+    def new_pool(workers):  # the first pool's workers die just before its third submission
+        pool = sweep_workers.new_pool(workers)
+        pools.append(pool)
+        if len(pools) == 1:
+            submit, calls = pool.submit, []
+
+            def submit_after_a_death(*args, **kwargs):
+                calls.append(args)
+                if len(calls) == 3:
+                    for process in list(pool._processes.values()):
+                        process.kill()
+                    deadline = time.time() + 10
+                    while not pool._broken and time.time() < deadline:
+                        time.sleep(0.01)
+                return submit(*args, **kwargs)
+
+            pool.submit = submit_after_a_death
+        return pool
+
+    monkeypatch.setattr(sweep_run, "new_pool", new_pool)
+    run_sweep(Sweep.load(path), tmp_path / "r.sqlite", workers=2)
+    assert len(pools) >= 2  # the death was seen, and the sweep went on on a new pool
+    run_sweep(Sweep.load(path), tmp_path / "alone.sqlite", workers=1)
+    assert outcomes(tmp_path / "r.sqlite") == outcomes(tmp_path / "alone.sqlite")
 
 
 @pytest.mark.parametrize("earlier", ["", "[search.bo]\ninducing = 0\n"])  # bo now, and as 0.7.0 ran it

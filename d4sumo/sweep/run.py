@@ -166,15 +166,31 @@ def _run_local(todo: list[_Active], store_results, workers: int) -> None:
     suspects: list[list[_Active]] = []
     running: dict[Future, list[_Active]] = {}
     pool = new_pool(workers)
+
+    def submitted(gang: list[_Active]) -> bool:
+        """Whether ``gang`` is on the pool. Not when a worker died since the last wait: the tasks in flight
+        then fail with the pool (and run again); with none in flight, a new pool is made now."""
+        nonlocal pool
+        try:
+            running[pool.submit(run_chunks, _task(gang))] = gang
+            return True
+        except BrokenProcessPool:
+            if not running:
+                kill_pool(pool)
+                pool = new_pool(workers)
+            return False
+
     try:
         while queue or running or suspects:
             if suspects:
                 if not running:
-                    running[pool.submit(run_chunks, _task(suspects[0]))] = suspects[0]
+                    submitted(suspects[0])  # if refused, tried again on the next turn
             else:
                 while queue and len(running) < workers + 1:
                     gang = queue.pop(0)
-                    running[pool.submit(run_chunks, _task(gang))] = gang
+                    if not submitted(gang):
+                        queue.insert(0, gang)
+                        break
             finished, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
             for future in finished:
                 gang = running.pop(future)
@@ -198,7 +214,8 @@ def _run_local(todo: list[_Active], store_results, workers: int) -> None:
                     queue.insert(0, gang)
                 elif gang:
                     gang = _share(gang, queue, len(running) + 1, workers)
-                    running[pool.submit(run_chunks, _task(gang))] = gang
+                    if not submitted(gang):
+                        queue.insert(0, gang)
     finally:
         kill_pool(pool)
 
