@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import sigint_at_default
 from d4sumo.cli import main
 from d4sumo.search.optimizers import EARLIER_OPTIONS
 
@@ -243,7 +244,8 @@ def test_every_command_in_the_readme_and_the_guide_is_valid():
     """Each d4sumo command parses as shown; each tools/ script exists and has the flags shown."""
     import shlex
 
-    from d4sumo.cli import _join_negative_lists, build_parser
+    from d4sumo.cli import _join_negative_lists
+    from d4sumo.cli.parser import build_parser
 
     commands = documented_commands()
     assert len(commands) > 30 and {page for page, _ in commands} >= {"README.md", "campaigns.md", "sweeps.md", "roads.md"}
@@ -269,7 +271,7 @@ def test_every_command_in_the_readme_and_the_guide_is_valid():
 def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_documented(capsys):
     import re
 
-    from d4sumo.cli import build_parser
+    from d4sumo.cli.parser import build_parser
 
     parser = build_parser()
     known = set()
@@ -321,6 +323,24 @@ def test_a_resumed_campaigns_progress_bar_starts_at_what_is_stored_and_a_complet
     assert "0/5" not in err and "1/5" not in err
 
 
+def test_ctrl_c_while_the_libraries_load_is_one_line_and_exit_130():
+    """Regression: Ctrl-C in the first half second of any command (numpy, scipy, rtamt and SUMO's bindings
+    loading) ended in a traceback of the import."""
+    code = """
+import sys
+import d4sumo.cli
+assert "numpy" not in sys.modules, "d4sumo.cli loads the library at import"
+class Interrupt:  # a Ctrl-C that lands while the parser's imports load
+    def find_spec(self, name, path=None, target=None):
+        if name == "d4sumo.cli.parser":
+            raise KeyboardInterrupt
+sys.meta_path.insert(0, Interrupt())
+sys.exit(d4sumo.cli.main(["falsify"]))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stderr) == (130, "d4sumo: interrupted\n")
+
+
 @pytest.mark.sumo
 def test_ctrl_c_in_falsify_says_where_the_samples_are_and_how_to_resume(tmp_path):
     import os
@@ -330,9 +350,8 @@ def test_ctrl_c_in_falsify_says_where_the_samples_are_and_how_to_resume(tmp_path
 
     db = tmp_path / "r.sqlite"
     cmd = [sys.executable, "-m", "d4sumo.cli", "falsify", "--optimizer", "random", "--samples", "5000", "--db", str(db)]
-    restore = lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)  # noqa: E731 (a background shell ignores SIGINT)
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=restore)
+                            preexec_fn=sigint_at_default)
     deadline = time.time() + 60
     while time.time() < deadline:
         try:

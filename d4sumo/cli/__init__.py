@@ -14,9 +14,7 @@ import sys
 import threading
 from typing import Sequence
 
-from ..errors import ConfigError, D4sumoError
-from .common import EXIT_USAGE, FLAG_KEYS, LIST_OPTIONS
-from .parser import build_parser
+# The library (numpy, scipy, rtamt, SUMO's bindings: half a second) is imported in `main`, not here.
 
 
 class Terminated(KeyboardInterrupt):
@@ -29,6 +27,8 @@ def _on_sigterm(signum, frame) -> None:
 
 def _join_negative_lists(argv: list[str]) -> list[str]:
     """``--params -0.5,0.2,1`` as ``--params=-0.5,0.2,1``: argparse would take the list for an option."""
+    from .common import LIST_OPTIONS
+
     out = []
     i = 0
     while i < len(argv):
@@ -44,6 +44,19 @@ def _join_negative_lists(argv: list[str]) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _on_sigterm)
+    try:  # from the first import of the library on, so a Ctrl-C while it loads is one line too
+        return _run(argv)
+    except KeyboardInterrupt as exc:
+        if not isinstance(exc, Terminated) and not getattr(exc, "said", False):
+            print("d4sumo: interrupted", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    from ..errors import ConfigError, D4sumoError
+    from .common import EXIT_USAGE, FLAG_KEYS
+    from .parser import build_parser
+
     parser = build_parser()
     try:
         args = parser.parse_args(_join_negative_lists(list(sys.argv[1:] if argv is None else argv)))
@@ -78,7 +91,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
-    except KeyboardInterrupt as exc:
-        if not isinstance(exc, Terminated) and not getattr(exc, "said", False):
-            print("d4sumo: interrupted", file=sys.stderr)
-        return 143 if isinstance(exc, Terminated) else 130
