@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import tempfile
 import time
-import tomllib
 from pathlib import Path
 
 from d4sumo.inputs import with_overrides
 from d4sumo.model.batch import DEFAULT_BATCH
-from d4sumo.model.config import read_toml
+from d4sumo.model.config import read_toml, toml_value
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
 from toolargs import Parser, run_main
@@ -52,7 +51,7 @@ def main() -> None:
     parser.add_argument("--baseline", action="store_true", help="first run the sweeps as d4sumo 0.2 did, and compare")
     args = parser.parse_args()
     parser.check_at_least({"--workers": (min(args.workers), 1), "--batch": (min(args.batch), 1)})
-    overrides = {k: tomllib.loads(f"v = {v}")["v"] for k, v in (item.split("=", 1) for item in args.set)}
+    overrides = {k: toml_value(v) for k, v in (item.split("=", 1) for item in args.set)}
     sweeps = [load(path, overrides) for path in args.sweeps]
     print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))
     times, results = {}, {}

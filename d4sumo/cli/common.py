@@ -6,12 +6,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
 from ..engine.scenarios import MAX_COPIES
 from ..errors import ConfigError, D4sumoError
+from ..model.config import toml_value
 
 EXIT_USAGE = 2
 
@@ -42,14 +42,6 @@ FLAG_KEYS = {
 
 #: options whose value is a comma-separated list of numbers, which may start with a minus sign
 LIST_OPTIONS = ("--params", "--knots")
-
-
-def _parse_value(text: str) -> Any:
-    """A --set value as TOML would read it (number, bool, quoted string, list), else the bare string."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
 
 
 def _floats(option: str, text: str) -> list[float]:
@@ -95,7 +87,7 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError("--set", item, "TABLE.KEY=VALUE, e.g. scenario.setpoint_m=5")
-        flags[key.strip()] = _parse_value(value.strip())
+        flags[key.strip()] = toml_value(value.strip())
     return with_overrides(doc, flags), flags
 
 

@@ -8,10 +8,15 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import tomllib
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, published as tomli
+    import tomli as tomllib
 
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
@@ -368,6 +373,14 @@ def read_toml(path: str | Path, field: str = "--config") -> dict:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(field, str(p), f"valid TOML ({exc})") from None
+
+
+def toml_value(text: str) -> Any:
+    """A flag's value as TOML reads it (number, bool, quoted string, list), else the bare string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
 
 
 def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
