@@ -1,4 +1,4 @@
 """The road network variants shipped with d4sumo: one folder each, plain SUMO node/edge XML.
 
-Data only; read through `d4sumo.scenarios` (``d4sumo scenarios`` lists them).
+Data only, installed as ``d4sumo.sumo_scenarios``; read through `d4sumo.engine.scenarios` (``d4sumo scenarios`` lists them).
 """

@@ -37,9 +37,13 @@ def wheel(tmp_path_factory):
 
 
 def test_the_wheel_ships_every_scenario_variant(wheel):
+    """pyproject.toml lists the packages one by one (the variants are mapped into d4sumo): none may be missing."""
     names = zipfile.ZipFile(wheel).namelist()
     for variant in (p.name for p in (ROOT / "sumo_scenarios").iterdir() if p.is_dir() and not p.name.startswith("_")):
-        assert f"sumo_scenarios/{variant}/highway.nod.xml" in names and f"sumo_scenarios/{variant}/highway.edg.xml" in names
+        for data in ("highway.nod.xml", "highway.edg.xml", "README.md"):
+            assert f"d4sumo/sumo_scenarios/{variant}/{data}" in names
+    # Regression: the variants were installed as a top-level package of their own, `sumo_scenarios`.
+    assert {n.split("/")[0] for n in names if not n.startswith("d4sumo-")} == {"d4sumo"}
     modules = {str(p.relative_to(ROOT)) for p in (ROOT / "d4sumo").rglob("*.py")}
     assert len(modules) > 30 and modules <= set(names)  # every module of every subpackage
     assert not any(n.startswith("tests/") for n in names)
@@ -47,7 +51,7 @@ def test_the_wheel_ships_every_scenario_variant(wheel):
 
 @pytest.mark.sumo
 def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp_path):
-    """Regression: a non-editable install had no sumo_scenarios/, so every episode exited 2."""
+    """Regression: a non-editable install had no scenario variants, so every episode exited 2."""
     env_dir = tmp_path / "env"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True)
     python = env_dir / "bin" / "python"
@@ -60,7 +64,7 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     work.mkdir()
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "XDG_CACHE_HOME": str(tmp_path / "cache")}
     run = lambda *code: subprocess.run([str(python), *code], cwd=work, capture_output=True, text=True, env=env, timeout=300)
-    where = run("-c", "import d4sumo, sumo_scenarios; print(d4sumo.__file__); print(sumo_scenarios.__file__)")
+    where = run("-c", "import d4sumo.sumo_scenarios as s; print(s.__file__)")
     assert where.returncode == 0, where.stderr
     assert all(line.startswith(str(site)) for line in where.stdout.split()), where.stdout  # not the checkout
     listed = run("-m", "d4sumo.cli", "scenarios")

@@ -1,8 +1,8 @@
 """Road network variants: plain SUMO node/edge XML in ``sumo_scenarios/<name>/``, built with netconvert.
 
 A variant is a folder holding one ``*.nod.xml`` and one ``*.edg.xml`` that describe a straight one-way
-road (one edge, or a chain of edges). The shipped variants live in the ``sumo_scenarios`` package
-(installed with d4sumo); a user's own folder works the same way. The ``.net.xml`` is built on first use
+road (one edge, or a chain of edges). The shipped variants live in ``sumo_scenarios/``, installed with
+d4sumo inside its package; a user's own folder works the same way. The ``.net.xml`` is built on first use
 and cached under the user's cache folder, keyed by a hash of the inputs, so editing a variant rebuilds
 it. A `NetworkSource` carries a variant's XML itself, so a worker on another machine builds the same
 road without seeing the client's disk.
@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.resources
 import json
 import logging
 import os
@@ -26,8 +25,16 @@ from ..sumohome import sumo_binary
 
 log = logging.getLogger(__name__)
 
-#: The variants shipped with d4sumo: the ``sumo_scenarios`` package (a folder of data).
-SCENARIOS_DIR = Path(str(importlib.resources.files("sumo_scenarios")))
+def _shipped_variants() -> Path:
+    # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
+    # d4sumo/sumo_scenarios). Run from a checkout, or an editable install, they are the folder beside it.
+    package = Path(__file__).resolve().parent.parent
+    inside = package / "sumo_scenarios"
+    return inside if inside.is_dir() else package.parent / "sumo_scenarios"
+
+
+#: The variants shipped with d4sumo (a folder of data).
+SCENARIOS_DIR = _shipped_variants()
 
 
 @dataclass(frozen=True)
