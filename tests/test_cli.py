@@ -149,6 +149,33 @@ def test_falsify_then_export_and_replay_a_stored_sample(tmp_path, capsys):
 
 
 @pytest.mark.sumo
+@pytest.mark.parametrize("tamper, named", [
+    ("pair = 'v0-v1', time_s = 1.0", "collision"),
+    ("min_gaps = json_set(min_gaps, '$.\"v1-v2\"', 99.0)", "min_gaps"),
+    ("robustness = robustness + 1e-12", "robustness"),
+])
+def test_replay_compares_the_whole_stored_verdict_and_exits_1_when_it_differs(tmp_path, capsys, tamper, named):
+    """Regression: replay compared only the robustness and the outcome, and exited 0 even when it said
+    the sample differs: a stored collision record or minimum gap it did not reproduce passed unnoticed."""
+    import sqlite3
+
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--optimizer", "random", "--samples", "3", "--seed", "4", "--db", str(db), "--quiet"]) == 0
+    with sqlite3.connect(db) as con:
+        sample = con.execute("SELECT id FROM sample WHERE pair IS NOT NULL ORDER BY id LIMIT 1").fetchone()[0]
+    capsys.readouterr()
+    assert main(["replay", str(db), str(sample)]) == 0
+    assert "reproduces the stored sample exactly" in capsys.readouterr().out
+    with sqlite3.connect(db) as con:
+        con.execute(f"UPDATE sample SET {tamper} WHERE id = ?", (sample,))
+    assert main(["replay", str(db), str(sample), "--json"]) == 1
+    replay = json.loads(capsys.readouterr().out)
+    assert replay["reproduced"] is False and replay["differs"] == [named]
+    assert main(["replay", str(db), str(sample)]) == 1
+    assert f"differs from the stored sample: {named}: stored" in capsys.readouterr().out
+
+
+@pytest.mark.sumo
 def test_a_cut_in_campaign_is_stored_exported_replayed_and_plotted_by_lane(tmp_path, capsys):
     db = tmp_path / "r.sqlite"
     argv = ["falsify", "--maneuver", "cutin", "--set", "scenario.cutin_follower=2", "--start", "steady",

@@ -14,6 +14,8 @@ from ..errors import ConfigError, D4sumoError
 from ..model.config import toml_value
 
 EXIT_USAGE = 2
+#: a replay that does not reproduce its stored sample: a failed check, as a test runner's exit 1
+EXIT_DIFFERS = 1
 
 #: flag dest -> the document key it sets
 FLAG_KEYS = {

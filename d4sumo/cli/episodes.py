@@ -9,7 +9,7 @@ import sys
 from .. import __version__
 from ..errors import ConfigError, check_number
 from ..model.config import EpisodeConfig
-from .common import check_display, check_fcd_written, check_output_file, document
+from .common import EXIT_DIFFERS, check_display, check_fcd_written, check_output_file, document
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
@@ -74,14 +74,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
     check_fcd_written(fcd)
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
+    # the whole verdict, compared exactly: what was stored is what this episode gives
+    replayed = {"robustness": rho, "outcome": episode.outcome,
+                "collision": episode.first_collision.to_dict() if episode.first_collision else None,
+                "min_gaps": episode.min_gaps_m()}
+    stored = {"robustness": row.robustness, "outcome": row.outcome, "collision": row.collision, "min_gaps": row.min_gaps}
+    differs = [k for k in stored if stored[k] != replayed[k]]
     summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
-                   stored_robustness=row.robustness, stored_outcome=row.outcome,
-                   reproduced=(row.robustness == rho and row.outcome == episode.outcome))
+                   stored_robustness=row.robustness, stored_outcome=row.outcome, stored_collision=row.collision,
+                   reproduced=not differs, differs=differs)
     _report(summary, evaluator.road.name, args.json)
     if not args.json:
-        print("reproduces the stored sample exactly" if summary["reproduced"] else
-              f"differs from the stored sample (stored robustness {row.robustness}, outcome {row.outcome})")
-    return 0
+        print("reproduces the stored sample exactly" if not differs else
+              "differs from the stored sample: " + "; ".join(f"{k}: stored {stored[k]}, replayed {replayed[k]}" for k in differs))
+    return 0 if not differs else EXIT_DIFFERS
 
 
 def episode_plan(family, params, config: EpisodeConfig):

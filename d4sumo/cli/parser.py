@@ -144,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", type=float, help="only this target speed in m/s")
     p.set_defaults(func=cmd_plot)
 
-    p = sub.add_parser("replay", help="re-simulate one stored sample exactly (FCD, sumo-gui)")
+    p = sub.add_parser("replay", help="re-simulate one stored sample and check that it reproduces (exit 1 if not; FCD, sumo-gui)")
     p.add_argument("db", type=Path, help="results database")
     p.add_argument("sample", type=int, help="sample id (as printed by falsify and export)")
     p.add_argument("--fcd", type=Path, help="write SUMO's FCD output to this file")
