@@ -278,16 +278,19 @@ def test_a_full_device_is_reported_and_leaves_no_file(good_db, tmp_path, monkeyp
     assert list(tmp_path.iterdir()) == []  # no partial file, never "written"
 
 
-def test_an_fcd_file_cut_short_is_an_error(tmp_path):
-    from d4sumo.cli.common import check_fcd_written
-    from d4sumo.errors import D4sumoError
+def test_an_fcd_file_cut_short_is_an_error_and_leaves_nothing(tmp_path):
+    from d4sumo.engine.simulation import fcd_file
+    from d4sumo.errors import SumoError
 
     fcd = tmp_path / "f.xml"
-    fcd.write_text('<fcd-export>\n  <timestep time="0.00">\n')
-    with pytest.raises(D4sumoError, match="not written completely"):
-        check_fcd_written(fcd)
-    fcd.write_text('<fcd-export>\n</fcd-export>\n')
-    check_fcd_written(fcd)
+    fcd.write_text("kept")
+    with pytest.raises(SumoError, match="could not be written completely"):
+        with fcd_file(fcd) as part:  # what SUMO leaves on a full disk
+            part.write_text('<fcd-export>\n  <timestep time="0.00">\n')
+    assert [p.name for p in tmp_path.iterdir()] == ["f.xml"] and fcd.read_text() == "kept"
+    with fcd_file(fcd) as part:
+        part.write_text('<fcd-export>\n</fcd-export>\n')
+    assert [p.name for p in tmp_path.iterdir()] == ["f.xml"] and fcd.read_text().endswith("</fcd-export>\n")
 
 
 @pytest.mark.sumo

@@ -369,6 +369,28 @@ sys.exit(d4sumo.cli.main(["falsify"]))
 
 
 @pytest.mark.sumo
+@pytest.mark.parametrize("sig, code", [(2, 130), (15, 143)])
+def test_an_episode_stopped_midway_leaves_no_fcd_and_keeps_the_file_it_would_replace(tmp_path, sig, code):
+    """Regression: Ctrl-C or SIGTERM in `simulate --fcd` left the episode's first seconds in the file,
+    closed with </fcd-export> so that it looked whole, in place of the file that was there."""
+    import os
+    import time
+
+    fcd = tmp_path / "sim.xml"
+    fcd.write_text("an earlier episode")
+    proc = subprocess.Popen([sys.executable, "-m", "d4sumo.cli", "simulate", "--step", "0.001", "--duration", "120",
+                             "--fcd", str(fcd)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=sigint_at_default)
+    deadline = time.time() + 60
+    while not any(p.name.endswith(".part") and p.stat().st_size > 0 for p in tmp_path.iterdir()) and time.time() < deadline:
+        time.sleep(0.1)
+    os.kill(proc.pid, sig)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == code and "Traceback" not in err
+    assert [p.name for p in tmp_path.iterdir()] == ["sim.xml"] and fcd.read_text() == "an earlier episode"
+
+
+@pytest.mark.sumo
 def test_ctrl_c_in_falsify_says_where_the_samples_are_and_how_to_resume(tmp_path):
     import os
     import signal

@@ -115,20 +115,6 @@ def check_display(gui: bool) -> None:
         raise ConfigError("--gui", "no display", "a graphical session (DISPLAY is not set); use --fcd and `d4sumo plot` instead")
 
 
-def check_fcd_written(path: Path | None) -> None:
-    """SUMO does not fail when its output cannot be written (a full disk): check the file is whole."""
-    if path is None:
-        return
-    try:
-        with open(path, "rb") as fh:
-            fh.seek(max(0, path.stat().st_size - 200))
-            whole = b"</fcd-export>" in fh.read()
-    except OSError:
-        whole = False
-    if not whole:
-        raise D4sumoError(f"--fcd: {path} was not written completely (is the disk full?)")
-
-
 def check_batch(value: int) -> int:
     if not 1 <= value <= MAX_COPIES:
         raise ConfigError("--batch", value, f"a whole number of episodes in [1, {MAX_COPIES}]")

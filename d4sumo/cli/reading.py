@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 
 from ..errors import ConfigError, D4sumoError
 from .common import check_output_file
@@ -53,10 +54,13 @@ def cmd_report(args: argparse.Namespace) -> int:
             store.campaigns()
             for _ in store.iter_samples():
                 pass
-    try:  # a folder that can be made here (/proc's parent exists, yet nothing can be made in it)
-        (args.out / "fcd").mkdir(parents=True, exist_ok=True)
+    try:  # a folder that can be made here (/proc's parent exists, yet nothing can be made in it), tried away
+        with tempfile.TemporaryDirectory(dir=args.out.parent):
+            pass
     except OSError as exc:
         raise ConfigError("--out", str(args.out), f"a folder that can be created and written ({exc.strerror})") from None
+    if args.out.is_dir() and not os.access(args.out, os.W_OK):
+        raise ConfigError("--out", str(args.out), "a folder you may write (permission denied)")
     steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
     with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
         def progress(what: str) -> None:

@@ -9,9 +9,11 @@ first one: SUMO lets the cars drive through each other afterwards, so later data
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -85,11 +87,40 @@ def simulate(
     plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
     if plan.u.shape != (config.steps,):
         raise ValueError(f"attack signal has shape {plan.u.shape}, expected ({config.steps},)")
-    with open_world(config, road, [config], fcd_path=fcd_path, gui=gui, types_file=types_file) as world:
-        result = play(world, [config], [plan])[0]
-    if isinstance(result, Exception):
-        raise result
+    with fcd_file(fcd_path) as part:
+        with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
+            result = play(world, [config], [plan])[0]
+        if isinstance(result, Exception):
+            raise result
     return result
+
+
+@contextlib.contextmanager
+def fcd_file(path: str | Path | None) -> Iterator[Path | None]:
+    """Where SUMO writes an episode's FCD: a file beside ``path``, renamed to it once the episode ended and
+    SUMO closed it whole. An interrupted or failed episode leaves nothing, and a file already at ``path``
+    stays as it was; SUMO itself does not fail when it cannot write (a full disk), so the end is checked."""
+    if path is None:
+        yield None
+        return
+    path = Path(path)
+    part = path.with_name(f".{path.name}.{os.getpid()}.part")
+    try:
+        yield part
+        if not _ends_whole(part):
+            raise SumoError(f"the FCD output {path} could not be written completely (is the disk full?)")
+        os.replace(part, path)
+    finally:
+        part.unlink(missing_ok=True)
+
+
+def _ends_whole(fcd: Path) -> bool:
+    try:
+        with open(fcd, "rb") as fh:
+            fh.seek(max(0, fcd.stat().st_size - 200))
+            return b"</fcd-export>" in fh.read()
+    except OSError:
+        return False
 
 
 # --- a batch: many episodes side by side in one SUMO ---------------------------------------------

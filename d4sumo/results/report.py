@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import html
 import logging
+import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Callable, Sequence
@@ -35,7 +37,11 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
         definition = store.campaign(record.campaign_id).definition
     campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
     evaluator = Evaluator(campaign)
-    simulate(campaign.config, evaluator.plan(record.params), road=evaluator.road, fcd_path=fcd_path)
+    try:
+        plan = evaluator.plan(record.params)
+    except ConfigError as exc:  # a damaged database: say which sample of which
+        raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
+    simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd_path)
     return timespace.read_fcd(fcd_path)
 
 
@@ -129,11 +135,27 @@ def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample
 def build_report(
     dbs: Sequence[str | Path], out_dir: str | Path, *, severe: int = 3, progress: Callable[[str], None] | None = None
 ) -> Path:
-    """Write ``index.html`` and its figures into ``out_dir``; returns the HTML path."""
+    """Write ``index.html`` and its figures into ``out_dir``; returns the HTML path. The report is built in a
+    folder beside it and moved in at the end, the page last: a report refused, failed or interrupted midway
+    leaves ``out_dir`` as it was."""
     out = Path(out_dir)
     records = load_records(dbs)
-    (out / "fcd").mkdir(parents=True, exist_ok=True)
-    step = progress or (lambda what: log.info("%s", what))
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    try:
+        _write_report(records, dbs, staging, severe, progress or (lambda what: log.info("%s", what)))
+        for f in sorted(staging.rglob("*"), key=lambda f: f.name == "index.html"):
+            if f.is_file():
+                target = out / f.relative_to(staging)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(f, target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out / "index.html"
+
+
+def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, severe: int,
+                  step: Callable[[str], None]) -> None:
+    (out / "fcd").mkdir()
     parts: list[str] = []
     db_names = [str(db) for db in dbs]
 
@@ -233,9 +255,7 @@ def build_report(
         f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
-    index = out / "index.html"
-    index.write_text(page, encoding="utf-8")
-    return index
+    (out / "index.html").write_text(page, encoding="utf-8")
 
 
 def clusters_caption(c) -> str:

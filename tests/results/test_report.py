@@ -105,3 +105,32 @@ def test_the_report_writes_only_into_its_folder(report):
     written = {p.relative_to(index.parent).as_posix() for p in index.parent.rglob("*") if p.is_file()}
     linked = {ref for ref in page.images + page.links if _local(ref)} | {"index.html"}
     assert written == linked  # nothing the page does not show or link
+
+
+def test_the_report_leaves_nothing_beside_its_folder(report):
+    index, _, _ = report
+    assert [p.name for p in index.parent.parent.iterdir()] == ["out"]  # the folder it was built in is gone
+
+
+def test_a_report_refused_midway_keeps_the_earlier_report_and_leaves_no_part(report, small_db, tmp_path):
+    """Regression: a sample refused while the report replayed it (here, a stored attack out of its box)
+    left heatmaps.png, tables.txt and fcd/ in --out without index.html, over an earlier report."""
+    import shutil
+    import sqlite3
+
+    from d4sumo.errors import ConfigError
+    from d4sumo.results.report import build_report
+
+    earlier = tmp_path / "out"
+    shutil.copytree(report[0].parent, earlier)
+    before = {p.relative_to(earlier): p.read_bytes() for p in earlier.rglob("*") if p.is_file()}
+    bad = tmp_path / "bad.sqlite"
+    shutil.copy(small_db, bad)
+    with sqlite3.connect(bad) as con:  # the most severe success: the report replays it
+        worst = con.execute("SELECT id FROM sample WHERE outcome = 'success' ORDER BY speed_diff_kmh DESC LIMIT 1").fetchone()[0]
+        con.execute("UPDATE sample SET params = '[5, 5, 5, 5, 5, 5, 5, 5, 5]' WHERE id = ?", (worst,))
+    for out in (earlier, tmp_path / "new"):
+        with pytest.raises(ConfigError, match=f"{bad}: sample {worst}: attack parameters: m0"):
+            build_report([bad], out, severe=3)
+    assert {p.relative_to(earlier): p.read_bytes() for p in earlier.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.sqlite", "out"]  # no "new", no part
