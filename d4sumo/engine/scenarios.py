@@ -14,6 +14,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import math
 import os
 import subprocess
 import tempfile
@@ -398,6 +399,10 @@ def _describe(net_file: Path) -> dict:
             raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
                               "a straight chain of edges without branches, or a scenario.route")
         chain.append(nxt[0])
+    for lane in (lane for e in chain for lane in e.getLanes()):  # netconvert keeps "nan" and "inf"; SUMO refuses them
+        if not 0 < lane.getSpeed() < math.inf:
+            raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+                              f"speed limits that are positive numbers of m/s (lane {lane.getID()}: {lane.getSpeed()})")
     lanes = _through_lanes(chain)
     if lanes == 0:
         raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],

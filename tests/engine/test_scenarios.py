@@ -159,3 +159,18 @@ def test_the_osm_example_imports_into_a_road_of_two_ways(tmp_path):
     road = build_road(str(net), cache_dir=tmp_path / "cache")
     assert road.route_edges == ("10", "11") and road.lanes == 3 and road.length_m > 4000
     assert road.speed_limit_mps == pytest.approx(120 / 3.6, abs=0.01)
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("edge, lane", [
+    ('speed="nan"', "e1_0: nan"),
+    ('speed="inf"', "e1_0: inf"),
+    ('speed="30"><lane index="1" speed="nan"/></edge', "e1_1: nan"),
+])
+def test_a_speed_limit_that_is_not_a_positive_number_is_refused_naming_the_lane(tmp_path, edge, lane):
+    """Regression: netconvert built a road with speed="nan" (an edge's or one lane's); SUMO then refused
+    it in every episode, so falsify and sweep stored error samples and exited 0."""
+    edges = f'<edge id="e1" from="a" to="c" numLanes="2" {edge}/>'.replace("</edge/>", "</edge>")
+    folder = _road_folder(tmp_path / "bad", edges)
+    with pytest.raises(ConfigError, match=f"speed limits that are positive numbers of m/s \\(lane {lane}"):
+        build_road(str(folder), cache_dir=tmp_path / "cache")
