@@ -108,6 +108,9 @@ class Specification:
         spec.spec = self.formula
         spec.set_sampling_period(round(step_s * 1000.0, 6), "ms", 0.1)
         unknown = _unknown_identifiers(self.formula, declared)
+        lexed = _lexer_errors(spec, self.formula)
+        if lexed:  # ANTLR's lexer prints these and drops the characters: the formula scored would not be the one given
+            raise ConfigError("spec.formula", self.formula, f"an STL formula rtamt can parse ({lexed[0]})")
         try:
             with _quiet_rtamt():
                 spec.parse()
@@ -161,13 +164,39 @@ def _check_time_bounds(ast, formula: str, step_s: float, duration_s: float | Non
             continue
         begin = Fraction(node.begin) * _UNIT_S.get(getattr(node, "begin_unit", ""), Fraction(1))
         end = Fraction(node.end) * _UNIT_S.get(getattr(node, "end_unit", ""), Fraction(1))
-        where = f"bound [{float(begin):g} s, {float(end):g} s]"
+        where = f"bound [{_seconds(begin)}, {_seconds(end)}]"
+        if begin < 0:
+            raise ConfigError("spec.formula", formula, f"time bounds [a:b] with 0 <= a (the {where} starts before now)")
         if begin > end:
             raise ConfigError("spec.formula", formula, f"time bounds [a:b] with a <= b (the {where} is reversed)")
         if begin % step or end % step:
             raise ConfigError("spec.formula", formula, f"time bounds on the step grid, multiples of {step_s:g} s (the {where})")
         if duration_s is not None and end > Fraction(duration_s).limit_denominator(10**6):
             raise ConfigError("spec.formula", formula, f"time bounds within the episode of {duration_s:g} s (the {where})")
+
+
+def _seconds(t: Fraction) -> str:
+    """A bound for a message: rtamt reads 1e400 exactly, past what a float holds."""
+    return f"{float(t):g} s" if abs(t) < 10**300 else "more than 1e300 s" if t > 0 else "less than -1e300 s"
+
+
+def _lexer_errors(spec, formula: str) -> list[str]:
+    """What rtamt's own lexer cannot read in ``formula``: ANTLR's token recognition errors."""
+    from antlr4 import InputStream
+    from antlr4.error.ErrorListener import ErrorListener
+
+    class Collect(ErrorListener):
+        def __init__(self):
+            self.errors: list[str] = []
+
+        def syntaxError(self, recognizer, offending, line, column, msg, e):
+            self.errors.append(f"character {column + 1}: {msg}")
+
+    lexer = spec.ast.antrlLexerType(InputStream(formula))
+    lexer.removeErrorListeners()
+    lexer.addErrorListener(collect := Collect())
+    lexer.getAllTokens()
+    return collect.errors
 
 
 def _signal_help(followers: int, maneuver: str) -> str:

@@ -94,6 +94,24 @@ def test_bad_formulas_are_refused_clearly(formula, message):
         Specification(followers=3, step_s=0.05, formula=formula)
 
 
+@pytest.mark.parametrize(
+    "formula, message",
+    [  # regression: ANTLR printed a line and dropped the character, and the rest was scored (and stored)
+        ("eventually(gap_2 <= 0)?", r"character 23: token recognition error at: '\?'"),
+        ("\u20acalways(gap_0 > 0)", "character 1: token recognition error"),
+        ("always(gap_0 > 0) # a comment", "character 19: token recognition error at: '#'"),
+        ("always(gap_0 > 0\x00)", "token recognition error"),
+        # regression: an OverflowError (a traceback) and rtamt's "max() arg is an empty sequence"
+        ("eventually[0:1e400](gap_0 > 0)", r"within the episode of 10 s \(the bound \[0 s, more than 1e300 s\]\)"),
+        ("eventually[-1:3](gap_0 > 0)", r"with 0 <= a \(the bound \[-1 s, 3 s\] starts before now\)"),
+    ],
+)
+def test_formulas_rtamt_would_misread_are_refused_in_one_line(formula, message, capfd):
+    with pytest.raises(ConfigError, match=message):
+        Specification(followers=3, step_s=0.05, formula=formula, duration_s=10.0)
+    assert capfd.readouterr().err == ""  # nothing of ANTLR's own
+
+
 def test_nan_never_reaches_rtamt():
     trace = random_trace(1)
     trace.signals["gap_1"][5] = np.nan
