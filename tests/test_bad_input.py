@@ -4,7 +4,10 @@ line (`d4sumo: error: ...`), exit code 2, no traceback, and every stored file by
 from __future__ import annotations
 
 import shutil
+import subprocess
 import sqlite3
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -201,6 +204,8 @@ def readers(db, tmp):
 @pytest.mark.sumo
 @pytest.mark.parametrize("argv", [
     ["replay", "{db}", "999999"], ["replay", "{db}", "abc"], ["export", "{db}", "--campaign", "99"],
+    ["replay", "{db}", "99999999999999999999999"],  # past SQLite's integers: once an OverflowError traceback
+    ["plot", "time-space", "{db}", "--out", "{tmp}/f.png", "--sample", "99999999999999999999999"],
     ["export", "{db}", "--out", "{tmp}/absent/x.csv"], ["export", "{db}", "--out", "{tmp}"],
     ["plot", "time-space", "{db}", "--out", "{tmp}/f.png"], ["plot", "heatmap", "{db}", "--out", "{tmp}/absent/f.png"],
     ["plot", "heatmap", "{db}", "--out", "{tmp}/f.png", "--setpoint", "99"], ["plot", "heatmap", "{db}", "--out", "{tmp}/f.xyz"],
@@ -307,3 +312,13 @@ def test_a_road_netconvert_cannot_build_is_one_line_naming_the_network(tmp_path,
     err = capsys.readouterr().err
     assert err.startswith("d4sumo: error: --network (scenario.network): got '") and err.count("\n") == 1, err
     assert expected in err and "Quitting" not in err and "/tmp" not in err.split("allowed:")[1]
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+@pytest.mark.parametrize("argv", [["scenarios"], ["export", "{db}"]])
+def test_standard_output_that_cannot_be_written_is_one_line(good_db, argv):
+    """Regression: `d4sumo ... > /dev/full` (a full disk) ended in an OSError traceback."""
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "d4sumo.cli", *[a.format(db=good_db) for a in argv]],
+                              stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert (done.returncode, done.stderr) == (2, "d4sumo: error: standard output could not be written (No space left on device)\n")

@@ -6,6 +6,7 @@ Every error a user can cause ends as one line `d4sumo: error: ...` and exit code
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
@@ -88,6 +89,19 @@ def _run(argv: Sequence[str] | None) -> int:
         return EXIT_USAGE
     except BrokenPipeError:
         # the reader went away (`d4sumo export db | head`): stop quietly, as command-line tools do
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        _drop_stdout()
         return 141
+    except OSError as exc:
+        # standard output that cannot take what is printed (`> /dev/full`, a full disk); the files a
+        # command writes are checked by the command, and name themselves (exc.filename)
+        if exc.filename is not None or exc.errno not in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG):
+            raise
+        _drop_stdout()
+        print(f"d4sumo: error: standard output could not be written ({exc.strerror})", file=sys.stderr)
+        return EXIT_USAGE
+
+
+def _drop_stdout() -> None:
+    """What is left in stdout's buffer goes nowhere: Python's own flush at exit would fail again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())

@@ -390,7 +390,9 @@ class Store:
 
     @_guarded
     def sample(self, sample_id: int) -> SampleRow:
-        row = self.db.execute(self._SAMPLE_COLUMNS + " WHERE s.id = ?", (sample_id,)).fetchone()
+        # an id past SQLite's 64-bit integers is no stored sample (sqlite3 would raise OverflowError)
+        row = (self.db.execute(self._SAMPLE_COLUMNS + " WHERE s.id = ?", (sample_id,)).fetchone()
+               if -2**63 <= sample_id < 2**63 else None)
         if row is None:
             last = self.db.execute("SELECT MIN(id), MAX(id) FROM sample").fetchone()
             held = f"it holds sample ids {last[0]}..{last[1]}" if last[0] is not None else "it holds no samples"
