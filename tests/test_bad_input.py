@@ -3,6 +3,7 @@ line (`d4sumo: error: ...`), exit code 2, no traceback, and every stored file by
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sqlite3
@@ -322,3 +323,71 @@ def test_standard_output_that_cannot_be_written_is_one_line(good_db, argv):
         done = subprocess.run([sys.executable, "-m", "d4sumo.cli", *[a.format(db=good_db) for a in argv]],
                               stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
     assert (done.returncode, done.stderr) == (2, "d4sumo: error: standard output could not be written (No space left on device)\n")
+
+
+CONTROLLERS = '''
+from dataclasses import dataclass
+
+
+@dataclass
+class P:
+    k: float = 1.0
+
+
+class FailsToBuild:
+    Params = P
+
+    def __init__(self, *args, **kwargs):
+        raise ValueError("init fails")
+
+    def command(self, *args):
+        return 0.0
+
+
+class FailsToCommand:
+    Params = P
+
+    def __init__(self, *args, **kwargs):
+        pass
+
+    def command(self, *args):
+        raise RuntimeError("cmd fails")
+
+
+class ParamsNotADataclass:
+    Params = dict
+
+    def command(self, *args):
+        return 0.0
+'''
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("module, cls, said", [
+    ("raise RuntimeError('boom at import')", "X", "a module that imports without error ({m} raised RuntimeError: boom at import)"),
+    ("def broken(:\n", "X", "a module that imports without error ({m} raised SyntaxError: invalid syntax"),
+    (CONTROLLERS, "ParamsNotADataclass", "a class with a Params dataclass and a command() method"),
+    (CONTROLLERS, "FailsToBuild", "the controller of v1 ({m}:FailsToBuild) could not be made: ValueError: init fails"
+                                  " (d4sumo -v shows its traceback)"),
+    (CONTROLLERS, "FailsToCommand", "the controller of v1 ({m}:FailsToCommand) raised RuntimeError: cmd fails"
+                                    " (d4sumo -v shows its traceback)"),
+], ids=["raises at import", "syntax error", "Params not a dataclass", "__init__ raises", "command raises"])
+def test_a_users_controller_that_fails_is_one_line_naming_it(tmp_path, monkeypatch, capsys, module, cls, said):
+    """Regression: each of these ended in a traceback of 20-40 lines and exit 1."""
+    import uuid
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"  # a module of its own: Python caches what it imported
+    (tmp_path / f"{name}.py").write_text(module)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["simulate", "--duration", "5", "--controller", f"{name}:{cls}"]) == 2
+    assert said.format(m=name) in check_one_line(capsys)
+
+
+@pytest.mark.sumo
+def test_d4sumo_v_shows_where_a_users_controller_failed(tmp_path, monkeypatch, capsys):
+    (tmp_path / "ctl_shows_where.py").write_text(CONTROLLERS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["-v", "simulate", "--duration", "5", "--controller", "ctl_shows_where:FailsToCommand"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and re.search(rf'{tmp_path / "ctl_shows_where.py"}", line \d+, in command', err)
+    assert err.rstrip().endswith("d4sumo: error: the controller of v1 (ctl_shows_where:FailsToCommand) raised RuntimeError: cmd fails")

@@ -13,6 +13,7 @@ import re
 import signal
 import sys
 import threading
+import traceback
 from typing import Sequence
 
 # The library (numpy, scipy, rtamt, SUMO's bindings: half a second) is imported in `main`, not here.
@@ -85,7 +86,13 @@ def _run(argv: Sequence[str] | None) -> int:
         print(f"d4sumo: error: {field}: got {exc.given!r}; allowed: {exc.allowed}", file=sys.stderr)
         return EXIT_USAGE
     except D4sumoError as exc:
-        print(f"d4sumo: error: {exc}", file=sys.stderr)
+        hint = ""
+        if exc.__cause__ is not None:  # an error of a user's controller, in its own code: -v shows where
+            if args.verbose:
+                traceback.print_exception(exc.__cause__)
+            else:
+                hint = " (d4sumo -v shows its traceback)"
+        print(f"d4sumo: error: {exc}{hint}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         # the reader went away (`d4sumo export db | head`): stop quietly, as command-line tools do

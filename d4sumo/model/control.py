@@ -534,10 +534,18 @@ def resolve_controller(name: str) -> type:
     if cwd not in sys.path and "" not in sys.path:  # the `d4sumo` script does not see the current folder
         sys.path.append(cwd)
     try:
-        cls = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError, ValueError) as exc:
+        module = importlib.import_module(module_name)
+    except (ImportError, ValueError) as exc:
         raise ControllerImportError(name, exc) from None
-    if not isinstance(getattr(cls, "Params", None), type) or not callable(getattr(cls, "command", None)):
+    except Exception as exc:  # found, but the module itself fails: a syntax error, an error raised at import
+        raise ConfigError("controller.class", name, f"a module that imports without error ({module_name} raised "
+                          f"{type(exc).__name__}: {exc})") from None
+    try:
+        cls = getattr(module, attr)
+    except AttributeError as exc:
+        raise ControllerImportError(name, exc) from None
+    params = getattr(cls, "Params", None)
+    if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not callable(getattr(cls, "command", None)):
         raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
     return cls
 
@@ -550,5 +558,8 @@ def build_params(cls: type, values: Mapping[str, Any]) -> Any:
             raise ConfigError(f"controller.{key}", values[key], f"a key of {', '.join(sorted(known))}")
     try:
         return cls.Params(**values)
-    except TypeError as exc:
-        raise ConfigError("controller", dict(values), str(exc)) from None
+    except ConfigError:  # a check of ours, naming its field
+        raise
+    except Exception as exc:  # a user's Params may check its values itself
+        raise ConfigError("controller", dict(values), str(exc) if isinstance(exc, TypeError) else f"parameters its Params "
+                          f"accepts ({type(exc).__name__}: {exc})") from None

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
-from .control import Actuator, CruiseControl, SwitchingController, SwitchingParams, acceleration_to_command
+from .control import Actuator, CruiseControl, SwitchingController, SwitchingParams, acceleration_to_command, user_module
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 
@@ -35,6 +35,16 @@ def checked_command(c, car: int, k: int) -> float:
     if not -1.0 <= u <= 1.0:  # NaN fails too
         raise ControllerError(f"the controller of v{car} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
     return u
+
+
+def _named_errors(command, car: int, name: str):
+    """A user's controller's command(), its errors a ControllerError naming the car and the class."""
+    def checked(*args):
+        try:
+            return command(*args)
+        except Exception as exc:
+            raise ControllerError(f"the controller of v{car} ({name}) raised {type(exc).__name__}: {exc}") from exc
+    return checked
 
 
 def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
@@ -65,11 +75,17 @@ class PythonFollower:
     def __init__(self, config: ControllerConfig, episode: EpisodeConfig, car: int):
         self.config = config
         self.vehicle = episode.vehicle_of(car)
-        self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
-                                                    target_speed_mps=episode.speed_mps, vehicle=self.vehicle,
-                                                    step_s=episode.step_s)
+        users = user_module(config.cls) is not None
+        try:
+            self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
+                                                        target_speed_mps=episode.speed_mps, vehicle=self.vehicle,
+                                                        step_s=episode.step_s)
+        except Exception as exc:
+            if not users or isinstance(exc, D4sumoError):
+                raise
+            raise ControllerError(f"the controller of v{car} ({config.cls}) could not be made: {type(exc).__name__}: {exc}") from exc
         self.actuator = Actuator(self.vehicle, episode.step_s, float("inf"))
-        self.command = self.controller.command
+        self.command = _named_errors(self.controller.command, car, config.cls) if users else self.controller.command
         self.has_mode = hasattr(self.controller, "mode")
 
 
