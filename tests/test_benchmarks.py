@@ -146,6 +146,26 @@ def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said):
     assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
 
 
+@pytest.mark.parametrize("script, argv, said", [  # regression: each ended in a traceback (or ran on)
+    ("bench_sweep.py", ["--set", "foo"], "--set: got 'foo'; allowed: KEY=VALUE"),
+    ("bench_sweep.py", ["--batch", "100000"], "--batch: got 100000; allowed: a whole number in [1, 64]"),
+    ("bench_sweep.py", ["--workers", "1", "0"], "--workers: got 0; allowed: a whole number in [1, 1024]"),
+    ("check_invariants.py", ["1", "--batch", "100000"], "--batch: got 100000; allowed: a whole number in [0, 64]"),
+    ("paper_page.py", ["--runs", "{file}"], "allowed: a folder for the sweeps' databases (this is a file)"),
+    ("paper_page.py", ["--runs", "{tmp}/absent/runs"], "allowed: a folder in an existing folder"),
+])
+def test_the_tools_refuse_bad_flags_in_one_line(tmp_path, script, argv, said):
+    import subprocess
+
+    (tmp_path / "file").write_text("")
+    tools = Path(__file__).resolve().parent.parent / "tools"
+    argv = [a.format(file=tmp_path / "file", tmp=tmp_path) for a in argv]
+    done = subprocess.run([sys.executable, str(tools / script), *argv], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing made
+
+
 def _children(pid: int) -> set[int]:
     found = set()
     for stat in Path("/proc").glob("[0-9]*/stat"):

@@ -246,7 +246,7 @@ def main() -> None:
     dt = args.recheck_dt
     if dt is not None and not (0 < dt <= arch_cc.DT and abs(arch_cc.SAMPLE_S / dt - round(arch_cc.SAMPLE_S / dt)) < 1e-9):
         parser.error(refusal("--recheck-dt", dt, f"a step in (0, {arch_cc.DT}] s that divides {arch_cc.SAMPLE_S} s"))
-    parser.check_at_least({"--runs": (args.runs, 1), "--first-seed": (args.first_seed, 0), "--jobs": (args.jobs, 1),
+    parser.check_counts({"--runs": (args.runs, 1), "--first-seed": (args.first_seed, 0), "--jobs": (args.jobs, 1),
                            "--samples": (args.samples, 1), "--held": (args.held, 1)})
     parser.check_optimizers(args.optimizers)
     allowed = SPECS if args.benchmark == "plateaus" else (*arch_cc.SPECS, *arch_cc.EARLIER_SPECS)

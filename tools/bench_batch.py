@@ -38,7 +38,7 @@ def main() -> None:
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
     args = parser.parse_args()
-    parser.check_at_least({"--samples": (args.samples, 1), "--repeats": (args.repeats, 1), "--batch": (args.batch, 1)})
+    parser.check_counts({"--samples": (args.samples, 1), "--repeats": (args.repeats, 1), "--batch": (args.batch, 1)})
     parser.check_optimizers(args.optimizers)
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core, both ways

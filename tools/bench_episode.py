@@ -48,7 +48,7 @@ def main() -> None:
     parser.add_argument("--followers", type=int, default=3)
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
     args = parser.parse_args()
-    parser.check_at_least({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
+    parser.check_counts({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
     configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
     road = build_road(configs[0].network)
     attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length

@@ -175,7 +175,7 @@ def main() -> None:
     parser.add_argument("--skopt-defaults", action="store_true")
     parser.add_argument("--optimizers", nargs="+", default=["bo", "turbo", "ce", "ce-bucket", "cmaes", "random"])
     args = parser.parse_args()
-    parser.check_at_least({"--seeds": (args.seeds, 1), "--samples": (args.samples, 1)})
+    parser.check_counts({"--seeds": (args.seeds, 1), "--samples": (args.samples, 1)})
     parser.check_optimizers(args.optimizers)
     print("default scenario: highway_4lane, 3 followers, setpoint 7 m, 25 m/s, rest, knots (9), 0.05 s steps")
     rtamt_ratio()

@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 
 from d4sumo.inputs import with_overrides
+from d4sumo.engine.scenarios import MAX_COPIES
+from d4sumo.errors import refusal
 from d4sumo.model.batch import DEFAULT_BATCH
 from d4sumo.model.config import read_toml, toml_value
 from d4sumo.search.campaign import open_store
@@ -50,7 +52,13 @@ def main() -> None:
                         help="change a fixed value of every sweep (TOML value), e.g. search.bo.batch_size=5")
     parser.add_argument("--baseline", action="store_true", help="first run the sweeps as d4sumo 0.2 did, and compare")
     args = parser.parse_args()
-    parser.check_at_least({"--workers": (min(args.workers), 1), "--batch": (min(args.batch), 1)})
+    for workers in args.workers:  # the bounds `d4sumo sweep` has
+        parser.check_counts({"--workers": (workers, 1, 1024)})
+    for batch in args.batch:
+        parser.check_counts({"--batch": (batch, 1, MAX_COPIES)})
+    for item in args.set:
+        if "=" not in item:
+            parser.error(refusal("--set", item, "KEY=VALUE, e.g. search.bo.batch_size=5"))
     overrides = {k: toml_value(v) for k, v in (item.split("=", 1) for item in args.set)}
     sweeps = [load(path, overrides) for path in args.sweeps]
     print(", ".join(f"sweep {s.name}: {len(s.campaigns)} campaigns, {s.samples} samples" for s in sweeps))

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import MAX_COPIES, build_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.errors import ConfigError
 from d4sumo.inputs import campaign_of
@@ -277,7 +277,7 @@ def main(argv=None) -> int:
                         help="play each episode also in a batch of K (more than engine.loop.DETACH_AT, so that the "
                              "arrays command it) [8]; 0: not")
     args = parser.parse_args(argv)
-    parser.check_at_least({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0)})
+    parser.check_counts({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0, MAX_COPIES)})
     rng = np.random.default_rng(args.seed)
     ROADS.append(netgenerate_grid())
     roads = {name: build_road(name, route=ROUTES.get(name, ())) for name in ROADS}

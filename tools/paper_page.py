@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from d4sumo import __version__
+from d4sumo.errors import refusal
 from d4sumo.inputs import with_overrides
 from d4sumo.presets import apply_preset
 from d4sumo.model.config import read_toml
@@ -346,7 +347,11 @@ def main() -> None:
     parser.add_argument("--runs", type=Path, default=Path("paper-runs"), help="folder of the sweeps' databases [paper-runs]")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    parser.check_at_least({"--workers": (args.workers, 1)})
+    parser.check_counts({"--workers": (args.workers, 1)})
+    if args.runs.exists() and not args.runs.is_dir():
+        parser.error(refusal("--runs", str(args.runs), "a folder for the sweeps' databases (this is a file)"))
+    if not args.runs.exists() and not args.runs.parent.is_dir():
+        parser.error(refusal("--runs", str(args.runs), f"a folder in an existing folder ({args.runs.parent} does not exist)"))
     walls = run_all(args.runs, args.workers)
     data = {name: load_records(dbs_of(args.runs, name)) for name in SWEEPS}
     par, non = data["parametric"], data["nonparametric"]

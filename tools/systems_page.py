@@ -65,7 +65,7 @@ def main() -> None:
     parser.add_argument("--db", type=Path, help="a database of examples/sweeps/systems.toml (else the sweep runs)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    parser.check_at_least({"--workers": (args.workers, 1)})
+    parser.check_counts({"--workers": (args.workers, 1)})
     sweep = Sweep.load(SWEEP)
     if args.db is not None:
         write_page(sweep, args.db, None, args.workers)

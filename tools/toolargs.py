@@ -26,11 +26,13 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
 
-    def check_at_least(self, least: dict[str, tuple[int | None, int]]) -> None:
-        """``{flag: (value, least)}`` for whole-number flags: a value under its least is refused (None: not given)."""
-        for flag, (value, low) in least.items():
-            if value is not None and value < low:
-                self.error(refusal(flag, value, f"a whole number of at least {low}"))
+    def check_counts(self, bounds: dict[str, tuple]) -> None:
+        """``{flag: (value, least)}`` or ``(value, least, most)`` for whole-number flags: a value out of its
+        bounds is refused (None: not given)."""
+        for flag, (value, low, *high) in bounds.items():
+            if value is not None and (value < low or (high and value > high[0])):
+                self.error(refusal(flag, value, f"a whole number in [{low}, {high[0]}]" if high else
+                                   f"a whole number of at least {low}"))
 
     def check_optimizers(self, specs: list[str]) -> None:
         """Every optimiser spec names an optimiser and options it takes, each within its range."""
