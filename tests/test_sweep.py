@@ -545,3 +545,15 @@ def test_a_database_of_a_sweep_run_with_the_earlier_default_optimizer_says_how_t
         with pytest.raises(StoreError, match=re.escape(said)):
             claim(store, now)
         claim(store, before)
+
+
+@pytest.mark.parametrize("fixed, field", [
+    ("[scenario]\nsetpoint_m = 9.0\n", "[scenario] setpoint_m"),
+    ('optimizer = "bo"\n', "[search] optimizer"),  # into [search]
+    ('[attack]\nfamily = "sine"\n', "[attack] family"),
+])
+def test_a_value_fixed_beside_its_grid_axis_is_refused(tmp_path, fixed, field):
+    """Regression: the grid won silently (setpoint_m = [5.0, 7.0] beside setpoint_m = 9.0 ran 5 and 7)."""
+    text = TINY.replace('[grid]\n', '[grid]\nattack = ["knots"]\n') + fixed
+    with pytest.raises(ConfigError, match=re.escape(f"sweep.toml: {field}: got ") + ".*no fixed value beside grid"):
+        Sweep.load(write(tmp_path, text))

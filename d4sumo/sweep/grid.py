@@ -94,6 +94,11 @@ class Sweep:
         if "controller" in grid and "controller" in base:
             raise ConfigError(f"{source}: [controller]", base["controller"],
                               "no [controller] beside grid.controller: give each controller's values in the grid")
+        for axis in grid:  # the grid would win silently over a fixed value of the same key
+            table, _, key = GRID_TO_KEY[axis].partition(".")
+            if key and isinstance(base.get(table), dict) and key in base[table]:
+                raise ConfigError(f"{source}: [{table}] {key}", base[table][key],
+                                  f"no fixed value beside grid.{axis}, which sets it for every campaign")
         campaigns, points, merged = [], {}, []
         for values in itertools.product(*grid.values()):
             point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
