@@ -213,6 +213,8 @@ def readers(db, tmp):
     ["replay", "{db}", "1", "--fcd", "{tmp}/absent/f.xml"], ["report", "{db}", "--out", "{tmp}/absent/deep/report"],
     ["report", "{tmp}/missing.sqlite"], ["export", "{tmp}"],
     ["report", "{db}", "--out", "/proc/d4sumo_report"],  # its parent exists, yet nothing can be made there: once a traceback
+    ["report", "{db}", "{db}", "--out", "{tmp}/report"],  # every sample counted twice, once
+    ["plot", "heatmap", "{db}", "{db}", "--out", "{tmp}/f.png"],
 ], ids=lambda a: " ".join(a))
 def test_reading_commands_refuse_bad_flags_and_change_nothing(good_db, tmp_path, argv, capsys):
     before = good_db.read_bytes()

@@ -109,6 +109,17 @@ def check_output_file(option: str, path: Path | None) -> Path | None:
     return path
 
 
+def check_distinct(dbs) -> None:
+    """Results databases each named once: one named twice would count every sample twice."""
+    seen: dict[str, str] = {}
+    for db in map(str, dbs):
+        key = os.path.realpath(db)
+        if key in seen:
+            twice = "named twice" if seen[key] == db else f"the same file as {seen[key]}"
+            raise ConfigError("db", db, f"each results database once (this one is {twice})")
+        seen[key] = db
+
+
 def check_display(gui: bool) -> None:
     """sumo-gui needs a display: say so at once instead of a minute of retries."""
     if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):

@@ -9,7 +9,7 @@ import sys
 import tempfile
 
 from ..errors import ConfigError, D4sumoError
-from .common import check_output_file
+from .common import check_distinct, check_output_file
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -45,6 +45,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError("--out", str(args.out), "a folder for index.html and its figures (this is a file)")
+    check_distinct(args.db)
     if not args.out.parent.is_dir():
         raise ConfigError("--out", str(args.out), f"a folder in an existing folder ({args.out.parent} does not exist)")
     if not 0 <= args.severe <= 100:
@@ -77,6 +78,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_plot(args: argparse.Namespace) -> int:
     from ..results.report import plot_figure
 
+    check_distinct(args.db)
     print(plot_figure(args.db, args.kind, args.out, sample=args.sample, fcd_path=check_output_file("--fcd", args.fcd),
                       attack=args.attack, optimizer=args.optimizer, start=args.start, setpoint_m=args.setpoint,
                       speed_mps=args.speed))

@@ -427,7 +427,8 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
                     else np.asarray(make_attack(wins[0].attack).knot_times_s, dtype=float))
     collision_times_s = np.array([r.time_from_attack_start_s for r in wins], dtype=float)
     relevant = np.array([relevant_knots(knot_times_s, t, wins[0].attack) for t in collision_times_s])
-    ks = range(1, min(max_k, len(wins) - 1) + 1)
+    distinct = len(np.unique(np.where(relevant, X, np.inf), axis=0))  # k-means finds no more clusters than these
+    ks = range(1, min(max_k, len(wins) - 1, distinct) + 1)
     fits = [kmeans_masked(X, relevant, k, seed) for k in ks]
     inertias = tuple(f[2] for f in fits)
     k = elbow(inertias)

@@ -321,3 +321,16 @@ def test_the_coded_knot_attacks_cluster_on_their_own_knot_times_every_knot_relev
     clustering = cluster_knots(records, "knots-coded bo")
     assert clustering is not None and np.allclose(clustering.knot_times_s, np.linspace(0.0, 40.0, 8))
     assert clustering.relevant.all()
+
+
+def test_k_means_tries_no_more_clusters_than_distinct_attacks():
+    """Regression: a report of one database named twice (each attack twice) printed scikit-learn's
+    ConvergenceWarning: k-means was asked for more clusters than there were distinct vectors."""
+    import warnings
+
+    rng = np.random.default_rng(3)
+    vectors = [rng.uniform(-1, 1, 9) for _ in range(3)] * 4  # 12 successes, 3 distinct attacks
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        c = cluster_knots([_record(v, time_s=60.0) for v in vectors], "repeated")
+    assert c is not None and c.k <= 3
