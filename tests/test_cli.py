@@ -500,3 +500,16 @@ def test_falsify_says_when_an_optimizers_options_go_unused(tmp_path):
     assert "note: the options of [search.bo] are unused: this campaign runs auto (--optimizer bo runs bo)" in said.stderr
     quiet = run("falsify", "--optimizer", "bo", "--samples", "2", "--db", db, "--quiet", "--set", "search.bo.inducing=0")
     assert quiet.returncode == 0 and "unused" not in quiet.stderr
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("argv, note", [
+    (["falsify", "--attack", "persistent", "--delta", "3"], "--delta is unused: the persistent attack has no delta_s"),
+    (["falsify", "--start", "rest", "--warmup", "10"], "--warmup is unused: start rest has no warm-up drive"),
+    (["simulate", "--horizon", "30"], "--horizon is unused: there is no attack (the attacker cruises)"),
+])
+def test_a_flag_the_episode_does_not_read_is_said(tmp_path, capsys, argv, note):
+    """Regression: these flags were dropped without a word."""
+    extra = ["--samples", "2", "--quiet", "--db", str(tmp_path / "r.sqlite")] if argv[0] == "falsify" else ["--duration", "5"]
+    assert main([*argv, *extra]) == 0
+    assert f"d4sumo: note: {note}" in capsys.readouterr().err

@@ -9,7 +9,7 @@ import sys
 
 from ..errors import ConfigError, check_number
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
-from .common import check_batch, document
+from .common import check_batch, document, note_unused_flags
 
 
 def cmd_falsify(args: argparse.Namespace) -> int:
@@ -22,6 +22,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     doc, _ = document(args)
     campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    note_unused_flags(args, campaign.config, evaluator.family)
     unused = sorted(k for k in doc.get("search", {}) if k in OPTIMIZERS and k != campaign.optimizer)
     if unused:  # e.g. --set search.bo.x with no --optimizer, since the default became auto
         print(f"d4sumo: note: the options of {', '.join(f'[search.{k}]' for k in unused)} are unused: this campaign runs "

@@ -109,6 +109,21 @@ def check_output_file(option: str, path: Path | None) -> Path | None:
     return path
 
 
+def note_unused_flags(args: argparse.Namespace, config, family) -> None:
+    """A flag this episode does not read (a slip, or a leftover of an earlier command line): said, not
+    silently dropped. ``family``: the attack family, or None (no attack)."""
+    unused = []
+    if getattr(args, "warmup", None) is not None and config.start != "warmup":
+        unused.append(("--warmup", f"start {config.start} has no warm-up drive (--start warmup has)"))
+    options = getattr(family, "options", {}) if family is not None else {}
+    for flag, key in (("--delta", "delta_s"), ("--horizon", "horizon_s")):
+        if getattr(args, flag[2:], None) is not None and key not in options:
+            unused.append((flag, f"the {family.name} attack has no {key} (the knots families have)" if family is not None
+                               else "there is no attack (the attacker cruises)"))
+    for flag, why in unused:
+        print(f"d4sumo: note: {flag} is unused: {why}", file=sys.stderr)
+
+
 def check_distinct(dbs) -> None:
     """Results databases each named once: one named twice would count every sample twice."""
     seen: dict[str, str] = {}
