@@ -227,6 +227,48 @@ def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
     assert run(split=True) == run(split=False)
 
 
+_HALVES = """
+import pickle, sys
+import numpy as np
+from d4sumo.search.optimizers import make_optimizer
+
+name, half, path = sys.argv[1], sys.argv[2], sys.argv[3]
+if half == "first":
+    opt, asked = make_optimizer(name, np.zeros(4), np.ones(4), budget=30, rng=np.random.default_rng(5)), []
+else:
+    opt, asked = pickle.load(open(path, "rb"))
+for i in range(13) if half == "first" else range(13, 30):
+    x = opt.ask()
+    asked.append(tuple(map(float, x)))
+    opt.tell(x, -float(np.sum((x - 0.3) ** 2)))
+pickle.dump((opt, asked), open(path, "wb"))
+"""
+
+
+@pytest.mark.parametrize("name", OPTIMIZERS)
+def test_an_optimisers_state_goes_on_exactly_in_another_process(name, tmp_path):
+    """Regression: pycma finds the points it asked by hash(x.tobytes()), which Python salts anew in every
+    process: CMA-ES carried to another worker mid-generation (a sweep's next chunk) went on differently,
+    so a sweep's samples depended on how its chunks fell on its workers."""
+    import os
+    import pickle
+    import subprocess
+    import sys
+
+    path = tmp_path / "state.pkl"
+    for half, salt in (("first", "1"), ("second", "2")):
+        done = subprocess.run([sys.executable, "-c", _HALVES, name, half, str(path)], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONHASHSEED": salt}, timeout=120)
+        assert done.returncode == 0, done.stderr
+    _, asked = pickle.load(open(path, "rb"))
+    opt, alone = make_optimizer(name, np.zeros(4), np.ones(4), budget=30, rng=np.random.default_rng(5)), []
+    for _ in range(30):
+        x = opt.ask()
+        alone.append(tuple(map(float, x)))
+        opt.tell(x, -float(np.sum((x - 0.3) ** 2)))
+    assert asked == alone
+
+
 @pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("turbo", {"failure_tolerance": 1}),
                                            ("auto", {"stall": 3})])
 def test_a_bayesian_optimisers_state_pickles_inside_a_batch_and_goes_on_exactly(name, options):

@@ -63,6 +63,28 @@ class CMAES(Optimizer):
         self._pending, self._population, self._scores = [], [], []
 
 
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        _rekey(self._es)
+
+
+def _rekey(es) -> None:
+    """pycma finds the points it handed out by ``hash(x.tobytes())``, and Python salts that hash anew in
+    every process: an optimiser carried to another process mid-generation (a sweep's next chunk on
+    another worker) found none of them, and its next generation changed. Each of its solution archives
+    is keyed again here, from the points they keep."""
+    from cma.utilities.utils import SolutionDict
+
+    archives = [v for v in vars(es).values() if isinstance(v, SolutionDict)]
+    archives += [v for owner in vars(es).values() if hasattr(owner, "__dict__") and not isinstance(owner, SolutionDict)
+                 for v in vars(owner).values() if isinstance(v, SolutionDict)]
+    for archive in archives:
+        new_key = {old: archive.key(x) for old, x in archive._unhashed_keys.items()}
+        archive.data = {new_key.get(k, k): v for k, v in archive.data.items()}
+        archive.data_with_same_key = {new_key.get(k, k): v for k, v in archive.data_with_same_key.items()}
+        archive._unhashed_keys = {new_key[k]: x for k, x in archive._unhashed_keys.items()}
+
+
 class _Normals:
     """pycma's source of normal draws: the campaign's Generator (a class, not a lambda, so that the
     optimiser's state pickles: a sweep sends it between processes)."""
