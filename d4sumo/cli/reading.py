@@ -9,6 +9,7 @@ import sys
 import tempfile
 
 from ..errors import ConfigError, D4sumoError
+from ..files import part_of, remove_stale_parts
 from .common import check_distinct, check_output_file
 
 
@@ -24,7 +25,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         if out_path is None:
             write_csv(store, sys.stdout, args.campaign)
             return 0
-        tmp = out_path.with_name(f".{out_path.name}.part")
+        remove_stale_parts(out_path)
+        tmp = part_of(out_path)
         try:
             with open(tmp, "w", newline="") as out:
                 rows = write_csv(store, out, args.campaign)

@@ -18,6 +18,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from ..errors import ConfigError, SumoError
+from ..files import part_of, remove_stale_parts
 from ..model.batch import episode_configs
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
@@ -104,7 +105,8 @@ def fcd_file(path: str | Path | None) -> Iterator[Path | None]:
         yield None
         return
     path = Path(path)
-    part = path.with_name(f".{path.name}.{os.getpid()}.part")
+    remove_stale_parts(path)
+    part = part_of(path)
     try:
         yield part
         if not _ends_whole(part):

@@ -18,6 +18,7 @@ from typing import Callable, Sequence
 from .. import __version__
 from ..engine.simulation import simulate
 from ..errors import ConfigError
+from ..files import part_of, remove_stale_parts
 from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
@@ -140,7 +141,10 @@ def build_report(
     leaves ``out_dir`` as it was."""
     out = Path(out_dir)
     records = load_records(dbs)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    remove_stale_parts(out)
+    staging = part_of(out)
+    shutil.rmtree(staging, ignore_errors=True)  # this process's own, from a report it made before
+    staging.mkdir()
     try:
         _write_report(records, dbs, staging, severe, progress or (lambda what: log.info("%s", what)))
         for f in sorted(staging.rglob("*"), key=lambda f: f.name == "index.html"):
