@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import re
+import signal
+import threading
 
 from ..errors import ConfigError, D4sumoError
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
@@ -32,18 +34,40 @@ def _dask_client(address: str, timeout_s: float, workers: int):
     except ImportError:  # pragma: no cover - a core dependency
         raise D4sumoError("--dask needs the distributed package (pip install 'dask[distributed]')") from None
     with contextlib.ExitStack() as stack:
-        if address == "local":
-            logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
-            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                       host="127.0.0.1", dashboard_address=":0", silence_logs=logging.WARNING))
-            log.warning("local Dask cluster of %d workers; dashboard at %s", workers, cluster.dashboard_link)
-            address = cluster.scheduler_address
         try:
-            client = Client(address, timeout=timeout_s)
-        except (OSError, TimeoutError) as exc:
-            raise D4sumoError(f"--dask: no Dask scheduler answered at {address} within {timeout_s:g} s ({exc})") from None
-        with client:
+            if address == "local":
+                logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
+                # the workers' warnings (a task cancelled by Ctrl-C) are not the user's business; errors are
+                with _signals_deferred():  # a cluster cut short while it starts cannot be closed cleanly
+                    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                           dashboard_address=":0", silence_logs=logging.ERROR)
+                    stack.callback(cluster.close, timeout=5)
+                log.warning("local Dask cluster of %d workers; dashboard at %s", workers, cluster.dashboard_link)
+                address = cluster.scheduler_address
+            try:
+                client = Client(address, timeout=timeout_s)
+            except (OSError, TimeoutError) as exc:
+                raise D4sumoError(f"--dask: no Dask scheduler answered at {address} within {timeout_s:g} s ({exc})") from None
+            stack.enter_context(client)
             yield client
+        finally:
+            # a close cut short by Ctrl-C left Python's exit waiting 10 s for Dask to close the cluster again
+            with _signals_held():
+                stack.close()
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Ctrl-C and SIGTERM ignored for a moment (the closing of a local cluster, bounded by its timeout)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
 
 
 def _run_dask(todo: list[_Active], store_results, client) -> None:
@@ -80,3 +104,21 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
             submit(_share(gang, queue, len(running) + 1, slots() - 1))
         while queue and len(running) < slots():
             submit(queue.pop(0))
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Ctrl-C and SIGTERM taken at the end of the block, not inside it (the start of a local cluster, about
+    a second: one cut short cannot be closed cleanly)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = {sig: signal.signal(sig, lambda sig, frame: caught.append(sig)) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+        if caught:  # now, to the command's own handler (in place of what the block raised, if anything)
+            signal.raise_signal(caught[0])
