@@ -513,3 +513,19 @@ def test_a_flag_the_episode_does_not_read_is_said(tmp_path, capsys, argv, note):
     extra = ["--samples", "2", "--quiet", "--db", str(tmp_path / "r.sqlite")] if argv[0] == "falsify" else ["--duration", "5"]
     assert main([*argv, *extra]) == 0
     assert f"d4sumo: note: {note}" in capsys.readouterr().err
+
+
+@pytest.mark.sumo
+def test_a_gap_a_hair_under_the_collision_distance_is_printed_under_it(capsys):
+    """Regression: --json rounded the minimum gaps to 4 decimals and the text to 2, so a cut-in that
+    collided with v0-v1 at -0.0000089 m printed that gap as -0.0 (and "-0.00 m") beside attacker_crash."""
+    argv = ["simulate", "--followers", "1", "--network", str(Path(__file__).resolve().parent.parent / "examples" / "roads" / "three_edges"),
+            "--maneuver", "cutin", "--set", "scenario.cutin_follower=1", "--set", "scenario.lane_change_s=0",
+            "--start", "steady", "--setpoint", "5", "--speed", "15", "--duration", "30", "--controller", "timegap",
+            "--attack", "knots", "--params=-1,-1,1,1,-1,-1,-1,-0.04,-1,0.274"]
+    assert main([*argv, "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["outcome"] == "attacker_crash" and s["first_collision"]["pair"] == "v0-v1"
+    assert -1e-4 < s["min_gaps_m"]["v0-v1"] < 0
+    assert main(argv) == 0
+    assert "v0-v1 -0.000009 m" in capsys.readouterr().out

@@ -104,7 +104,7 @@ def episode_summary(config, family, params, episode, robustness, d_safe, fcd) ->
         "outcome": episode.outcome,
         "first_collision": episode.first_collision.to_dict() if episode.first_collision else None,
         "collisions": [c.to_dict() for c in episode.collisions],
-        "min_gaps_m": {k: round(v, 4) for k, v in episode.min_gaps_m().items()},
+        "min_gaps_m": episode.min_gaps_m(),  # unrounded: a gap a hair under the collision distance stays under
         "robustness": robustness,
         "d_safe_m": d_safe,
         "simulated_s": float(episode.trace.times_s[-1]),
@@ -117,6 +117,16 @@ def _report(summary: dict, road_name: str, as_json: bool) -> None:
         print(json.dumps(summary, indent=2))
     else:
         _print_summary(summary, road_name)
+
+
+def _gap_text(gap_m: float, collision_m: float) -> str:
+    """A gap to 2 decimals, or to as many as it takes to stay on its side of the collision distance
+    (-0.0000089 m is no "-0.00" beside an overlap, 0.049969 m no "0.05" beside a 0.05 m collision gap)."""
+    for digits in (2, 4, 6, 9):
+        text = f"{gap_m:.{digits}f}"
+        if (float(text) < collision_m) == (gap_m < collision_m):
+            return text
+    return repr(gap_m)
 
 
 def _print_summary(s: dict, road_name: str) -> None:
@@ -133,7 +143,8 @@ def _print_summary(s: dict, road_name: str) -> None:
             f"outcome: {s['outcome']}: {c['pair']} collided at t = {c['time_s']:.2f} s, "
             f"{c['position_m']:.1f} m along the road, speed difference {c['speed_diff_kmh']:.1f} km/h"
         )
-    print("min gaps: " + ", ".join(f"{k} {v:.2f} m" for k, v in s["min_gaps_m"].items()))
+    collision_m = s["config"]["scenario"].get("collision_gap_m", 0.0)
+    print("min gaps: " + ", ".join(f"{k} {_gap_text(v, collision_m)} m" for k, v in s["min_gaps_m"].items()))
     if s["robustness"] is not None:
         what = "the formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
         print(f"robustness of {what}: {s['robustness']:.4f}")
