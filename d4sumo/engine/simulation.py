@@ -83,17 +83,34 @@ def simulate(
     """Play one episode in SUMO. ``attack``: the attacker's plan (`maneuvers.attack_plan`), or only its
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
+    plan = checked_plan(config, attack)
     road = road or build_road(config.network, route=config.route)
     types_file = check_episode(config, road)
-    plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
-    if plan.u.shape != (config.steps,):
-        raise ValueError(f"attack signal has shape {plan.u.shape}, expected ({config.steps},)")
     with fcd_file(fcd_path) as part:
         with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
             result = play(world, [config], [plan])[0]
         if isinstance(result, Exception):
             raise result
     return result
+
+
+def checked_plan(config: EpisodeConfig, attack: AttackPlan | np.ndarray) -> AttackPlan:
+    """The attacker's plan, refused unless it is one command per step, each in [-1, 1] or NaN (it
+    cruises): a command past full throttle or full brake would play physics no car has."""
+    if not isinstance(config, EpisodeConfig):
+        raise ConfigError("config", type(config).__name__, "an EpisodeConfig")
+    try:
+        plan = attack if isinstance(attack, AttackPlan) else AttackPlan(np.asarray(attack, dtype=float))
+        u = np.asarray(plan.u, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError("attack", repr(attack)[:80], "an AttackPlan, or an array of commands") from None
+    if u.shape != (config.steps,):
+        raise ConfigError("attack", f"a signal of shape {u.shape}", f"{config.steps} commands, one per step of the episode")
+    outside = ~np.isnan(u) & ~((u >= -1.0) & (u <= 1.0))
+    if outside.any():
+        k = int(np.argmax(outside))
+        raise ConfigError("attack", f"{u[k]} at step {k}", "commands in [-1, 1], or NaN where the attacker cruises")
+    return plan
 
 
 @contextlib.contextmanager
@@ -169,6 +186,7 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     if len(plans) > MAX_COPIES:
         raise ValueError(f"a batch of {len(plans)} episodes; allowed: at most {MAX_COPIES}")
     configs = episode_configs(config, len(plans))
+    plans = [checked_plan(c, p) for c, p in zip(configs, plans)]
     config = configs[0]
     distinct = list({id(c): c for c in configs}.values())
     if not shares_sumo(config):
@@ -184,8 +202,5 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     types_file = check_episode(config, road)
     for c in distinct[1:]:
         check_episode(c, road)
-    for plan in plans:
-        if plan.u.shape != (config.steps,):
-            raise ValueError(f"attack signal has shape {plan.u.shape}, expected ({config.steps},)")
     with open_world(config, road, configs, types_file=types_file) as world:
         return play(world, configs, plans, on_episode=on_episode)

@@ -12,7 +12,7 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.ballistic import integrate
 from d4sumo.engine.scenarios import build_road
-from d4sumo.engine.simulation import simulate
+from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.errors import ConfigError
 from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
@@ -714,3 +714,24 @@ def test_a_sumo_driven_follower_of_another_class_keeps_the_passenger_cars_comfor
     car = simulate(config, brake, road=road)
     truck = simulate(dataclasses.replace(config, vehicles={"v2": {"vclass": "truck"}}), brake, road=road)
     assert truck.min_gaps_m() == car.min_gaps_m()
+
+
+@pytest.mark.parametrize("attack, said", [
+    (lambda n: np.full(n, 5.0), r"attack: got '5.0 at step 0'; allowed: commands in \[-1, 1\]"),
+    (lambda n: np.r_[np.zeros(n - 1), -1.5], r"got '-1.5 at step"),
+    (lambda n: np.full(n, np.inf), "got 'inf at step 0'"),
+    (lambda n: np.zeros(10), r"got 'a signal of shape \(10,\)'; allowed: \d+ commands, one per step"),
+    (lambda n: "abc", "allowed: an AttackPlan, or an array of commands"),
+])
+def test_an_attack_a_car_cannot_play_is_refused_before_sumo_starts(attack, said):
+    """Regression: simulate() took commands of 5 (and -5), and the attacker accelerated at 16 m/s^2 (and
+    braked at 34 m/s^2, an attacker_crash); a signal's wrong shape was a bare ValueError."""
+    with pytest.raises(ConfigError, match=said):
+        simulate(CONFIG, attack(CONFIG.steps))
+    with pytest.raises(ConfigError, match=said):
+        simulate_batch(CONFIG, [np.zeros(CONFIG.steps), attack(CONFIG.steps)])
+
+
+def test_simulate_refuses_what_is_not_an_episode_configuration():
+    with pytest.raises(ConfigError, match="config: got 'dict'; allowed: an EpisodeConfig"):
+        simulate({"setpoint_m": 7}, np.zeros(10))
