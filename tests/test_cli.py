@@ -529,3 +529,14 @@ def test_a_gap_a_hair_under_the_collision_distance_is_printed_under_it(capsys):
     assert -1e-4 < s["min_gaps_m"]["v0-v1"] < 0
     assert main(argv) == 0
     assert "v0-v1 -0.000009 m" in capsys.readouterr().out
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("maneuver", ["cutin", "cutout"])
+def test_knots_with_a_lane_change_take_the_lane_change_time_last(capsys, maneuver):
+    """Regression: --knots counted the lane change time as a knot, so 10 values asked for 11, and 11 for 12:
+    a cut-in or cut-out could never be played with --knots."""
+    assert main(["simulate", "--maneuver", maneuver, "--knots=0,0,0,0,0,0,0,0,0,5", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["attack"]["values"][-1] == 5.0 and len(s["attack"]["values"]) == 10
+    assert s["config"]["scenario"]["maneuver"] == maneuver

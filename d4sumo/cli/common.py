@@ -12,6 +12,7 @@ from typing import Any
 from ..engine.scenarios import MAX_COPIES
 from ..errors import ConfigError, D4sumoError
 from ..model.config import toml_value
+from ..model.maneuvers import MANEUVERS
 
 EXIT_USAGE = 2
 #: a replay that does not reproduce its stored sample: a failed check, as a test runner's exit 1
@@ -76,11 +77,7 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
     if len(given) > 1 and getattr(args, "command", "") == "simulate":
         raise ConfigError("/".join(given), "together", "one attack: --knots, --constant or --attack with --params")
     if knots is not None:
-        values = _floats("--knots", knots)
-        delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
-        flags.update({"attack.family": "knots", "attack.params": values})
-        if "attack.horizon_s" not in flags and isinstance(delta, (int, float)):
-            flags["attack.horizon_s"] = delta * (len(values) - 1) or delta
+        flags.update({"attack.family": "knots", "attack.params": _floats("--knots", knots)})
     if constant is not None:
         flags.update({"attack.family": "constant", "attack.params": [constant]})
     if "attack.params" in flags and "attack.family" not in flags and "family" not in doc.get("attack", {}):
@@ -90,6 +87,12 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         if not sep or not key.strip():
             raise ConfigError("--set", item, "TABLE.KEY=VALUE, e.g. scenario.setpoint_m=5")
         flags[key.strip()] = toml_value(value.strip())
+    if knots is not None and "attack.horizon_s" not in flags:  # the knots' span: one every delta_s
+        delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
+        maneuver = MANEUVERS.get(flags.get("scenario.maneuver", doc.get("scenario", {}).get("maneuver", "inlane")))
+        count = len(flags["attack.params"]) - (1 if maneuver is not None and maneuver.lateral else 0)  # then t_lc_s
+        if isinstance(delta, (int, float)):
+            flags["attack.horizon_s"] = delta * (count - 1) or delta
     return with_overrides(doc, flags), flags
 
 

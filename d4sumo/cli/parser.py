@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="play one episode and summarise it")
     _add_episode_options(p)
     g = p.add_argument_group("attack (with none, the attacker cruises at the target speed)")
-    g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s)")
+    g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s); "
+                        "with a cut-in or cut-out, then the lane change time t_lc_s")
     g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from the attack's start")
     g.add_argument("--attack", choices=FAMILIES, help="attack family (with --params)")
     g.add_argument("--params", help="comma-separated parameter values of the family, e.g. --attack sine --params 0.5,0.2,0")
