@@ -62,13 +62,13 @@ def apply_preset(doc: Mapping[str, Any], *, campaign: bool = False) -> dict:
     for table, values in PAPER_AS_RUN[family].items():
         layers[table] = {**layers.get(table, {}), **values}
     for table, values in layers.items():
-        if table == "controller" and isinstance(doc.get("controller"), list):  # a mixed platoon: each follower
-            doc["controller"] = [{**values, **(t if isinstance(t, Mapping) else {"class": t})} for t in doc["controller"]]
+        if table == "controller":  # the code's controller options are the paper's controller's: its followers only
+            mine = doc.get("controller", {})
+            tables = [t if isinstance(t, Mapping) else {"class": t} for t in (mine if isinstance(mine, list) else [mine])]
+            tables = [{**values, **t} if t.get("class", "switching") == "switching" else t for t in tables]
+            doc["controller"] = tables if isinstance(mine, list) else tables[0]
             continue
-        mine = doc.get(table, {})
-        if table == "controller" and isinstance(mine, str):
-            mine = {"class": mine}
-        doc[table] = {**values, **mine}
+        doc[table] = {**values, **doc.get(table, {})}
     if named or campaign:
         doc["attack"]["family"] = PAPER_AS_RUN[family]["attack"]["family"]  # the family as coded, whatever was named
     else:

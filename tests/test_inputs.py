@@ -127,6 +127,18 @@ def test_the_paper_as_run_preset_lays_the_authors_options_under_the_document_and
     assert "preset" not in str(k.definition()) and k.definition()["config"]["controller"]["low_level"] == "pid"
 
 
+@pytest.mark.parametrize("controller", ["sumo:IDM", "timegap", ["switching", "timegap", "sumo:IDM"]])
+def test_the_paper_as_run_preset_sets_the_code_controllers_options_on_the_papers_controller_only(controller):
+    """Regression: the preset laid the paper's controller options (switching_rule, ...) on any follower, so
+    --preset paper-as-run with a SUMO model or the time-gap ACC was refused, naming switching_rule."""
+    c = campaign_of({"preset": "paper-as-run", "controller": controller})
+    followers = c.config.controllers if isinstance(controller, list) else [c.config.controller]
+    for follower in followers:
+        params = dict(follower.params)
+        assert (params.get("switching_rule") == "code") == (follower.cls == "switching")
+    assert c.attack == "knots-coded" and c.config.collision_gap_m == 0.05
+
+
 @pytest.mark.parametrize("doc, message", [
     ({"preset": "paper"}, "preset: got 'paper'; allowed: one of paper-as-run"),
     ({"preset": "paper-as-run", "attack": {"family": "sine"}}, "attack.family: got 'sine'; allowed: one of persistent, intermittent, knots"),
