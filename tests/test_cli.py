@@ -507,6 +507,8 @@ def test_falsify_says_when_an_optimizers_options_go_unused(tmp_path):
     (["falsify", "--attack", "persistent", "--delta", "3"], "--delta is unused: the persistent attack has no delta_s"),
     (["falsify", "--start", "rest", "--warmup", "10"], "--warmup is unused: start rest has no warm-up drive"),
     (["simulate", "--horizon", "30"], "--horizon is unused: there is no attack (the attacker cruises)"),
+    (["simulate", "--formula", "always(gap_0 > 0)", "--d-safe", "1"], "--d-safe is unused: it is the paper's psi's"),
+    (["falsify", "--formula", "eventually(gap_2 <= 0)", "--d-safe", "1"], "--d-safe is unused: it is the paper's psi's"),
 ])
 def test_a_flag_the_episode_does_not_read_is_said(tmp_path, capsys, argv, note):
     """Regression: these flags were dropped without a word."""

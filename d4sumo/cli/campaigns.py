@@ -22,7 +22,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     doc, _ = document(args)
     campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
-    note_unused_flags(args, campaign.config, evaluator.family)
+    note_unused_flags(args, campaign.config, evaluator.family, campaign.formula)
     unused = sorted(k for k in doc.get("search", {}) if k in OPTIMIZERS and k != campaign.optimizer)
     if unused:  # e.g. --set search.bo.x with no --optimizer, since the default became auto
         print(f"d4sumo: note: the options of {', '.join(f'[search.{k}]' for k in unused)} are unused: this campaign runs "

@@ -112,10 +112,12 @@ def check_output_file(option: str, path: Path | None) -> Path | None:
     return path
 
 
-def note_unused_flags(args: argparse.Namespace, config, family) -> None:
+def note_unused_flags(args: argparse.Namespace, config, family, formula: str | None = None) -> None:
     """A flag this episode does not read (a slip, or a leftover of an earlier command line): said, not
-    silently dropped. ``family``: the attack family, or None (no attack)."""
+    silently dropped. ``family``: the attack family, or None (no attack); ``formula``: one of the user's."""
     unused = []
+    if getattr(args, "d_safe", None) is not None and formula is not None:
+        unused.append(("--d-safe", "it is the paper's psi's, and --formula scores a formula of your own"))
     if getattr(args, "warmup", None) is not None and config.start != "warmup":
         unused.append(("--warmup", f"start {config.start} has no warm-up drive (--start warmup has)"))
     options = getattr(family, "options", {}) if family is not None else {}

@@ -36,7 +36,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     doc = apply_preset(link_collision_distance(document(args)[0]))  # the spec's values too
     config = episode_config(doc)
     family, params = attack_of(doc)
-    note_unused_flags(args, config, family)
+    note_unused_flags(args, config, family, doc.get("spec", {}).get("formula"))
     spec_table = doc.get("spec", {})
     d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
     formula = spec_table.get("formula")
