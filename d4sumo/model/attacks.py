@@ -15,7 +15,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
-from ..errors import ConfigError, check_number
+from ..errors import ConfigError, check_int, check_number
 
 
 @dataclass(frozen=True)
@@ -65,9 +65,13 @@ class AttackFamily:
 
     def check(self, params: Sequence[float], field: str = "attack parameters") -> np.ndarray:
         """The parameter vector as an array, or a ConfigError naming the offending parameter."""
-        x = np.asarray(params, dtype=float).reshape(-1)
-        if x.size != self.dimension:
-            raise ConfigError(field, list(map(float, x)), f"{self.dimension} values for {self.name}: {', '.join(self.names)}")
+        try:
+            x = np.asarray(params, dtype=float)
+        except (TypeError, ValueError):
+            raise ConfigError(field, repr(params)[:80], f"{self.dimension} numbers for {self.name}: {', '.join(self.names)}") from None
+        x = x.reshape(-1) if x.ndim == 0 else x  # one number, for a family of one parameter
+        if x.ndim != 1 or x.size != self.dimension:
+            raise ConfigError(field, x.tolist(), f"{self.dimension} values for {self.name}: {', '.join(self.names)}")
         for value, p in zip(x, self.parameters):
             if not (p.low <= value <= p.high):  # NaN fails too
                 raise ConfigError(f"{field}: {p.name}", float(value), f"a number in [{p.low:g}, {p.high:g}] {p.unit}".rstrip())
@@ -335,6 +339,11 @@ def attack_signal(family: AttackFamily | None, params: Sequence[float] | None, *
                   start_step: int = 0) -> np.ndarray:
     """The attacker's command at each step's start, for an attack that begins at step ``start_step``
     (after a warm-up); NaN where the attacker cruises (before the attack, or with no attack at all)."""
+    steps = check_int("steps", steps, 1, 10**9)
+    check_number("step_s", step_s, 0.0, 3600.0, "s", low_open=True)
+    start_step = check_int("start_step", start_step, 0, steps)
+    if family is not None and not isinstance(family, AttackFamily):
+        raise ConfigError("family", repr(family), "an AttackFamily (make_attack(name)), or None for no attack")
     u = np.full(steps, np.nan)
     if family is None:
         return u

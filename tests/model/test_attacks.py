@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d4sumo.errors import ConfigError
-from d4sumo.model.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, make_attack
+from d4sumo.model.attacks import FAMILIES, FAMILY_CLASSES, Intermittent, Knots, Spline, attack_signal, make_attack
 
 TIMES = np.arange(1200) * 0.05
 
@@ -162,3 +162,21 @@ def test_knots_are_one_signal_and_every_other_familys_parameters_scalars():
     assert make_attack("knots-coded").signals == (8,)
     assert make_attack("sine").signals == (1,) * make_attack("sine").dimension
     assert make_attack("intermittent").signals == (1,) * 6
+
+
+@pytest.mark.parametrize("change, said", [
+    ({"params": "abc"}, "attack parameters: got \"'abc'\"; allowed: 9 numbers for knots"),
+    ({"params": np.zeros((3, 3))}, "allowed: 9 values for knots"),
+    ({"steps": -1}, r"steps: got -1; allowed: a whole number in \[1,"),
+    ({"steps": 10.5}, "steps: got 10.5"),
+    ({"step_s": 0}, r"step_s: got 0; allowed: a number in \(0, 3600\] s"),
+    ({"start_step": -5}, r"start_step: got -5; allowed: a whole number in \[0, 400\]"),
+    ({"start_step": 500}, "start_step: got 500"),
+    ({"family": "knots"}, r"family: got \"'knots'\"; allowed: an AttackFamily"),
+])
+def test_attack_signal_refuses_bad_arguments_naming_them(change, said):
+    """Regression: these ended in numpy's own errors (negative dimensions, broadcasting), an AttributeError,
+    or were taken (a start after the episode gave all NaN, a step of 0 s all zeros, 2-D parameters)."""
+    args = {"family": make_attack("knots"), "params": [0.0] * 9, "steps": 400, "step_s": 0.15, "start_step": 0, **change}
+    with pytest.raises(ConfigError, match=said):
+        attack_signal(args.pop("family"), args.pop("params"), **args)
