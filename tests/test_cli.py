@@ -542,3 +542,8 @@ def test_knots_with_a_lane_change_take_the_lane_change_time_last(capsys, maneuve
     s = json.loads(capsys.readouterr().out)
     assert s["attack"]["values"][-1] == 5.0 and len(s["attack"]["values"]) == 10
     assert s["config"]["scenario"]["maneuver"] == maneuver
+
+
+def test_knots_beside_a_maneuver_that_is_no_name_is_one_line(capsys):
+    assert main(["simulate", "--knots=0,0,0", "--set", "scenario.maneuver=[1]"]) == 2
+    assert "scenario.maneuver: got [1]" in capsys.readouterr().err

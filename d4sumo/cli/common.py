@@ -89,7 +89,8 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         flags[key.strip()] = toml_value(value.strip())
     if knots is not None and "attack.horizon_s" not in flags:  # the knots' span: one every delta_s
         delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
-        maneuver = MANEUVERS.get(flags.get("scenario.maneuver", doc.get("scenario", {}).get("maneuver", "inlane")))
+        name = flags.get("scenario.maneuver", doc.get("scenario", {}).get("maneuver", "inlane"))
+        maneuver = MANEUVERS.get(name) if isinstance(name, str) else None  # a bad one is refused with the document
         count = len(flags["attack.params"]) - (1 if maneuver is not None and maneuver.lateral else 0)  # then t_lc_s
         if isinstance(delta, (int, float)):
             flags["attack.horizon_s"] = delta * (count - 1) or delta
