@@ -507,6 +507,9 @@ def test_falsify_says_when_an_optimizers_options_go_unused(tmp_path):
     (["falsify", "--attack", "persistent", "--delta", "3"], "--delta is unused: the persistent attack has no delta_s"),
     (["falsify", "--start", "rest", "--warmup", "10"], "--warmup is unused: start rest has no warm-up drive"),
     (["simulate", "--horizon", "30"], "--horizon is unused: there is no attack (the attacker cruises)"),
+    (["simulate", "--set", "scenario.cutin_follower=2"], "--set scenario.cutin_follower is unused: the inlane maneuver"),
+    (["falsify", "--maneuver", "cutin", "--set", "scenario.obstacle_distance_m=100"],
+     "--set scenario.obstacle_distance_m is unused: the cutin maneuver does not read it"),
     (["simulate", "--formula", "always(gap_0 > 0)", "--d-safe", "1"], "--d-safe is unused: it is the paper's psi's"),
     (["falsify", "--formula", "eventually(gap_2 <= 0)", "--d-safe", "1"], "--d-safe is unused: it is the paper's psi's"),
 ])

@@ -126,6 +126,11 @@ def note_unused_flags(args: argparse.Namespace, config, family, formula: str | N
         if getattr(args, flag[2:], None) is not None and key not in options:
             unused.append((flag, f"the {family.name} attack has no {key} (the knots families have)" if family is not None
                                else "there is no attack (the attacker cruises)"))
+    settings = {k for m in MANEUVERS.values() for k in m.settings} - set(config.maneuver_class.settings)
+    for item in getattr(args, "set", []):  # a maneuver's setting set for another maneuver
+        key = item.partition("=")[0].strip()
+        if key.startswith("scenario.") and key.removeprefix("scenario.") in settings:
+            unused.append((f"--set {key}", f"the {config.maneuver} maneuver does not read it"))
     for flag, why in unused:
         print(f"d4sumo: note: {flag} is unused: {why}", file=sys.stderr)
 
