@@ -306,6 +306,10 @@ def test_an_fcd_file_cut_short_is_an_error_and_leaves_nothing(tmp_path):
     ("garbage <<<", "", "netconvert: invalid document structure in the node file, line"),
     ("", "", "netconvert: "),
     ('<nodes><node id="a" x="0" y="0"/></nodes>', "<edges></edges>", "netconvert: No edges loaded"),
+    # regression: netconvert crashes on a negative lane count, and the line said "netconvert: no message"
+    ('<nodes><node id="a" x="0" y="0"/><node id="b" x="5000" y="0"/></nodes>',
+     '<edges><edge id="e1" from="a" to="b" numLanes="-2" speed="30"/></edges>',
+     "netconvert: it crashed (signal "),
 ])
 def test_a_road_netconvert_cannot_build_is_one_line_naming_the_network(tmp_path, capsys, nodes, edges, expected):
     """netconvert's own five lines ("Quitting (on error).") once reached the user."""

@@ -358,8 +358,12 @@ def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str, ext
     if result.returncode != 0:
         os.unlink(tmp)
         names = {str(nodes): "the node file", str(edges): "the edge file"}
+        said = _netconvert_errors(result.stderr or result.stdout, names)
+        if result.returncode < 0:  # it crashed on them (numLanes="-2": SIGSEGV), with no error of its own
+            said = (f"it crashed (signal {-result.returncode}) on these files: check their numbers "
+                    "(numLanes, speed, coordinates)")
         raise ConfigError("scenario.network", name, f"node and edge XML that netconvert builds into a road "
-                                                    f"(netconvert: {_netconvert_errors(result.stderr or result.stdout, names)})")
+                                                    f"(netconvert: {said})")
     os.replace(tmp, out)
 
 
