@@ -141,8 +141,8 @@ def build_report(
     leaves ``out_dir`` as it was."""
     out = Path(out_dir)
     records = load_records(dbs)
-    remove_stale_parts(out)
-    staging = part_of(out)
+    remove_stale_parts(out.resolve())  # resolved: "." has no name to put a part beside
+    staging = part_of(out.resolve())
     shutil.rmtree(staging, ignore_errors=True)  # this process's own, from a report it made before
     staging.mkdir()
     try:

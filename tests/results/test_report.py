@@ -134,3 +134,13 @@ def test_a_report_refused_midway_keeps_the_earlier_report_and_leaves_no_part(rep
             build_report([bad], out, severe=3)
     assert {p.relative_to(earlier): p.read_bytes() for p in earlier.rglob("*") if p.is_file()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.sqlite", "out"]  # no "new", no part
+
+
+def test_a_report_into_the_current_folder(small_db, tmp_path, monkeypatch):
+    """Regression: --out . ended in "ValueError: PosixPath('.') has an empty name" (its part had no name)."""
+    from d4sumo.results.report import build_report
+
+    monkeypatch.chdir(tmp_path)
+    index = build_report([small_db], ".", severe=1)
+    assert (tmp_path / "index.html").is_file() and index.resolve() == tmp_path / "index.html"
+    assert not [p for p in tmp_path.parent.iterdir() if p.name.endswith(".part")]
