@@ -36,8 +36,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     doc = apply_preset(link_collision_distance(document(args)[0]))  # the spec's values too
     config = episode_config(doc)
     family, params = attack_of(doc)
-    note_unused_flags(args, config, family, doc.get("spec", {}).get("formula"))
     spec_table = doc.get("spec", {})
+    note_unused_flags(args, config, family, spec_table.get("formula"))
     d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
     formula = spec_table.get("formula")
     spec = None
@@ -75,7 +75,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives
     replayed = {"robustness": rho, "outcome": episode.outcome,
-                "collision": episode.first_collision.to_dict() if episode.first_collision else None,
+                "collision": episode.first_collision_record(),
                 "min_gaps": episode.min_gaps_m()}
     stored = {"robustness": row.robustness, "outcome": row.outcome, "collision": row.collision, "min_gaps": row.min_gaps}
     differs = [k for k in stored if stored[k] != replayed[k]]
@@ -102,7 +102,7 @@ def episode_summary(config, family, params, episode, robustness, d_safe, fcd) ->
         "config": config.to_dict(),
         "attack": None if family is None else {**family.describe(), "values": [float(v) for v in params]},
         "outcome": episode.outcome,
-        "first_collision": episode.first_collision.to_dict() if episode.first_collision else None,
+        "first_collision": episode.first_collision_record(),
         "collisions": [c.to_dict() for c in episode.collisions],
         "min_gaps_m": episode.min_gaps_m(),  # unrounded: a gap a hair under the collision distance stays under
         "robustness": robustness,

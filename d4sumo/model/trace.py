@@ -95,6 +95,10 @@ class Episode:
     def first_collision(self) -> Collision | None:
         return self.collisions[0] if self.collisions else None
 
+    def first_collision_record(self) -> dict | None:
+        """The first collision as a sample stores it (pair, time, position, speed difference), or None."""
+        return self.collisions[0].to_dict() if self.collisions else None
+
     @property
     def outcome(self) -> str:
         """success: followers collided and the attacker is untouched; attacker_crash; no_crash."""

@@ -74,7 +74,7 @@ class Evaluator:
                 raise ValueError(f"robustness is {rho}")
         except Exception as exc:  # a user's formula
             return self._failed(index, x, exc, time.perf_counter() - t0)
-        collision = episode.first_collision.to_dict() if episode.first_collision else None
+        collision = episode.first_collision_record()
         return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
 
     @staticmethod

@@ -52,22 +52,8 @@ def _dask_client(address: str, timeout_s: float, workers: int):
             yield client
         finally:
             # a close cut short by Ctrl-C left Python's exit waiting 10 s for Dask to close the cluster again
-            with _signals_held():
+            with _signals_deferred(ignored=True):
                 stack.close()
-
-
-@contextlib.contextmanager
-def _signals_held():
-    """Ctrl-C and SIGTERM ignored for a moment (the closing of a local cluster, bounded by its timeout)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
 
 
 def _run_dask(todo: list[_Active], store_results, client) -> None:
@@ -107,18 +93,20 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
 
 
 @contextlib.contextmanager
-def _signals_deferred():
-    """Ctrl-C and SIGTERM taken at the end of the block, not inside it (the start of a local cluster, about
-    a second: one cut short cannot be closed cleanly)."""
+def _signals_deferred(*, ignored: bool = False):
+    """Ctrl-C and SIGTERM kept out of a block: taken at its end (the start of a local cluster, about a
+    second: one cut short cannot be closed cleanly), by the command's own handler, in place of what the
+    block raised, if anything; or ``ignored`` (its closing, bounded by its timeout)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
-    held = {sig: signal.signal(sig, lambda sig, frame: caught.append(sig)) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handler = signal.SIG_IGN if ignored else (lambda sig, frame: caught.append(sig))
+    held = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
-        if caught:  # now, to the command's own handler (in place of what the block raised, if anything)
+        for sig, previous in held.items():
+            signal.signal(sig, previous)
+        if caught:
             signal.raise_signal(caught[0])

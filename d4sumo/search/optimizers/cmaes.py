@@ -62,7 +62,6 @@ class CMAES(Optimizer):
             self._es = self._start(self.rng.random(self.dimension))
         self._pending, self._population, self._scores = [], [], []
 
-
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         _rekey(self._es)
