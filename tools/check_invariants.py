@@ -1,7 +1,7 @@
 """Verdict invariants over many random episodes, checked against SUMO's own FCD output.
 
 Plays N random episodes (on the shipped 4-lane highway and on roads of several edges: a speed change,
-a lane drop, a curve, a route through netgenerate's grid; one in five with the paper-as-run preset, its controllers, families and scenario,
+a lane drop, a curve, a route through netgenerate's grid; one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
@@ -132,9 +132,14 @@ def vehicle_table(rng: np.random.Generator) -> dict:
 
 def _as_run_episode(rng: np.random.Generator, setpoint: float, followers: int) -> tuple[Campaign, np.ndarray]:
     """An episode of the paper-as-run preset: the authors' controllers, attack families and scenario."""
+    followers = max(2, followers)
     doc = {"preset": "paper-as-run", "attack": {"family": str(rng.choice(["persistent", "intermittent", "knots"]))},
-           "scenario": {"setpoint_m": setpoint, "followers": max(2, followers), "network": str(rng.choice(STRAIGHT))},
+           "scenario": {"setpoint_m": setpoint, "followers": followers, "network": str(rng.choice(STRAIGHT))},
            "vehicle": {"coast_decel_mps2": float(rng.choice([0.0, 0.0, 1.0, 2.0]))}, "search": {"optimizer": "random"}}
+    if rng.random() < 1 / 3:  # other systems under the preset (they keep their own options): one for all, or mixed
+        systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
+        tables = [{"class": c.cls} if c.cls == "switching" else {"class": c.cls, **dict(c.params)} for c in systems]
+        doc["controller"] = tables if rng.random() < 0.5 else tables[0]
     campaign = campaign_of(doc)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
