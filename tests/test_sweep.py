@@ -559,6 +559,52 @@ def test_a_value_fixed_beside_its_grid_axis_is_refused(tmp_path, fixed, field):
         Sweep.load(write(tmp_path, text))
 
 
+@pytest.mark.sumo
+def test_ctrl_c_to_a_local_dask_sweep_is_one_line_not_the_workers_tracebacks(tmp_path):
+    """Regression: the terminal's Ctrl-C, sent to the whole group, reached the local cluster's workers,
+    and each printed its KeyboardInterrupt traceback (pages of them) after the sweep's one line."""
+    db = tmp_path / "r.sqlite"
+    _, proc = start_sweep(write(tmp_path, LONG), db, "--dask", "local")
+    wait_for_samples(db, 20)
+    t0 = time.time()
+    os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=20)
+    err = proc.stderr.read().decode()
+    assert proc.returncode == 130 and err.count("interrupted") == 1, err
+    assert "KeyboardInterrupt" not in err and "NameError" not in err, err
+    assert time.time() - t0 < 8
+
+
+def test_a_local_dask_worker_ignores_ctrl_c_and_the_interrupted_sync_error_is_dropped():
+    import logging
+
+    from d4sumo.sweep import dask_cluster
+
+    held = signal.getsignal(signal.SIGINT)
+    try:
+        dask_cluster.dask_setup(worker=None)  # as a worker runs its preload
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, held)
+
+    def record(exc):
+        try:
+            raise exc
+        except Exception:
+            return logging.LogRecord("tornado.application", logging.ERROR, __file__, 1, "Exception in callback",
+                                     None, sys.exc_info())
+
+    # distributed/utils.py's cancel, whose future is not made yet when Ctrl-C lands
+    sync = {}
+    exec(compile("def cancel():\n    return future\n", os.path.join("site-packages", "distributed", "utils.py"), "exec"), sync)
+    try:
+        sync["cancel"]()
+    except NameError as exc:
+        assert dask_cluster._interrupted_sync(record(exc)) is False
+    assert dask_cluster._interrupted_sync(record(NameError("another"))) is True
+    assert dask_cluster._interrupted_sync(logging.LogRecord("x", logging.ERROR, __file__, 1, "m", None, None)) is True
+
+
 _INTERRUPTED = """
 import os, signal, sys
 from distributed import LocalCluster

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import re
 import signal
 import threading
+import traceback
 
 from ..errors import ConfigError, D4sumoError
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
@@ -26,6 +28,17 @@ _DASK_ADDRESS = re.compile(r"^(?:(tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[A
 
 
 
+def _interrupted_sync(record: logging.LogRecord) -> bool:
+    """False for the NameError distributed's ``sync`` logs when Ctrl-C lands before the call it waits for
+    has started (its ``cancel`` reads a future not made yet): a traceback after the one line the
+    interruption gets, about nothing the user did wrong."""
+    exc = record.exc_info[1] if record.exc_info else None
+    if not isinstance(exc, NameError) or exc.__traceback__ is None:
+        return True
+    last = traceback.extract_tb(exc.__traceback__)[-1]
+    return not (last.name == "cancel" and last.filename.endswith(os.path.join("distributed", "utils.py")))
+
+
 @contextlib.contextmanager
 def _dask_client(address: str, timeout_s: float, workers: int):
     """A Dask client of the scheduler at ``address``, or of a local cluster of ``workers`` processes."""
@@ -37,10 +50,11 @@ def _dask_client(address: str, timeout_s: float, workers: int):
         try:
             if address == "local":
                 logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
+                logging.getLogger("tornado.application").addFilter(_interrupted_sync)
                 # the workers' warnings (a task cancelled by Ctrl-C) are not the user's business; errors are
                 with _signals_deferred():  # a cluster cut short while it starts cannot be closed cleanly
                     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                           dashboard_address=":0", silence_logs=logging.ERROR)
+                                           dashboard_address=":0", silence_logs=logging.ERROR, preload=[__name__])
                     stack.callback(cluster.close, timeout=5)
                 log.warning("local Dask cluster of %d workers; dashboard at %s", workers, cluster.dashboard_link)
                 address = cluster.scheduler_address
@@ -54,6 +68,14 @@ def _dask_client(address: str, timeout_s: float, workers: int):
             # a close cut short by Ctrl-C left Python's exit waiting 10 s for Dask to close the cluster again
             with _signals_deferred(ignored=True):
                 stack.close()
+
+
+def dask_setup(worker) -> None:
+    """Run by each worker of a local cluster as it starts (its ``preload``): it ignores Ctrl-C. The terminal
+    sends Ctrl-C to the whole process group, the workers with it; the sweep takes it and closes them in
+    order, where each worker's own KeyboardInterrupt printed pages of tracebacks."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run_dask(todo: list[_Active], store_results, client) -> None:
