@@ -11,6 +11,7 @@ road without seeing the client's disk.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -281,7 +282,9 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
     named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
     rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
-    with its y coordinates shifted, so a car drives exactly as on the road alone."""
+    with its y coordinates shifted, so a car drives exactly as on the road alone; where netconvert builds
+    a copy otherwise (`_copies_alike`), the road alone is returned (``copies`` 1): its episodes play one at
+    a time."""
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
@@ -294,7 +297,34 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     net_file = road.net_file.parent / f"{copied.name}-{copied.digest}.net.xml"
     if not net_file.is_file():
         _build_net(copied, net_file)
+    if not _copies_alike(road.net_file, net_file, copies):
+        return road
     return dataclasses.replace(road, net_file=net_file, copies=copies)
+
+
+@functools.lru_cache(maxsize=32)
+def _copies_alike(alone: Path, copied: Path, copies: int) -> bool:
+    """Whether every copy's lanes (edges' and junctions') are the road's alone, attribute for attribute
+    but their shapes. netconvert computes a junction's geometry anew at each copy's coordinates, and a
+    curved one can come out of another length or speed limit (1.22 m against 1.26 m), which SUMO's
+    car-following models obey: the episodes played on that copy would not be the episodes alone."""
+    from xml.etree import ElementTree as ET
+
+    def lanes(path: Path) -> dict[str, dict]:
+        return {lane.get("id"): {k: v for k, v in lane.attrib.items() if k not in ("id", "shape")}
+                for lane in ET.parse(path).getroot().iter("lane")}
+
+    road, batch = lanes(alone), lanes(copied)
+    if len(batch) != copies * len(road):
+        return False
+    for j in range(copies):
+        prefix = copy_prefix(j)
+        for lane_id, attributes in road.items():
+            internal = lane_id.startswith(":")  # a junction's lane: ':' then the junction's id
+            copy_id = f":{prefix}{lane_id[1:]}" if internal else prefix + lane_id
+            if batch.get(copy_id) != attributes:
+                return False
+    return True
 
 
 def _side_by_side(source: NetworkSource, copies: int) -> tuple[bytes, bytes, bytes]:

@@ -179,7 +179,8 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     exception a user's follower controller raised in it (alone it would end that episode). An episode
     that ends (its first collision) leaves SUMO at once and costs nothing more; ``on_episode(i, result)``
     hears of it then. Followers whose SUMO model draws from SUMO's random streams (`carfollowing.shares_sumo`)
-    would draw differently beside other platoons: their episodes play one at a time, in turn.
+    would draw differently beside other platoons: their episodes play one at a time, in turn, as do the
+    episodes on a road whose copies netconvert does not build alike (`scenarios.batch_road`).
     """
     if not plans:
         return []
@@ -189,7 +190,9 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     plans = [checked_plan(c, p) for c, p in zip(configs, plans)]
     config = configs[0]
     distinct = list({id(c): c for c in configs}.values())
-    if not shares_sumo(config):
+    if not shares_sumo(config) and (road is None or road.copies < len(plans)):
+        road = batch_road(config.network, len(plans), route=config.route)  # alone where copies differ
+    if shares_sumo(config) or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:
             return _one_at_a_time(config, plans, alone, on_episode)
@@ -197,8 +200,6 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
         for i, (c, plan) in enumerate(zip(configs, plans)):  # each with its own configuration, in turn
             results += _one_at_a_time(c, [plan], alone, on_episode and (lambda _, r, i=i: on_episode(i, r)))
         return results
-    if road is None or road.copies < len(plans):
-        road = batch_road(config.network, len(plans), route=config.route)
     types_file = check_episode(config, road)
     for c in distinct[1:]:
         check_episode(c, road)

@@ -547,6 +547,29 @@ def test_a_batch_on_a_road_of_several_edges_is_bit_for_bit_each_episode_alone(ro
     assert sum(r.trace["pos_v1"][-1] > build_road(config.network).first_edge_m for r in batched) >= 2  # past a join
 
 
+def test_a_batch_on_a_road_whose_copies_netconvert_builds_otherwise_plays_each_episode_alone(tmp_path):
+    """Regression: netconvert built a sharp junction's lane 1.22 m long in one copy of the road and 1.26 m
+    alone (its geometry is computed anew at each copy's coordinates); SUMO's models obey the junction's
+    speed limit, and 8 of 32 samples of a campaign on such a road replayed otherwise."""
+    from conftest import assert_same_episode, random_plans
+
+    from d4sumo.engine.scenarios import batch_road
+
+    network = tmp_path / "sharp_junctions"
+    network.mkdir()
+    (network / "road.nod.xml").write_text(
+        '<nodes><node id="n0" x="0" y="0"/><node id="n1" x="160" y="0" radius="25"/><node id="n2" x="160" y="30" radius="15"/>'
+        '<node id="n3" x="190" y="60" radius="20"/><node id="n4" x="3500" y="60"/></nodes>')
+    (network / "road.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{e}" from="n{i}" to="n{i + 1}" numLanes="2" speed="33"/>' for i, e in enumerate("abcd")) + "</edges>")
+    assert batch_road(str(network), 4).copies == 1  # the road alone: its copies are not alike
+    assert batch_road(str(ROADS / "curved"), 4).copies == 4
+    config = EpisodeConfig(network=str(network), start="warmup", controller=[ControllerConfig("sumo:ACC")] * 3)
+    plans = random_plans(config, 4, seed=7)
+    for plan, result in zip(plans, simulate_batch(config, plans)):
+        assert_same_episode(result, simulate(config, plan))
+
+
 # --- the paper as its authors ran it ------------------------------------------------------------------
 
 
