@@ -55,6 +55,9 @@ class Road:
     #: whether every edge of the route, and every junction lane between two of them, is as long in each of
     #: its lanes: positions along the route in different lanes are then comparable (lane changes need it)
     even_lanes: bool = True
+    #: the widths of the lanes the platoon may use (0 .. lanes - 1) along the route, narrowest first: a lane
+    #: change reads lanes of one width (`maneuvers.occupied_lanes`)
+    lane_widths_m: tuple[float, ...] = (3.2,)
     #: lane index -> {vehicle class: the first edge of the route whose lane of that index it may not use}
     closed_to: tuple[tuple[tuple[str, str], ...], ...] = ()
 
@@ -251,6 +254,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lane_width_m=info["lane_width_m"],
         first_edge_m=info["first_edge_m"],
         even_lanes=info["even_lanes"],
+        lane_widths_m=tuple(info["lane_widths_m"]),
         closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in info["closed_to"]),
     )
 
@@ -370,7 +374,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "closed_to" in info else None
+    return info if isinstance(info, dict) and "lane_widths_m" in info else None
 
 
 def _netconvert(binary: str, nodes: Path, edges: Path, out: Path, name: str, extra: list[str] | None = None) -> None:
@@ -450,6 +454,7 @@ def _describe(net_file: Path) -> dict:
         "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
         "first_edge_m": chain[0].getLength(),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
+        "lane_widths_m": sorted({e.getLanes()[i].getWidth() for e in chain for i in range(lanes)}),
         "closed_to": [_closed_to(chain, i) for i in range(lanes)],
     }
 

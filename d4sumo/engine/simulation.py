@@ -40,6 +40,11 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road whose lanes are as long as each other ({road.name}'s are not, on a curve or at a junction), "
                           "or maneuver inlane")
+    if config.maneuver_class.lateral and len(road.lane_widths_m) > 1:  # which lanes a car is in reads one width
+        raise ConfigError("scenario.maneuver", config.maneuver,
+                          f"a road whose lanes are of one width ({road.name}'s are "
+                          f"{' to '.join(f'{w:g}' for w in (road.lane_widths_m[0], road.lane_widths_m[-1]))} m wide), "
+                          "or maneuver inlane")
     own = dict(config.vehicles)
     for vid, v in zip(config.vehicle_ids, config.car_vehicles):
         for lane in range(config.maneuver_class.lanes_needed):

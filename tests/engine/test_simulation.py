@@ -627,6 +627,31 @@ def test_a_lane_change_is_refused_on_a_road_whose_lanes_differ_in_length(road):
     check_road(EpisodeConfig(), dc.replace(road, even_lanes=False))  # in its lane, a car's own lane decides
 
 
+@pytest.mark.parametrize("lanes, edges", [
+    ('<lane index="0" width="2.6"/><lane index="1" width="5.0"/>', ["a"]),  # one edge, lanes of two widths
+    ("", ["a", "b"]),  # lanes of one width on each edge, another on the next
+], ids=["across", "along"])
+def test_a_lane_change_is_refused_on_a_road_whose_lanes_differ_in_width(tmp_path, lanes, edges):
+    """Regression: which lanes the attacker was in read one width (lane 0's), so on lanes of 2.6 m and 5 m
+    it was put in lane 0 1.17 m before its body reached it: an attacker_crash at 0.9 s where SUMO's
+    positions show none (and, with the widths the other way round, a crash missed)."""
+    network = tmp_path / "widths"
+    network.mkdir()
+    (network / "road.nod.xml").write_text(
+        '<nodes><node id="n0" x="0" y="0"/><node id="n1" x="150" y="0"/><node id="n2" x="4000" y="0"/></nodes>')
+    if edges == ["a"]:
+        edge_xml = f'<edge id="a" from="n0" to="n2" numLanes="2" speed="33">{lanes}</edge>'
+    else:
+        edge_xml = ('<edge id="a" from="n0" to="n1" numLanes="2" speed="33" width="2.8"/>'
+                    '<edge id="b" from="n1" to="n2" numLanes="2" speed="33" width="4.0"/>')
+    (network / "road.edg.xml").write_text(f"<edges>{edge_xml}</edges>")
+    config = EpisodeConfig(network=str(network), maneuver="cutin", start="steady")
+    widths = "2.6 to 5" if edges == ["a"] else "2.8 to 4"
+    with pytest.raises(ConfigError, match=f"a road whose lanes are of one width \\(widths's are {widths} m wide\\)"):
+        simulate(config, np.zeros(config.steps))
+    simulate(dataclasses.replace(config, maneuver="inlane"), np.zeros(config.steps))  # in its lane, widths do not matter
+
+
 # --- a platoon of different vehicles --------------------------------------------------------------
 
 TRUCK = {"length_m": 12.0, "max_accel_mps2": 1.5, "max_decel_mps2": 4.0, "vclass": "truck", "shape": "truck/semitrailer"}
