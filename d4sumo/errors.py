@@ -31,6 +31,11 @@ class SumoError(D4sumoError):
     """SUMO could not be found, could not build a network, or failed during an episode."""
 
 
+class WarmupCollision(D4sumoError):
+    """Cars collided in the warm-up, before the attack started: the episode scores no attack. The warm-up
+    is the same whatever the attack, so every episode of that configuration ends so."""
+
+
 def is_number(value: object) -> bool:
     """A real number (Python's or numpy's), not a bool."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))

@@ -182,9 +182,11 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     """The names of the invariants this sample breaks."""
     config = campaign.config
     r = evaluator(index, params, fcd_path=fcd)
-    if r.outcome == "error":
+    if r.outcome == "error" and not r.error.startswith("WarmupCollision"):
         return [f"error: {r.error}"]
     store.add_sample(campaign_id, index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps, r.wall_s, r.error)
+    if r.outcome == "error":  # a collision in the warm-up: no attack was played, no verdict to check
+        return []
     row = store.samples(campaign_id)[-1]  # what a reader of the database sees
     broken = []
     c = row.collision
@@ -299,7 +301,8 @@ def main(argv=None) -> int:
             evaluator = Evaluator(campaign, road=road)
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
-            outcomes[store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"] += 1
+            outcome = store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"
+            outcomes["warm-up collision" if outcome == "error" and not problems else outcome] += 1
             if args.batch > 1:  # its partners drawn apart, so that the episodes are those of a run without
                 differs = batch_differs(campaign, evaluator, params, args.batch - 1,
                                         np.random.default_rng([args.seed, index]), road)

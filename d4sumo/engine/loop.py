@@ -16,6 +16,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import WarmupCollision
 from ..model.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, maneuver_of
@@ -107,6 +108,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             sensed = [vid for i in arrayed for vid in platoons[i]]
         if batch is not None:  # as alone: a failure, else an untraceable mode
             error = error or batch.failed.get(e) or batch.bad_modes.get(e)
+        if error is None and collisions and steps_done <= configs[e].attack_start_step:
+            error = _warmup_collision(configs[e], collisions[0])
         lateral_m = world.lateral_rows(e)
         if error is not None:
             results[e] = error
@@ -195,3 +198,11 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     for e in sorted(live):
         end(e, steps, ())
     return results
+
+
+def _warmup_collision(config: EpisodeConfig, collision) -> WarmupCollision:
+    """A collision before the attack's first command acted (the step counts say, not the clock): the
+    platoon's own, on this road and from rest, which no attack caused."""
+    return WarmupCollision(
+        f"{collision.pair} collided at {collision.time_s:.2f} s, in the warm-up before the attack (from "
+        f"{config.attack_start_s:g} s): the platoon crashes on {config.network} with no attack at all")

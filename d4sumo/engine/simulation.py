@@ -195,9 +195,10 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     plans = [checked_plan(c, p) for c, p in zip(configs, plans)]
     config = configs[0]
     distinct = list({id(c): c for c in configs}.values())
-    if not shares_sumo(config) and (road is None or road.copies < len(plans)):
+    batched = shares_sumo(config)
+    if batched and (road is None or road.copies < len(plans)):
         road = batch_road(config.network, len(plans), route=config.route)  # alone where copies differ
-    if shares_sumo(config) or road.copies < len(plans):
+    if not batched or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:
             return _one_at_a_time(config, plans, alone, on_episode)

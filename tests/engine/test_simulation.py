@@ -547,6 +547,34 @@ def test_a_batch_on_a_road_of_several_edges_is_bit_for_bit_each_episode_alone(ro
     assert sum(r.trace["pos_v1"][-1] > build_road(config.network).first_edge_m for r in batched) >= 2  # past a join
 
 
+def sharp_junctions(folder: Path) -> Path:
+    """A road of three sharp turns (junction radii 15-25 m, a limit of about 4 m/s through them)."""
+    network = folder / "sharp_junctions"
+    network.mkdir()
+    (network / "road.nod.xml").write_text(
+        '<nodes><node id="n0" x="0" y="0"/><node id="n1" x="160" y="0" radius="25"/><node id="n2" x="160" y="30" radius="15"/>'
+        '<node id="n3" x="190" y="60" radius="20"/><node id="n4" x="3500" y="60"/></nodes>')
+    (network / "road.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{e}" from="n{i}" to="n{i + 1}" numLanes="2" speed="33"/>' for i, e in enumerate("abcd")) + "</edges>")
+    return network
+
+
+def test_a_collision_in_the_warm_up_is_no_attack_s_success(tmp_path):
+    """Regression: IDM braking for a sharp turn was hit by the paper's controller behind it 10.8 s into
+    the 15 s warm-up, and the episode was stored as a success (robustness +0.069) before any attack."""
+    from d4sumo.errors import WarmupCollision
+
+    config = EpisodeConfig(network=str(sharp_junctions(tmp_path)), start="warmup",
+                           controller=[ControllerConfig("sumo:IDM"), ControllerConfig("switching"), ControllerConfig("switching")])
+    box = maneuver_of(config).family(make_attack("knots"))
+    plan = attack_plan(box, np.zeros(box.lower.size), config)  # knots of 0: the attacker cruises on
+    with pytest.raises(WarmupCollision, match=r"v1-v2 collided at 10\.80 s, in the warm-up before the attack \(from 15 s\)"):
+        simulate(config, plan)
+    assert all(isinstance(r, WarmupCollision) for r in simulate_batch(config, [plan, plan]))
+    rest = dataclasses.replace(config, start="rest")  # from rest the attack is on from the start
+    assert simulate(rest, attack_plan(box, np.zeros(box.lower.size), rest)).outcome == "no_crash"
+
+
 def test_a_batch_on_a_road_whose_copies_netconvert_builds_otherwise_plays_each_episode_alone(tmp_path):
     """Regression: netconvert built a sharp junction's lane 1.22 m long in one copy of the road and 1.26 m
     alone (its geometry is computed anew at each copy's coordinates); SUMO's models obey the junction's
@@ -555,13 +583,7 @@ def test_a_batch_on_a_road_whose_copies_netconvert_builds_otherwise_plays_each_e
 
     from d4sumo.engine.scenarios import batch_road
 
-    network = tmp_path / "sharp_junctions"
-    network.mkdir()
-    (network / "road.nod.xml").write_text(
-        '<nodes><node id="n0" x="0" y="0"/><node id="n1" x="160" y="0" radius="25"/><node id="n2" x="160" y="30" radius="15"/>'
-        '<node id="n3" x="190" y="60" radius="20"/><node id="n4" x="3500" y="60"/></nodes>')
-    (network / "road.edg.xml").write_text("<edges>" + "".join(
-        f'<edge id="{e}" from="n{i}" to="n{i + 1}" numLanes="2" speed="33"/>' for i, e in enumerate("abcd")) + "</edges>")
+    network = sharp_junctions(tmp_path)
     assert batch_road(str(network), 4).copies == 1  # the road alone: its copies are not alike
     assert batch_road(str(ROADS / "curved"), 4).copies == 4
     config = EpisodeConfig(network=str(network), start="warmup", controller=[ControllerConfig("sumo:ACC")] * 3)
