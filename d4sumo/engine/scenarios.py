@@ -237,10 +237,11 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         _build_net(source, net_file, netconvert)
         try:
             info = _describe(net_file)
-        except ConfigError:
-            if not route:
+        except ConfigError as exc:
+            if not route or not exc.allowed.endswith(_OR_ROUTE):  # a road's own fault (a lane 0 that ends): said as is
                 raise
-            raise ConfigError("scenario.route", list(route), "edges that lead on one to the next") from None
+            raise ConfigError("scenario.route", list(route), "edges that lead on one to the next, "
+                              "never back to a junction passed before") from None
         if route and info["route_edges"] != list(route):
             raise ConfigError("scenario.route", list(route), f"edges that lead on one to the next (they drive as {info['route_edges']})")
         _write_atomic(info_file, json.dumps(info))
@@ -418,6 +419,9 @@ def _netconvert_errors(text: str, files: dict[str, str]) -> str:
     return "; ".join(errors) or text.strip().splitlines()[-1] if text.strip() else "no message"
 
 
+_OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles (one given: it does not lead on)
+
+
 def _describe(net_file: Path) -> dict:
     """The straight chain of edges from the road's start, its length and its lowest speed limit."""
     import sumolib
@@ -427,7 +431,7 @@ def _describe(net_file: Path) -> dict:
     starts = [e for e in edges if not e.getIncoming()]
     if len(starts) != 1:
         raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
-                          "a network with exactly one road start (a straight one-way chain of edges), or a scenario.route")
+                          f"a network with exactly one road start (a straight one-way chain of edges){_OR_ROUTE}")
     chain = [starts[0]]
     while True:
         nxt = list(chain[-1].getOutgoing())
@@ -435,7 +439,7 @@ def _describe(net_file: Path) -> dict:
             break
         if len(nxt) > 1 or nxt[0] in chain:
             raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
-                              "a straight chain of edges without branches, or a scenario.route")
+                              f"a straight chain of edges without branches{_OR_ROUTE}")
         chain.append(nxt[0])
     for lane in (lane for e in chain for lane in e.getLanes()):  # netconvert keeps "nan" and "inf"; SUMO refuses them
         if not 0 < lane.getSpeed() < math.inf:

@@ -145,6 +145,11 @@ def test_a_route_through_a_network_of_many_ways_is_the_road_alone_and_batches_co
                          (("A0B0", "A0B0"), "each edge once")):
         with pytest.raises(ConfigError, match=f"scenario.route: got .*; allowed: {message}"):
             build_road(str(grid), route=bad, cache_dir=tmp_path / "cache")
+    # regression: a route round a block, and one whose turn leaves lane 0, were said not to lead on
+    with pytest.raises(ConfigError, match="scenario.route: got .*; allowed: edges that lead on one to the next, never back to a junction"):
+        build_road(str(grid), route=("A0B0", "B0B1", "B1A1", "A1A0"), cache_dir=tmp_path / "cache")
+    with pytest.raises(ConfigError, match="scenario.network: got .*lane 0 of A0B0 ends there"):
+        build_road(str(grid), route=("A0B0", "B0B1"), cache_dir=tmp_path / "cache")
 
 
 @pytest.mark.sumo
