@@ -49,7 +49,6 @@ class Road:
     length_m: float
     speed_limit_mps: float  # the lowest limit along the chain
     lanes: int
-    lane_width_m: float = 3.2  # the rightmost lane's width (SUMO's default 3.2 m)
     copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
     first_edge_m: float = float("inf")  # the first edge's length: every car starts on it
     #: whether every edge of the route, and every junction lane between two of them, is as long in each of
@@ -57,9 +56,14 @@ class Road:
     even_lanes: bool = True
     #: the widths of the lanes the platoon may use (0 .. lanes - 1) along the route, narrowest first: a lane
     #: change reads lanes of one width (`maneuvers.occupied_lanes`)
-    lane_widths_m: tuple[float, ...] = (3.2,)
+    lane_widths_m: tuple[float, ...] = (3.2,)  # SUMO's default
     #: lane index -> {vehicle class: the first edge of the route whose lane of that index it may not use}
     closed_to: tuple[tuple[tuple[str, str], ...], ...] = ()
+
+    @property
+    def lane_width_m(self) -> float:
+        """The narrowest lane's width: the one width of them all wherever a lane change plays."""
+        return self.lane_widths_m[0]
 
     def closed(self, lane: int, vclass: str) -> str | None:
         """The first edge of the route whose lane ``lane`` ``vclass`` may not use, or None."""
@@ -252,7 +256,6 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         length_m=info["length_m"],
         speed_limit_mps=info["speed_limit_mps"],
         lanes=info["lanes"],
-        lane_width_m=info["lane_width_m"],
         first_edge_m=info["first_edge_m"],
         even_lanes=info["even_lanes"],
         lane_widths_m=tuple(info["lane_widths_m"]),
@@ -455,7 +458,6 @@ def _describe(net_file: Path) -> dict:
         "length_m": sum(e.getLength() for e in chain),
         "speed_limit_mps": min(e.getSpeed() for e in chain),
         "lanes": lanes,
-        "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),
         "first_edge_m": chain[0].getLength(),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
         "lane_widths_m": sorted({e.getLanes()[i].getWidth() for e in chain for i in range(lanes)}),

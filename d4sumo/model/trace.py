@@ -44,7 +44,7 @@ class Trace:
 
     def window(self, start: int) -> "Trace":
         """The trace from sample ``start`` on, its clock restarted at 0; at least its last two samples
-        (a trace that ended before ``start`` is seen at its end: rtamt needs two samples)."""
+        (rtamt needs two)."""
         start = min(start, len(self) - 2)
         if start <= 0:
             return self

@@ -137,7 +137,8 @@ class Specification:
 
     def robustness(self, trace: Trace) -> float:
         """The robustness at ``start_step`` (the attack's start; 0 unless scored after a warm-up), the
-        window's own t = 0. An episode that ended before it is scored at its end, the collision."""
+        window's own t = 0. An episode never ends before it: a collision in the warm-up is no episode
+        (`errors.WarmupCollision`)."""
         trace = trace.window(self.start_step)
         data = {"time": trace.times_s.tolist()}
         for name in self.variables:
