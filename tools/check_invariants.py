@@ -58,12 +58,26 @@ from toolargs import Parser, run_main
 
 FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 decimals
 #: the roads drawn from: the shipped 4-lane highway (one edge), and roads of several edges: a speed
-#: change, a lane drop, a curve (in-lane maneuvers only there: lanes are told from the FCD's y)
+#: change, a lane drop, a curve (in-lane maneuvers only there: lanes are told from the FCD's y); then
+#: netgenerate's grid and three sharp turns (`sharp_turns`), made at the first run
 ROADS = ["highway_4lane", *(str(Path(__file__).resolve().parent.parent / "examples" / "roads" / name)
                             for name in ("three_edges", "lane_drop", "curved"))]
 STRAIGHT = ROADS[:3]
 #: networks with many ways, driven along a named route: netgenerate's grid (made at the first run)
 ROUTES: dict[str, tuple[str, ...]] = {}
+
+
+def sharp_turns() -> str:
+    """A road of three sharp turns (junction radii 15-25 m, about 4 m/s through them): SUMO's models slow
+    down for them, and netconvert builds their lanes otherwise in a batch's copies (played alone then)."""
+    folder = Path(tempfile.gettempdir()) / "d4sumo-check-sharp-turns"
+    folder.mkdir(exist_ok=True)
+    (folder / "road.nod.xml").write_text(
+        '<nodes><node id="n0" x="0" y="0"/><node id="n1" x="160" y="0" radius="25"/><node id="n2" x="160" y="30" radius="15"/>'
+        '<node id="n3" x="190" y="60" radius="20"/><node id="n4" x="3500" y="60"/></nodes>')
+    (folder / "road.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{e}" from="n{i}" to="n{i + 1}" numLanes="2" speed="33"/>' for i, e in enumerate("abcd")) + "</edges>")
+    return str(folder)
 
 
 def netgenerate_grid() -> str:
@@ -286,7 +300,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     parser.check_counts({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0, MAX_COPIES)})
     rng = np.random.default_rng(args.seed)
-    ROADS.append(netgenerate_grid())
+    ROADS.extend([netgenerate_grid(), sharp_turns()])
     roads = {name: build_road(name, route=ROUTES.get(name, ())) for name in ROADS}
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
