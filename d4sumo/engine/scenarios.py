@@ -50,6 +50,8 @@ class Road:
     speed_limit_mps: float  # the lowest limit along the chain
     lanes: int
     copies: int = 1  # side by side, for a batch of episodes (`batch_road`)
+    #: netconvert builds this road's copies otherwise than the road: its batches play one at a time (`batch_road`)
+    copies_unlike: bool = False
     first_edge_m: float = float("inf")  # the first edge's length: every car starts on it
     #: whether every edge of the route, and every junction lane between two of them, is as long in each of
     #: its lanes: positions along the route in different lanes are then comparable (lane changes need it)
@@ -291,8 +293,8 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
     rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
     with its y coordinates shifted, so a car drives exactly as on the road alone; where netconvert builds
-    a copy otherwise (`_copies_alike`), the road alone is returned (``copies`` 1): its episodes play one at
-    a time."""
+    a copy otherwise (`_copies_alike`), the road alone is returned, marked ``copies_unlike``: its episodes
+    play one at a time."""
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
@@ -306,7 +308,7 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     if not net_file.is_file():
         _build_net(copied, net_file)
     if not _copies_alike(road.net_file, net_file, copies):
-        return road
+        return dataclasses.replace(road, copies_unlike=True)
     return dataclasses.replace(road, net_file=net_file, copies=copies)
 
 

@@ -196,7 +196,7 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     config = configs[0]
     distinct = list({id(c): c for c in configs}.values())
     batched = shares_sumo(config)
-    if batched and (road is None or road.copies < len(plans)):
+    if batched and (road is None or road.copies < len(plans) and not road.copies_unlike):
         road = batch_road(config.network, len(plans), route=config.route)  # alone where copies differ
     if not batched or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None

@@ -63,7 +63,7 @@ class Evaluator:
 
     def batch_road(self, episodes: int) -> Road:
         """The road with at least this many copies side by side (built once, then grown as needed)."""
-        if self._batch_road is None or self._batch_road.copies < episodes:
+        if self._batch_road is None or self._batch_road.copies < episodes and not self._batch_road.copies_unlike:
             self._batch_road = batch_road(self.network, episodes)
         return self._batch_road
 

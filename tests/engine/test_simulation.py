@@ -584,7 +584,8 @@ def test_a_batch_on_a_road_whose_copies_netconvert_builds_otherwise_plays_each_e
     from d4sumo.engine.scenarios import batch_road
 
     network = sharp_junctions(tmp_path)
-    assert batch_road(str(network), 4).copies == 1  # the road alone: its copies are not alike
+    alone = batch_road(str(network), 4)
+    assert alone.copies == 1 and alone.copies_unlike  # the road alone: its copies are not alike
     assert batch_road(str(ROADS / "curved"), 4).copies == 4
     config = EpisodeConfig(network=str(network), start="warmup", controller=[ControllerConfig("sumo:ACC")] * 3)
     plans = random_plans(config, 4, seed=7)
