@@ -432,8 +432,9 @@ def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
     {"bo": "inducing = 0", "ce": "noise_fraction = 0.0"},  # 0.4
     {"bo": "gp_version = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.3
     {"bo": "gp_version = 1\nbatch_size = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.2
-    {"auto": "suffix = 0.0\npatience = 0"},  # 0.9
-    {"auto": "stall = 0\nsuffix = 0.0\npatience = 0"},  # 0.8
+    {"auto": "per_signal = 0"},  # 0.10
+    {"auto": "suffix = 0.0\npatience = 0\nper_signal = 0"},  # 0.9
+    {"auto": "stall = 0\nsuffix = 0.0\npatience = 0\nper_signal = 0"},  # 0.8
     {"auto": "version = 1"},  # 0.7
 ])
 def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):

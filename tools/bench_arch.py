@@ -192,7 +192,7 @@ def held_rates(args) -> None:
     ones that falsify it at the model's step still do at a finer one."""
     specs = args.specs or [*arch_cc.SPECS, *arch_cc.EARLIER_SPECS]
     held = make_optimizer("auto", np.zeros(2 * SEGMENTS), np.ones(2 * SEGMENTS), budget=1,
-                          rng=np.random.default_rng(args.first_seed))
+                          rng=np.random.default_rng(args.first_seed), signals=(SEGMENTS, SEGMENTS))
     draws = {"held": lambda: held._held(), "uniform": lambda: held._arm_rng.random(2 * SEGMENTS)}
     print(f"chasing cars, instance {args.instance}: {args.held} inputs of each kind (seed {args.first_seed})", flush=True)
     falsifying = {spec: [] for spec in specs}  # the held inputs that falsify each specification

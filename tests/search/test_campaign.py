@@ -283,13 +283,16 @@ def test_bo_with_a_constant_liar_proposes_a_batch_of_distinct_points_and_repeats
     assert "batch_size" in campaign.definition()["optimizer_options"]
 
 
-@pytest.mark.parametrize("removed, kept, stall", [(("suffix", "patience"), {"suffix": 0.0, "patience": 0}, 25),
-                                                  (("suffix", "patience", "stall"), {"stall": 0, "suffix": 0.0, "patience": 0}, 0),
-                                                  (("suffix", "patience", "stall", "version"), {"version": 1}, 0)])
-def test_an_auto_campaign_0_9_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(removed, kept, stall):
-    """d4sumo 0.9 stored auto's definition without ``suffix`` and ``patience`` (no suffix moves, exploring
-    from the design on), 0.8 without ``stall`` either (piece moves through stalls), 0.7 without ``version``
-    either (uniform exploration: no stalls, no piece moves)."""
+@pytest.mark.parametrize("removed, kept, ran", [
+    (("per_signal",), {"per_signal": 0}, (25, 0.25, 5)),
+    (("per_signal", "suffix", "patience"), {"suffix": 0.0, "patience": 0, "per_signal": 0}, (25, 0.0, 0)),
+    (("per_signal", "suffix", "patience", "stall"), {"stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0}, (0, 0.0, 0)),
+    (("per_signal", "suffix", "patience", "stall", "version"), {"version": 1}, (0, 0.0, 0))])
+def test_an_auto_campaign_an_earlier_version_stored_replays_as_it_ran_under_its_key(removed, kept, ran):
+    """d4sumo 0.10 stored auto's definition without ``per_signal`` (held inputs cut across signals), 0.9
+    without ``suffix`` and ``patience`` either (no suffix moves, exploring from the design on), 0.8
+    without ``stall`` either (piece moves through stalls), 0.7 without ``version`` either (uniform
+    exploration: no stalls, no piece moves)."""
     from d4sumo.search.store import campaign_key
 
     new = Campaign(optimizer="auto")
@@ -299,7 +302,7 @@ def test_an_auto_campaign_0_9_0_8_or_0_7_stored_replays_as_it_ran_under_its_key(
         del old["optimizer_options"][key]
     stored = Campaign.from_definition(old, samples=12)
     options = dict(stored.optimizer_options)
-    assert (options["stall"], options["suffix"], options["patience"]) == (stall, 0.0, 0)
+    assert (options["stall"], options["suffix"], options["patience"], options["per_signal"]) == (*ran, 0)
     assert campaign_key(stored.definition()) == campaign_key(old)
     assert Campaign(optimizer="auto", optimizer_options=kept, samples=12).definition() == stored.definition()
 

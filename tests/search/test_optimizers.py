@@ -583,6 +583,22 @@ def test_auto_held_points_hold_pieces_at_bounds_or_one_value():
     assert 0.55 < at_bounds < 0.78, at_bounds
 
 
+def test_auto_held_points_cut_each_signal_on_its_own():
+    """Throttle and brake (two signals of 20) are each cut into at most 8 pieces, none running from one
+    into the other; d4sumo 0.10 (``per_signal = 0``) cut the 40 values as one run, up to 16 pieces
+    wherever the cuts fell, a piece across the two."""
+    def most_pieces_in_a_signal(per_signal):
+        opt = make_optimizer("auto", np.zeros(40), np.ones(40), budget=10, rng=np.random.default_rng(3),
+                             options={"per_signal": per_signal}, signals=(20, 20))
+        draws = [opt._held() for _ in range(400)]
+        return max(1 + int(np.count_nonzero(np.diff(z[a:a + 20]))) for z in draws for a in (0, 20)), draws
+
+    most, draws = most_pieces_in_a_signal(1)
+    assert most <= 8
+    assert any(z[19] != z[20] and z[0] == z[19] and z[20] == z[39] for z in draws)  # one piece each, apart
+    assert most_pieces_in_a_signal(0)[0] > 8
+
+
 def test_auto_piece_moves_change_one_piece_or_span_of_the_incumbent():
     opt = make_optimizer("auto", LOWER, UPPER, budget=10, rng=np.random.default_rng(1), options={"suffix": 0.0})
     best = np.repeat([0.0, 0.7, 1.0, 0.2], [3, 2, 4, 1])[: opt.dimension]

@@ -68,21 +68,23 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: definition leaves such an option out at that value, and a stored definition without it gets it back,
 #: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
 #: ran scikit-optimize's GP; ce added no noise; auto explored uniformly, then made piece moves through
-#: stalls, then explored from the design on without suffix moves)
+#: stalls, then explored from the design on without suffix moves, then cut held inputs across signals)
 OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1, "inducing": 0},
                                               "ce": {"noise_fraction": 0.0},
-                                              "auto": {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0}}
+                                              "auto": {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0}}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
 #: (bo in 0.6 and before: the exact GP however many scores; in 0.3: scikit-optimize's GP; in 0.2 also one
-#: point per score; ce in 0.4 and before: no noise; auto in 0.9: exploring from the design on, no suffix
-#: moves, in 0.8: also piece moves through stalls, in 0.7: uniform exploration)
+#: point per score; ce in 0.4 and before: no noise; auto in 0.10: held sampling across signals, in 0.9:
+#: also exploring from the design on, no suffix moves, in 0.8: also piece moves through stalls, in 0.7:
+#: uniform exploration)
 EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 0}, {"gp_version": 1, "inducing": 0},
                                                                    {"gp_version": 1, "batch_size": 1, "inducing": 0}),
                                                             "ce": ({"noise_fraction": 0.0},),
-                                                            "auto": ({"suffix": 0.0, "patience": 0},
-                                                                     {"stall": 0, "suffix": 0.0, "patience": 0}, {"version": 1})}
+                                                            "auto": ({"per_signal": 0}, {"suffix": 0.0, "patience": 0, "per_signal": 0},
+                                                                     {"stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0},
+                                                                     {"version": 1})}
 
 
 #: the optimiser a campaign runs when none is named, and the one earlier d4sumo versions ran instead

@@ -14,8 +14,11 @@ exploring points find the way off it.
 The exploring arms read the parameters as a signal in time order (an attack's knots, a
 pedal's values segment by segment) and propose held inputs, as falsification tools of the field do
 (FalCAuN holds values from a small alphabet; extreme inputs falsify often):
-- held sampling: the parameters cut at random into 1 to ``0.4 d`` pieces, each piece held at the lower
-  bound, the upper bound or a uniform value, a third of the time each;
+- held sampling: each signal cut at random into 1 to ``0.4 n`` pieces (n its values; a scalar is a
+  signal of one), each piece held at the lower bound, the upper bound or a uniform value, a third of the
+  time each. (``per_signal = 0``, as 0.10 ran: the d parameters cut as one run into 1 to ``0.4 d``, a
+  piece running from the throttle's last values into the brake's first.) On CC4 (80 seeds) cutting by
+  signal took ``auto`` from 77 runs falsified to 80, in 433 simulations on average (421 before, over 77);
 - piece moves on the incumbent: one of its pieces (a run of equal values) redrawn, cut from a random
   point to its end, or a random span set to one new value; or, a ``suffix`` share of them, a suffix
   move: the incumbent kept up to a random time and every signal after it redrawn as held pieces.
@@ -83,7 +86,7 @@ class Portfolio(BayesianOptimization):
     name = "auto"
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
                "share_max": (0.8, 0.0, 1.0), "version": (2, 1, 2), "stall": (25, 0, 100_000),
-               "suffix": (0.25, 0.0, 1.0), "patience": (5, 0, 100_000)}
+               "suffix": (0.25, 0.0, 1.0), "patience": (5, 0, 100_000), "per_signal": (1, 0, 1)}
 
     @staticmethod
     def resolve_together(options: dict) -> dict:
@@ -92,7 +95,7 @@ class Portfolio(BayesianOptimization):
                               f"a share within [share_min, share_max] = [{options['share_min']}, {options['share_max']}]")
         # version 1 is 0.7's auto: uniform exploration from the design on, no stalls, no piece moves (one
         # definition for one behaviour)
-        return {**options, "stall": 0, "suffix": 0.0, "patience": 0} if options["version"] == 1 else options
+        return {**options, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0} if options["version"] == 1 else options
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -156,7 +159,13 @@ class Portfolio(BayesianOptimization):
 
     def _held(self) -> np.ndarray:
         z = np.empty(self.dimension)
-        self._hold(z, self._max_pieces)
+        if not self.options["per_signal"]:  # 0.10's: the parameters cut as one run, across signals
+            self._hold(z, self._max_pieces)
+            return z
+        start = 0
+        for n in self.signals:  # each signal cut on its own: a piece never runs from one into the next
+            self._hold(z[start:start + n], _max_pieces(n))
+            start += n
         return z
 
     def _hold(self, values: np.ndarray, max_pieces: int) -> None:
