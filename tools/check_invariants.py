@@ -310,9 +310,14 @@ def main(argv=None) -> int:
         store = open_store(Path(tmp) / "invariants.sqlite")
         fcd = Path(tmp) / "fcd.xml"
         for index in range(args.n):
-            campaign, params = random_episode(rng)
-            road = roads[campaign.config.network]
-            evaluator = Evaluator(campaign, road=road)
+            while True:  # a draw its road refuses (a platoon longer than the sharp turns' first edge) is drawn again
+                campaign, params = random_episode(rng)
+                road = roads[campaign.config.network]
+                try:
+                    evaluator = Evaluator(campaign, road=road)
+                    break
+                except ConfigError:
+                    continue
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
             outcome = store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"
