@@ -38,6 +38,7 @@ class Evaluator:
         self.road = road or build_road(self.network)
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None
+        self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
         self._shares_sumo = shares_sumo(campaign.config)
         self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
 
@@ -77,10 +78,15 @@ class Evaluator:
         collision = episode.first_collision_record()
         return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
 
-    @staticmethod
-    def _failed(index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
+    def _failed(self, index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
         message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
-        log.warning("sample %d failed: %s", index, message)
+        # a failure that repeats is said twice, not once a sample (a warm-up collision ends every one alike)
+        repeats = self._failures.get(message, 0)
+        self._failures[message] = repeats + 1
+        if repeats == 0:
+            log.warning("sample %d failed: %s", index, message)
+        elif repeats == 1:
+            log.warning("sample %d failed the same way; later samples that do are counted, not shown", index)
         return SampleResult(index, x, None, "error", None, None, wall_s, message)
 
 

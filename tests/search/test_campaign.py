@@ -92,6 +92,21 @@ def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goe
     assert summary.count("error") == 1
 
 
+def test_a_failure_every_sample_ends_in_is_said_twice_not_once_a_sample(tmp_path, monkeypatch, caplog):
+    """A campaign whose warm-up always collides printed one line per sample; each is still stored."""
+    def failing(*args, **kwargs):
+        raise SumoError("the same failure")
+
+    monkeypatch.setattr(campaign_module, "simulate", failing)
+    with Store(tmp_path / "r.sqlite") as store, caplog.at_level("WARNING"):
+        run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=1)
+        rows = store.samples()
+    said = [r.getMessage() for r in caplog.records if "failed" in r.getMessage()]
+    assert said == ["sample 0 failed: the same failure",
+                    "sample 1 failed the same way; later samples that do are counted, not shown"]
+    assert [r.outcome for r in rows] == ["error"] * 6
+
+
 def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_play_alone(tmp_path, monkeypatch):
     """Regression: a SUMO failure errored every unfinished episode of the batch (in a sweep, of up to 32
     campaigns), where alone only the failing one would be: the results depended on the grouping."""
