@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from d4sumo import __version__
+from d4sumo.errors import WarmupCollision
 from d4sumo.engine.simulation import simulate
 from d4sumo.results.analysis import count_noun, group, load_records, most_severe, table_systems
 from d4sumo.results.report import describe, plot_sample
@@ -46,8 +47,12 @@ def baseline(sweep: Sweep) -> dict[str, list[str]]:
         if key in seen:
             continue
         seen.add(key)
-        episode = simulate(c.config, np.full(c.config.steps, np.nan))
         out.setdefault(key[0], [])
+        try:
+            episode = simulate(c.config, np.full(c.config.steps, np.nan))
+        except WarmupCollision as exc:  # crashed before the attack would have started: a crash with no attack
+            out[key[0]].append(f"{c.config.setpoint_m:g} m from {c.config.start} ({exc})")
+            continue
         if episode.collisions:
             first = episode.first_collision
             trace = episode.trace

@@ -463,6 +463,7 @@ def _describe(net_file: Path) -> dict:
         "first_edge_m": chain[0].getLength(),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
         "lane_widths_m": sorted({e.getLanes()[i].getWidth() for e in chain for i in range(lanes)}),
+        "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),  # what d4sumo 0.10, sharing the cache, reads
         "closed_to": [_closed_to(chain, i) for i in range(lanes)],
     }
 
