@@ -22,7 +22,7 @@ SIMULATE = [
     ["--attack", "sine", "--params", "0.5,0.2"], ["--attack", "zigzag"], ["--constant", "2"],
     ["--knots=1,1", "--constant", "1"], ["--controller", "foo"], ["--controller", "nope.module:X"],
     ["--controller", "os:path"], ["--controller", ""], ["--set", "scenario.setpoint_m=inf"], ["--set", "nosection"],
-    ["--set", "vehicle.length_m=[1,2]"], ["--set", "scenario.setpont_m=3"], ["--set", "controller.acc_kp=nan"],
+    ["--set", "vehicle.length_m=[1,2]"], ["--set", "scenario.setpont_m=3"], ["--set", "scenario.route=[]"], ["--set", "controller.acc_kp=nan"],
     ["--set", "controller.acc_kp=-1"], ["--set", "=3"], ["--set", "a.b.c=1"],
     ["--formula", "eventually[5:2](gap_1 <= 0)"], ["--formula", "eventually[0:1e12](gap_1 <= 0)"],
     ["--formula", "eventually[0:0.01](gap_1 <= 0)"], ["--formula", "always(foo > 0)"], ["--formula", "always(gap_1 >"],

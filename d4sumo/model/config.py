@@ -344,6 +344,9 @@ class EpisodeConfig:
         tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
         scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in _TABLES]
         _check_keys("scenario", tables["scenario"], scenario_keys)
+        if tables["scenario"].get("route", None) in ([], ()):  # left out, the network's one chain; given, edges
+            raise ConfigError("scenario.route", [], "a list of one edge id or more, e.g. [\"e1\", \"e2\"] (leave it out "
+                                                    "for a network of one chain of edges)")
         # [vehicle.vI]: a car's own table (the config checks the car); any other key is one of [vehicle]
         keys = [f.name for f in dataclasses.fields(VehicleParams)]
         cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"])

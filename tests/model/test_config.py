@@ -128,3 +128,10 @@ def test_a_vehicle_key_given_a_table_is_that_key_refused_not_a_car():
     with pytest.raises(ConfigError) as info:
         EpisodeConfig.from_dict({"vehicle": {"shape": {"a": 1}}})
     assert info.value.field == "vehicle.shape"
+
+
+def test_an_empty_route_is_refused_not_read_as_no_route():
+    """Regression: `--set 'scenario.route=[]'` played the network's one chain of edges, as if no route were given."""
+    with pytest.raises(ConfigError, match=r"^scenario.route: got \[\]; allowed: a list of one edge id or more"):
+        EpisodeConfig.from_dict({"scenario": {"route": []}})
+    assert EpisodeConfig.from_dict({"scenario": {}}).route == ()
