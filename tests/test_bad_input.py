@@ -373,11 +373,12 @@ class ParamsNotADataclass:
     ("raise RuntimeError('boom at import')", "X", "a module that imports without error ({m} raised RuntimeError: boom at import)"),
     ("def broken(:\n", "X", "a module that imports without error ({m} raised SyntaxError: invalid syntax"),
     (CONTROLLERS, "ParamsNotADataclass", "a class with a Params dataclass and a command() method"),
+    (CONTROLLERS, "Missing", "allowed: a class of {m}; {m} imported ("),
     (CONTROLLERS, "FailsToBuild", "the controller of v1 ({m}:FailsToBuild) could not be made: ValueError: init fails"
                                   " (d4sumo -v shows its traceback)"),
     (CONTROLLERS, "FailsToCommand", "the controller of v1 ({m}:FailsToCommand) raised RuntimeError: cmd fails"
                                     " (d4sumo -v shows its traceback)"),
-], ids=["raises at import", "syntax error", "Params not a dataclass", "__init__ raises", "command raises"])
+], ids=["raises at import", "syntax error", "Params not a dataclass", "no such class", "__init__ raises", "command raises"])
 def test_a_users_controller_that_fails_is_one_line_naming_it(tmp_path, monkeypatch, capsys, module, cls, said):
     """Regression: each of these ended in a traceback of 20-40 lines and exit 1."""
     import uuid

@@ -492,13 +492,28 @@ class NotImported(ConfigError):
 
 
 class ControllerImportError(ConfigError):
-    """A user's controller class that does not import here: says how to make it importable."""
+    """A user's controller class that cannot be had here: its module does not import (says how to make
+    it importable), or it imports without the class (says which classes it has)."""
 
-    def __init__(self, name: str, reason: Exception):
+    def __init__(self, name: str, allowed: str, hint: str):
+        self.hint = hint
+        super().__init__("controller.class", name, f"{allowed}; {hint}")
+
+    @classmethod
+    def no_module(cls, name: str, reason: Exception) -> "ControllerImportError":
         module = name.partition(":")[0]
-        self.hint = (f"{module} did not import here ({reason}): run from the folder that holds "
-                     f"{module.replace('.', '/')}.py, or put its folder on PYTHONPATH")
-        super().__init__("controller.class", name, f"an importable 'package.module:ClassName'; {self.hint}")
+        return cls(name, "an importable 'package.module:ClassName'",
+                   f"{module} did not import here ({reason}): run from the folder that holds "
+                   f"{module.replace('.', '/')}.py, or put its folder on PYTHONPATH")
+
+    @classmethod
+    def no_class(cls, name: str, module: Any) -> "ControllerImportError":
+        module_name, _, attr = name.partition(":")
+        classes = sorted(k for k, v in vars(module).items()
+                         if isinstance(v, type) and v.__module__ == module.__name__ and not k.startswith("_"))
+        where = getattr(module, "__file__", None) or module_name
+        has = f"its classes: {', '.join(classes[:12])}{', ...' if len(classes) > 12 else ''}" if classes else "it defines no class"
+        return cls(name, f"a class of {module_name}", f"{module_name} imported ({where}) but has no class {attr} ({has})")
 
 
 @contextlib.contextmanager
@@ -536,14 +551,13 @@ def resolve_controller(name: str) -> type:
     try:
         module = importlib.import_module(module_name)
     except (ImportError, ValueError) as exc:
-        raise ControllerImportError(name, exc) from None
+        raise ControllerImportError.no_module(name, exc) from None
     except Exception as exc:  # found, but the module itself fails: a syntax error, an error raised at import
         raise ConfigError("controller.class", name, f"a module that imports without error ({module_name} raised "
                           f"{type(exc).__name__}: {exc})") from None
-    try:
-        cls = getattr(module, attr)
-    except AttributeError as exc:
-        raise ControllerImportError(name, exc) from None
+    cls = getattr(module, attr, None)
+    if cls is None:
+        raise ControllerImportError.no_class(name, module)
     params = getattr(cls, "Params", None)
     if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not callable(getattr(cls, "command", None)):
         raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")

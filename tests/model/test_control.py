@@ -162,6 +162,19 @@ def test_bad_controller_configs_name_the_field(name, params, field):
     assert info.value.field == field
 
 
+def test_a_module_that_imports_without_the_class_says_so_and_names_its_classes(tmp_path, monkeypatch):
+    """Regression: `--controller mymodule:Missing` said "mymodule did not import here" of a module that imported."""
+    import uuid
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"  # a module of its own: Python caches what it imported
+    (tmp_path / f"{name}.py").write_text("class Gentle:\n    pass\n\n\nclass Firm:\n    pass\n\n\ndef helper():\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ConfigError) as info:
+        resolve_controller(f"{name}:Missing")
+    assert str(info.value) == (f"controller.class: got '{name}:Missing'; allowed: a class of {name}; {name} imported "
+                               f"({tmp_path / name}.py) but has no class Missing (its classes: Firm, Gentle)")
+
+
 # --- the constant time-gap controller (the paper's mitigation) ----------------------------------
 
 
