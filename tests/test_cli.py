@@ -456,7 +456,7 @@ def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_im
     marker.unlink()
     exported = d4sumo("export", "r.sqlite")
     assert exported.returncode == 0 and "myctl:Gentle(" in exported.stdout.splitlines()[1]
-    from d4sumo.results.analysis import load_records
+    from d4sumo.results.records import load_records
 
     records = load_records([tmp_path / "r.sqlite"])
     assert len(records) == 3 and records[0].system.startswith("myctl:Gentle(")

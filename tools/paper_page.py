@@ -32,7 +32,8 @@ from d4sumo.inputs import with_overrides
 from d4sumo.presets import apply_preset
 from d4sumo.model.config import read_toml
 from d4sumo.results import paper
-from d4sumo.results.analysis import Record, load_records, most_severe
+from d4sumo.results.analysis import most_severe
+from d4sumo.results.records import Record, load_records
 from d4sumo.results.figures import heatmap_columns, heatmap_panels, heatmaps
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.search.campaign import open_store

@@ -24,7 +24,8 @@ import numpy as np
 from d4sumo import __version__
 from d4sumo.errors import WarmupCollision
 from d4sumo.engine.simulation import simulate
-from d4sumo.results.analysis import count_noun, group, load_records, most_severe, table_systems
+from d4sumo.results.analysis import count_noun, group, most_severe, table_systems
+from d4sumo.results.records import load_records
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.sweep import Sweep, run_sweep
 from toolargs import Parser, run_main

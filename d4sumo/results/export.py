@@ -9,7 +9,7 @@ from typing import TextIO
 
 from ..search.campaign import Campaign
 from ..search.store import Store
-from .analysis import system_label
+from .records import system_label
 
 HEADER = ["sample_id", "campaign_id", "index", "network", "followers", "setpoint_m", "speed_mps", "start", "maneuver",
           "system", "attack", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m",

@@ -14,7 +14,9 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConfigError
-from .analysis import FEW_ATTACKS, Clustering, Record, count_noun, runs, success_grid
+from .analysis import count_noun, runs, success_grid
+from .clusters import FEW_ATTACKS, Clustering
+from .records import Record
 
 SPEED_CMAP = "turbo"
 SUCCESS_CMAP = "viridis"

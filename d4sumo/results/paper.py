@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .analysis import Record
+from .records import Record
 
 #: Table 1, per row: crashes, v1-v2 crashes, time till collision mean (std) s, collision location
 #: mean (std) m, speed difference mean (std) km/h. Parametric attacks, 2-9 m, 20 m/s, steady state.

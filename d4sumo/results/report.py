@@ -23,8 +23,10 @@ from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
 from . import figures, paper, timespace
-from .analysis import (Record, Table, cluster_knots, count_noun, load_records, most_severe, richest_conditions,
-                       table_attacker_crashes, table_by_speed, table_success_statistics, table_systems)
+from .analysis import (Table, count_noun, most_severe, table_attacker_crashes, table_by_speed, table_success_statistics,
+                       table_systems)
+from .clusters import cluster_knots, richest_conditions
+from .records import Record, load_records
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,9 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.results import figures, timespace
-from d4sumo.results.analysis import Record, cluster_knots, load_records, most_severe, richest_conditions
+from d4sumo.results.analysis import most_severe
+from d4sumo.results.clusters import cluster_knots, richest_conditions
+from d4sumo.results.records import Record, load_records
 
 PNG = b"\x89PNG\r\n\x1a\n"
 PLURAL_AFTER_ONE = re.compile(r"\b1 (attacks|clusters|noise points|successes|samples|panels)\b")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from d4sumo.results.analysis import Record
+from d4sumo.results.records import Record
 from d4sumo.results.paper import PART, TABLE_1, comparisons, table_1, table_2, table_3, to_markdown
 
 

@@ -9,7 +9,8 @@ from urllib.parse import urlparse
 
 import pytest
 
-from d4sumo.results.analysis import load_records, most_severe
+from d4sumo.results.analysis import most_severe
+from d4sumo.results.records import load_records
 
 pytestmark = pytest.mark.sumo
 
