@@ -78,6 +78,14 @@ def test_one_controller_flag_replaces_a_config_files_mixed_platoon(tmp_path, cap
     assert json.loads(capsys.readouterr().out)["config"]["controller"]["class"] == "timegap"
 
 
+def test_the_network_flags_help_names_every_kind_of_road_it_takes(capsys):
+    """Regression: its help said "scenario variant ... or a folder", never a *.net.xml nor what to do with an OSM file."""
+    assert main(["falsify", "--help"]) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert ("--network NETWORK the road: a shipped variant (see `d4sumo scenarios`), a folder of one *.nod.xml and one "
+            "*.edg.xml (or of one *.net.xml), or a *.net.xml file" in said and "netconvert --osm-files" in said)
+
+
 @pytest.mark.parametrize(
     "argv, expected",
     [

@@ -17,6 +17,7 @@ import json
 import logging
 import math
 import os
+import shlex
 import subprocess
 import tempfile
 from dataclasses import dataclass
@@ -107,9 +108,32 @@ def scenario_folder(name: str, root: Path | None = None) -> Path:
             return folder.resolve()
         if folder.is_dir() and _inputs(folder, strict=False):
             return folder.resolve()
+    raise ConfigError("scenario.network", name, _not_a_network(Path(name), root))
+
+
+def _not_a_network(path: Path, root: Path) -> str:
+    """What ``--network`` takes, said for the path given that is none of it: a file that is not there, an
+    OpenStreetMap file (netconvert imports it first), a node or edge file (its folder is the road), a
+    folder without one road's files."""
+    if any(s.lower() == ".osm" for s in path.suffixes):
+        if not path.is_file():
+            return f"an OpenStreetMap file that exists, imported with netconvert first (there is no {path.absolute()})"
+        net = path.name[:path.name.lower().index(".osm")] + ".net.xml"
+        return (f"a network file (*.net.xml): import an OpenStreetMap file with netconvert first: "
+                f"netconvert --osm-files {shlex.quote(str(path))} -o {shlex.quote(net)}")
+    if path.name.endswith(".net.xml") and not path.exists():
+        return f"a *.net.xml that exists (there is no {path.absolute()})"
+    if path.name.endswith((".nod.xml", ".edg.xml")) and path.is_file():
+        return f"the folder that holds the node and edge files ({path.absolute().parent}), not one of them"
+    if path.is_dir():
+        found = ", ".join(f"{len(list(path.glob(g)))} {g}" for g in ("*.nod.xml", "*.edg.xml", "*.net.xml"))
+        return f"a folder with exactly one *.nod.xml and one *.edg.xml, or one *.net.xml (it holds {found})"
     names = list_scenarios(root)
-    raise ConfigError("scenario.network", name, f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, "
-                                                "a folder with *.nod.xml and *.edg.xml, or a *.net.xml")
+    allowed = (f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, a folder with *.nod.xml and *.edg.xml, "
+               "or a *.net.xml")
+    if path.is_file():
+        return f"{allowed} ({path.name} is not one: a network file's name ends in .net.xml)"
+    return allowed + (f" (there is no {path.absolute()})" if len(path.parts) > 1 or path.suffix else "")
 
 
 def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | Path | None:
@@ -131,7 +155,8 @@ class NetworkSource:
     """A variant's plain XML (nodes, edges, and the connections and types a network file had), by value:
     what a road is built from, anywhere."""
 
-    name: str
+    name: str  # as the user named it (a variant, or the path given): what messages say
+    stem: str  # the folder's or the network file's own name: its built files' names in the cache
     nodes_xml: bytes
     edges_xml: bytes
     connections_xml: bytes = b""
@@ -189,7 +214,8 @@ def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
             if (c.get("from"), c.get("to")) in follows:
                 kept.append(c)
         out_connections = ET.tostring(kept)
-    return NetworkSource(source.name, ET.tostring(out_nodes), ET.tostring(out_edges), out_connections, source.types_xml)
+    return NetworkSource(source.name, source.stem, ET.tostring(out_nodes), ET.tostring(out_edges), out_connections,
+                         source.types_xml)
 
 
 def _network_source(name: str, root: Path | None = None) -> NetworkSource:
@@ -197,9 +223,9 @@ def _network_source(name: str, root: Path | None = None) -> NetworkSource:
     found = folder if folder.is_file() else _inputs(folder)
     try:
         if isinstance(found, Path):
-            return _plain_source(found, folder.name.removesuffix(".net.xml") if folder.is_file() else folder.name)
+            return _plain_source(found, name, folder.name.removesuffix(".net.xml") if folder.is_file() else folder.name)
         nodes, edges = found
-        return NetworkSource(folder.name, nodes.read_bytes(), edges.read_bytes())
+        return NetworkSource(name, folder.name, nodes.read_bytes(), edges.read_bytes())
     except OSError as exc:
         raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
 
@@ -207,12 +233,12 @@ def _network_source(name: str, root: Path | None = None) -> NetworkSource:
 _PLAIN: dict[tuple[str, int, int], NetworkSource] = {}  # a network file, by path, size and time -> its plain XML
 
 
-def _plain_source(net_file: Path, name: str) -> NetworkSource:
+def _plain_source(net_file: Path, name: str, stem: str) -> NetworkSource:
     """A network file as plain node, edge, connection and type XML (netconvert --plain-output-prefix)."""
     stat = net_file.stat()
     key = (str(net_file), stat.st_size, stat.st_mtime_ns)
     if key in _PLAIN:
-        return dataclasses.replace(_PLAIN[key], name=name)
+        return dataclasses.replace(_PLAIN[key], name=name, stem=stem)
     binary = sumo_binary("netconvert")
     with tempfile.TemporaryDirectory() as tmp:
         prefix = Path(tmp) / "plain"
@@ -225,7 +251,7 @@ def _plain_source(net_file: Path, name: str) -> NetworkSource:
             raise ConfigError("scenario.network", name, "a network file SUMO loads (netconvert: "
                               f"{_netconvert_errors(result.stderr or result.stdout, {str(net_file): net_file.name})})")
         read = lambda ext: prefix.with_suffix(ext).read_bytes() if prefix.with_suffix(ext).is_file() else b""  # noqa: E731
-        source = NetworkSource(name, read(".nod.xml"), read(".edg.xml"), read(".con.xml"), read(".typ.xml"))
+        source = NetworkSource(name, stem, read(".nod.xml"), read(".edg.xml"), read(".con.xml"), read(".typ.xml"))
     _PLAIN[key] = source
     return source
 
@@ -236,13 +262,13 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
     the road of those edges, which must lead on one to the next)."""
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
-    net_file = cache / f"{source.name}-{source.digest}.net.xml"
+    net_file = cache / f"{source.stem}-{source.digest}.net.xml"
     info_file = net_file.with_suffix(".json")
     info = _read_info(info_file) if net_file.is_file() else None
     if info is None:
         _build_net(source, net_file, netconvert)
         try:
-            info = _describe(net_file)
+            info = _describe(net_file, source.name)
         except ConfigError as exc:
             if not route or not exc.allowed.endswith(_OR_ROUTE):  # a road's own fault (a lane 0 that ends): said as is
                 raise
@@ -303,8 +329,8 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
         return road
     copies = 1 << (copies - 1).bit_length()
     nodes, edges, connections = _side_by_side(source, copies)
-    copied = NetworkSource(f"{source.name}-x{copies}", nodes, edges, connections, source.types_xml)
-    net_file = road.net_file.parent / f"{copied.name}-{copied.digest}.net.xml"
+    copied = NetworkSource(source.name, f"{source.stem}-x{copies}", nodes, edges, connections, source.types_xml)
+    net_file = road.net_file.parent / f"{copied.stem}-{copied.digest}.net.xml"
     if not net_file.is_file():
         _build_net(copied, net_file)
     if not _copies_alike(road.net_file, net_file, copies):
@@ -427,15 +453,16 @@ def _netconvert_errors(text: str, files: dict[str, str]) -> str:
 _OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles (one given: it does not lead on)
 
 
-def _describe(net_file: Path) -> dict:
-    """The straight chain of edges from the road's start, its length and its lowest speed limit."""
+def _describe(net_file: Path, name: str) -> dict:
+    """The straight chain of edges from the road's start, its length and its lowest speed limit (refusals
+    name the network ``name``)."""
     import sumolib
 
     net = sumolib.net.readNet(str(net_file))
     edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
     starts = [e for e in edges if not e.getIncoming()]
     if len(starts) != 1:
-        raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+        raise ConfigError("scenario.network", name,
                           f"a network with exactly one road start (a straight one-way chain of edges){_OR_ROUTE}")
     chain = [starts[0]]
     while True:
@@ -443,16 +470,16 @@ def _describe(net_file: Path) -> dict:
         if not nxt:
             break
         if len(nxt) > 1 or nxt[0] in chain:
-            raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+            raise ConfigError("scenario.network", name,
                               f"a straight chain of edges without branches{_OR_ROUTE}")
         chain.append(nxt[0])
     for lane in (lane for e in chain for lane in e.getLanes()):  # netconvert keeps "nan" and "inf"; SUMO refuses them
         if not 0 < lane.getSpeed() < math.inf:
-            raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+            raise ConfigError("scenario.network", name,
                               f"speed limits that are positive numbers of m/s (lane {lane.getID()}: {lane.getSpeed()})")
     lanes = _through_lanes(chain)
     if lanes == 0:
-        raise ConfigError("scenario.network", net_file.name.rsplit("-", 1)[0],
+        raise ConfigError("scenario.network", name,
                           f"a road whose rightmost lane (the platoon's, lane 0) leads on through every junction; "
                           f"lane 0 of {_lane_end(chain)} ends there")
     return {

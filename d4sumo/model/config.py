@@ -112,7 +112,7 @@ class ControllerConfig:
 class EpisodeConfig:
     """One episode of the paper's scenario: road, platoon, start mode, step and duration."""
 
-    network: str = "highway_4lane"  # a folder of sumo_scenarios/ or a path to one
+    network: str = "highway_4lane"  # a folder of sumo_scenarios/, or a path: a folder of node and edge files, a *.net.xml
     route: tuple[str, ...] = ()  # the edges the platoon drives (none: the network's one chain of edges)
     followers: int = 3  # N followers behind the attacker: ids v1..vN
     setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
@@ -148,7 +148,8 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
-            raise ConfigError("scenario.network", self.network, "a scenario name (see `d4sumo scenarios`) or a folder")
+            raise ConfigError("scenario.network", self.network, "a shipped variant (see `d4sumo scenarios`), a folder of node "
+                                                                "and edge files, or a *.net.xml")
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
         if not isinstance(self.route, (list, tuple)) or not all(isinstance(e, str) and e for e in self.route):
             raise ConfigError("scenario.route", self.route, "a list of edge ids, e.g. [\"e1\", \"e2\"]")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -45,6 +46,29 @@ def test_an_unknown_variant_lists_the_known_ones():
         build_road("autobahn")
 
 
+@pytest.mark.parametrize("given, allowed", [
+    ("nosuch.net.xml", "a *.net.xml that exists (there is no {cwd}/nosuch.net.xml)"),
+    ("{tmp}/two_edges/road.nod.xml", "the folder that holds the node and edge files ({tmp}/two_edges), not one of them"),
+    ("{tmp}/two_edges/notes.txt", "one of highway_1lane, highway_3lane_120kmh, highway_4lane, a folder with *.nod.xml and "
+                                  "*.edg.xml, or a *.net.xml (notes.txt is not one: a network file's name ends in .net.xml)"),
+    ("{tmp}/two_edges/map.osm", "a network file (*.net.xml): import an OpenStreetMap file with netconvert first: "
+                                "netconvert --osm-files {tmp}/two_edges/map.osm -o map.net.xml"),
+    ("{tmp}/nosuch.osm", "an OpenStreetMap file that exists, imported with netconvert first (there is no {tmp}/nosuch.osm)"),
+    ("{tmp}", "a folder with exactly one *.nod.xml and one *.edg.xml, or one *.net.xml (it holds 0 *.nod.xml, 0 *.edg.xml, "
+              "0 *.net.xml)"),
+], ids=["missing network file", "a node file", "another file", "an OSM file", "a missing OSM file", "a folder of none"])
+def test_a_network_that_is_none_says_what_is_wrong_with_the_path_given(tmp_path, monkeypatch, given, allowed):
+    """Regression: a missing *.net.xml and an OSM file were told only the list of what --network takes."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copytree(Path(__file__).resolve().parents[2] / "examples" / "roads" / "two_edges", tmp_path / "two_edges")
+    (tmp_path / "two_edges" / "notes.txt").write_text("notes")
+    (tmp_path / "two_edges" / "map.osm").write_text("<osm/>")
+    given, allowed = given.format(tmp=tmp_path), allowed.format(tmp=tmp_path, cwd=tmp_path)
+    with pytest.raises(ConfigError) as info:
+        build_road(given, cache_dir=tmp_path / "cache")
+    assert str(info.value) == f"scenario.network: got {given!r}; allowed: {allowed}"
+
+
 def test_a_missing_netconvert_is_a_clear_error(tmp_path):
     with pytest.raises(SumoError, match="netconvert"):
         build_road("highway_4lane", cache_dir=tmp_path, netconvert=str(tmp_path / "netconvert"))
@@ -86,7 +110,7 @@ def test_a_lone_net_xml_is_a_road_and_plays_as_its_node_and_edge_files(tmp_path)
     folder.mkdir()
     shutil.copy(build_road(str(plain), cache_dir=tmp_path / "cache").net_file, folder / "highway.net.xml")
     roads = [build_road(name, cache_dir=tmp_path / "cache") for name in (str(folder), str(folder / "highway.net.xml"))]
-    assert roads[0].name == "lone" and roads[1].name == "highway"
+    assert roads[0].name == str(folder) and roads[1].name == str(folder / "highway.net.xml")  # as the user named them
     for road in roads:
         assert (road.route_edges, road.lanes, road.speed_limit_mps) == (("e1", "e2", "e3"), 4, 35.0)
     config = EpisodeConfig(network=str(plain), start="steady", speed_mps=30.0, duration_s=90.0)
@@ -107,11 +131,12 @@ def test_a_network_file_sumo_cannot_load_or_with_no_one_chain_is_one_line(tmp_pa
 
     bad = tmp_path / "bad.net.xml"
     bad.write_text("<net><edge id=")
-    with pytest.raises(ConfigError, match=r"scenario.network: got 'bad'; allowed: a network file SUMO loads \(netconvert: "):
+    # regression: refusals named a network file by its stem ('bad'), where the user gave its path
+    with pytest.raises(ConfigError, match=rf"scenario.network: got '{re.escape(str(bad))}'; allowed: a network file SUMO loads \(netconvert: "):
         build_road(str(bad), cache_dir=tmp_path / "cache")
     grid = tmp_path / "grid.net.xml"  # netgenerate's grid: two-way streets, no one chain of edges to drive
     subprocess.run([sumo_binary("netgenerate"), "--grid", "--grid.number", "3", "-o", str(grid)], check=True, capture_output=True)
-    with pytest.raises(ConfigError, match="a network with exactly one road start"):
+    with pytest.raises(ConfigError, match=rf"got '{re.escape(str(grid))}'; allowed: a network with exactly one road start"):
         build_road(str(grid), cache_dir=tmp_path / "cache")
 
 
@@ -141,7 +166,7 @@ def test_a_route_through_a_network_of_many_ways_is_the_road_alone_and_batches_co
     plans = random_plans(config, 5, seed=1)
     for batched, plan in zip(simulate_batch(config, plans), plans):
         assert_same_episode(batched, simulate(config, plan))
-    for bad, message in ((("A0B0", "X"), "edges of grid \\(it has no edge 'X'\\)"), (("A0B0", "C0D0"), "edges that lead on one to the next"),
+    for bad, message in ((("A0B0", "X"), f"edges of {re.escape(str(grid))} \\(it has no edge 'X'\\)"), (("A0B0", "C0D0"), "edges that lead on one to the next"),
                          (("A0B0", "A0B0"), "each edge once")):
         with pytest.raises(ConfigError, match=f"scenario.route: got .*; allowed: {message}"):
             build_road(str(grid), route=bad, cache_dir=tmp_path / "cache")
