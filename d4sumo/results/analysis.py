@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -17,16 +17,46 @@ from .records import Record
 
 
 def group(records: Iterable[Record], *fields: str) -> dict[tuple, list[Record]]:
+    return _grouped(records, lambda r: tuple(getattr(r, f) for f in fields))
+
+
+def _grouped(records: Iterable[Record], key: Callable[[Record], tuple]) -> dict[tuple, list[Record]]:
     out: dict[tuple, list[Record]] = defaultdict(list)
     for r in records:
-        out[tuple(getattr(r, f) for f in fields)].append(r)
+        out[key(r)].append(r)
     return dict(sorted(out.items(), key=lambda kv: tuple(str(k) for k in kv[0])))
 
 
+def scenario_labels(records: Iterable[Record]) -> dict[tuple, str]:
+    """Each scenario of the records named by what sets it apart from the others: the keys whose values
+    differ ("network=grid.net.xml, route=[A0B0 B0C0]"), each scenario with those it stores (a key without
+    effect in a scenario is not stored). One scenario: named "". No two scenarios get the same name."""
+    scenarios = list(dict.fromkeys(r.scenario for r in records))
+    if len(scenarios) < 2:
+        return {s: "" for s in scenarios}
+    absent = object()
+    keys = dict.fromkeys(k for s in scenarios for k, _ in s)
+    differ = {k for k in keys if len({_hashable(dict(s).get(k, absent)) for s in scenarios}) > 1}
+    return {s: ", ".join(f"{k}={_value_text(v)}" for k, v in s if k in differ) for s in scenarios}
+
+
+def _hashable(value):
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _value_text(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return "[" + " ".join(map(str, value)) + "]"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict[tuple, list[Record]]]:
-    """Group by ``fields``, led by the maneuver and the system under test when the records hold more than one."""
-    lead = tuple(f for f in ("maneuver", "maneuver_settings", "system") if len({getattr(r, f) for r in records}) > 1)
-    return lead + fields, group(records, *lead, *fields)
+    """Group by ``fields``, led by the scenario (by its name in `scenario_labels`) and the system under test
+    when the records hold more than one: campaigns on two roads, routes or durations are never pooled."""
+    labels = scenario_labels(records)
+    lead = (("scenario",) if len(labels) > 1 else ()) + (("system",) if len({r.system for r in records}) > 1 else ())
+    return lead + fields, _grouped(records, lambda r: tuple(
+        labels[r.scenario] if f == "scenario" else getattr(r, f) for f in (*lead, *fields)))
 
 
 def run_label(key: tuple) -> str:
@@ -126,13 +156,15 @@ def table_by_speed(records: Sequence[Record]) -> Table:
 
 
 def table_systems(records: Sequence[Record]) -> Table:
-    """Per system under test: how often an attacker made it crash, where, and how hard."""
+    """Per system under test (and scenario, when the records hold several): how often an attacker made it
+    crash, where, and how hard."""
+    labels = scenario_labels(records)
     rows = []
-    for (system,), rs in group(records, "system").items():
+    for key, rs in _grouped(records, lambda r: (labels[r.scenario], r.system)).items():
         wins = [r for r in rs if r.outcome == "success"]
         setpoints = sorted({r.setpoint_m for r in wins})
         rows.append((
-            system, str(len(rs)), f"{len(wins)} ({100 * len(wins) / len(rs):.1f}%)",
+            run_label(tuple(k for k in key if k)), str(len(rs)), f"{len(wins)} ({100 * len(wins) / len(rs):.1f}%)",
             str(sum(r.outcome == "attacker_crash" for r in rs)),
             ", ".join(f"{d:g}" for d in setpoints) or "none",
             f"{max(r.speed_diff_kmh for r in wins):.1f}" if wins else "-",
@@ -175,9 +207,10 @@ def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = 
 
 
 def most_severe(records: Sequence[Record], count: int = 3) -> list[Record]:
-    """The successes with the largest speed difference at the first collision, at most one per
-    configuration (network, followers, setpoint, speed, start, system, attack, optimiser), so that one
-    campaign's near-copies of its best attack do not fill the list."""
+    """The ``count`` successes with the largest speed difference at the first collision, no two of one
+    configuration (`Record.configuration`: campaigns that differ in their seed alone are one): each
+    configuration's most severe success competes, so that one campaign's near-copies of its best attack
+    do not fill the list."""
     wins = [r for r in records if r.outcome == "success" and r.speed_diff_kmh is not None]
     chosen: dict[tuple, Record] = {}
     for r in sorted(wins, key=lambda r: (-r.speed_diff_kmh, r.db, r.sample_id)):

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from ..model.attacks import make_attack
-from .analysis import group, runs
+from .analysis import group, run_label, runs
 from .records import Record
 
 #: A knot's per-cluster statistic resting on fewer attacks than this is drawn greyed out.
@@ -181,13 +181,14 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
 
 
 def richest_conditions(records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
-    """For each (system,) attack, optimiser and start of knot campaigns, the condition with the most successes."""
+    """For each (scenario, system,) attack, optimiser and start of knot campaigns, the setpoint and speed with
+    the most successes."""
     out = []
     knots = [r for r in records if r.attack in KNOT_FAMILIES]
     for key, rs in runs(knots, "attack", "optimizer", "start")[1].items():
-        *system, attack, optimizer, start = key
+        *scenario_system, attack, optimizer, start = key
         conditions = group(rs, "network", "setpoint_m", "speed_mps")
-        (network, d, v), best = max(conditions.items(), key=lambda kv: sum(r.outcome == "success" for r in kv[1]))
-        lead = f"{system[0]}: " if system else ""
+        (_, d, v), best = max(conditions.items(), key=lambda kv: sum(r.outcome == "success" for r in kv[1]))
+        lead = f"{run_label(tuple(scenario_system))}: " if scenario_system else ""
         out.append((f"{lead}{attack} {optimizer}, {start}, setpoint {d:g} m, {v:g} m/s", best))
     return out

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConfigError
-from .analysis import count_noun, runs, success_grid
+from .analysis import count_noun, run_label, runs, success_grid
 from .clusters import FEW_ATTACKS, Clustering
 from .records import Record
 
@@ -89,11 +89,19 @@ def text_colour(background) -> str:
 
 def heatmap_panels(records: Sequence[Record]) -> list[tuple[str | tuple[str, str], list[Record]]]:
     """One panel per attack, optimiser and start mode: the groups a reader compares. With several
-    systems under test a panel's name is (system, "attack, OPTIMISER, start ..."): a row per system."""
+    systems under test a panel's name is (system, "attack, OPTIMISER, start ..."): a row per system
+    (per scenario and system, with several scenarios); with several scenarios and one system, the
+    scenario leads the panel's title."""
     fields, groups = runs(records, "attack", "optimizer", "start")
-    system = fields[0] == "system"
-    return [((key[0], f"{key[-3]}, {key[-2].upper()}, start {key[-1]}") if system
-             else f"{key[-3]}, {key[-2].upper()}, start {key[-1]}", rs) for key, rs in groups.items()]
+    lead = len(fields) - 3
+    panels = []
+    for key, rs in groups.items():
+        run = f"{key[-3]}, {key[-2].upper()}, start {key[-1]}"
+        if "system" in fields:
+            panels.append(((run_label(key[:lead]), run), rs))
+        else:
+            panels.append((f"{run_label(key[:lead])}: {run}" if lead else run, rs))
+    return panels
 
 
 def heatmap_columns(records: Sequence[Record]) -> int:

@@ -8,11 +8,13 @@ the report shows them, and `tools/paper_page.py` writes them into docs/paper.md.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
+from .analysis import scenario_labels
 from .records import Record
 
 #: Table 1, per row: crashes, v1-v2 crashes, time till collision mean (std) s, collision location
@@ -151,8 +153,19 @@ def table_3(records: Sequence[Record]) -> Comparison | None:
 
 
 def comparisons(records: Sequence[Record]) -> list[Comparison]:
-    """The paper's tables that the records' grids cover, with our rows beside them."""
-    return [c for c in (table_1(records), table_2(records), table_3(records)) if c is not None and c.rows]
+    """The paper's tables that the records' grids cover, with our rows beside them; one set per scenario
+    when the records hold several (never pooled: a collision location means something else on another
+    road), each title naming its scenario."""
+    labels = scenario_labels(records)
+    by_scenario: dict[str, list[Record]] = {}
+    for r in records:
+        by_scenario.setdefault(labels[r.scenario], []).append(r)
+    out = []
+    for name, rs in sorted(by_scenario.items()):
+        for c in (table_1(rs), table_2(rs), table_3(rs)):
+            if c is not None and c.rows:
+                out.append(dataclasses.replace(c, title=f"{c.title}: {name}") if name else c)
+    return out
 
 
 def to_markdown(c: Comparison) -> list[str]:

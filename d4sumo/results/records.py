@@ -7,15 +7,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.control import names_only
-from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
+from ..model.maneuvers import LANE_CHANGE_PARAMETER, lane_change_steps
 
-#: the scenario keys of the lane-changing maneuvers (not the maneuver's name): what sets two such campaigns apart
-MANEUVER_SETTINGS = tuple(dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"))
+#: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
+#: Every other key a campaign stores (network, route, duration, step, warm-up, followers, the maneuver and
+#: its settings, ...) is part of its scenario: what its collision times and locations mean.
+GRID_KEYS = ("setpoint_m", "speed_mps", "start")
 
 
 @dataclass(frozen=True)
@@ -44,10 +46,12 @@ class Record:
     attack_start_s: float = 0.0  # simulation time at which the attack starts (after a warm-up, else 0)
     system: str = "switching"  # the system under test: its controller(s), see EpisodeConfig.system_label
     maneuver: str = "inlane"  # the attacker's maneuver: inlane (the paper's), cutin or cutout
-    maneuver_settings: str = ""  # its settings ("cutin_follower=2, cutin_offset_m=0.0, lane_change_s=2.0")
     step_s: float = 0.05
     end_s: float = 60.0  # when the episode ends without a collision (warm-up included)
     param_names: tuple[str, ...] = ()  # the attack parameters' names, as the family (and maneuver) name them
+    #: the campaign's scenario: its [scenario] keys as stored (a key without effect is not), but GRID_KEYS;
+    #: campaigns of different scenarios are never pooled (`analysis.scenario_labels`)
+    scenario: tuple[tuple[str, Any], ...] = ()
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -66,9 +70,10 @@ class Record:
 
     @property
     def configuration(self) -> tuple:
-        """What makes two campaigns different experiments (the seed does not)."""
-        return (self.network, self.followers, self.setpoint_m, self.speed_mps, self.start, self.attack_start_s,
-                self.system, self.maneuver, self.maneuver_settings, self.attack, self.optimizer)
+        """What makes two campaigns different experiments (the seed does not): the scenario, the grid's
+        point in it, the system under test, the attack and the optimiser."""
+        return (self.scenario, self.network, self.followers, self.setpoint_m, self.speed_mps, self.start,
+                self.attack_start_s, self.system, self.maneuver, self.attack, self.optimizer)
 
 
 def system_label(config: dict) -> str:
@@ -88,23 +93,33 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
         with open_store(path, create=False) as store:
             campaigns = {c.id: Campaign.from_definition(c.definition, where=f"{path}: campaign {c.id}")
                          for c in store.campaigns()}
-            rows = {}
-            for cid, c in campaigns.items():
-                cfg = c.config
-                start_s = cfg.warmup_s if cfg.start == "warmup" else 0.0
-                settings = ", ".join(f"{k}={v}" for k, v in cfg.to_dict()["scenario"].items() if k in MANEUVER_SETTINGS)
-                rows[cid] = (cfg.network, cfg.followers, cfg.setpoint_m, cfg.speed_mps, cfg.start, c.attack, c.optimizer,
-                             c.seed, dict(c.attack_options).get("delta_s"), start_s, cfg.system_label,
-                             cfg.maneuver, settings, cfg.step_s, start_s + cfg.duration_s, c.family().names)
+            settings = {cid: _campaign_settings(c) for cid, c in campaigns.items()}
             for s in store.iter_samples():
-                (network, followers, setpoint, speed, start, attack, optimizer, seed, delta_s, start_s, system, maneuver,
-                 settings, step_s, end_s, names) = rows[s.campaign_id]
                 records.append(Record(
-                    str(path), s.id, s.campaign_id, network, followers, setpoint, speed, start, attack, optimizer, seed,
-                    delta_s, s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m, s.speed_diff_kmh,
-                    start_s, system, maneuver, settings, step_s, end_s, names,
+                    db=str(path), sample_id=s.id, campaign_id=s.campaign_id, params=s.params, robustness=s.robustness,
+                    outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
+                    speed_diff_kmh=s.speed_diff_kmh, **settings[s.campaign_id],
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
     return records
+
+
+def _campaign_settings(campaign) -> dict[str, Any]:
+    """The fields of a Record that its campaign gives (every sample of the campaign shares them)."""
+    cfg = campaign.config
+    start_s = cfg.warmup_s if cfg.start == "warmup" else 0.0
+    return dict(
+        network=cfg.network, followers=cfg.followers, setpoint_m=cfg.setpoint_m, speed_mps=cfg.speed_mps, start=cfg.start,
+        attack=campaign.attack, optimizer=campaign.optimizer, seed=campaign.seed,
+        delta_s=dict(campaign.attack_options).get("delta_s"), attack_start_s=start_s, system=cfg.system_label,
+        maneuver=cfg.maneuver, step_s=cfg.step_s, end_s=start_s + cfg.duration_s, param_names=campaign.family().names,
+        scenario=scenario_of(cfg),
+    )
+
+
+def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
+    """A campaign's scenario: the [scenario] keys its definition stores, but GRID_KEYS (a list as a tuple)."""
+    return tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in config.to_dict()["scenario"].items()
+                 if k not in GRID_KEYS)
 

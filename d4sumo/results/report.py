@@ -54,8 +54,11 @@ def collision_of(record: Record) -> dict | None:
 
 
 def describe(record: Record) -> str:
+    scenario = dict(record.scenario)
     where = (f"{record.network}, " if record.network != "highway_4lane" else "") + (
-        f"{record.followers} followers, " if record.followers != 3 else "")
+        f"route [{' '.join(scenario['route'])}], " if scenario.get("route") else "") + (
+        f"{record.followers} followers, " if record.followers != 3 else "") + (
+        f"duration {scenario['duration_s']:g} s, " if scenario.get("duration_s", 60.0) != 60.0 else "")
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
     system = f"{record.system}, " if record.system != "switching" else ""
     maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""

@@ -7,6 +7,7 @@ import itertools
 
 import pytest
 
+from d4sumo.model.config import EpisodeConfig
 from d4sumo.results.analysis import (count_noun, most_severe, success_grid, table_attacker_crashes, table_by_speed,
                                      table_success_statistics)
 from d4sumo.results.records import Record, load_records
@@ -145,3 +146,55 @@ def test_table_3_gives_shares_of_a_rows_successes_only_across_several_speeds():
     t3 = table_by_speed(two)
     assert t3.rows == (("knots bo rest", "20", "5 (25.0%)", "15 (75.0%)"),)
     assert "the share of the row's successes" in t3.title
+
+
+# --- campaigns of different scenarios ------------------------------------------------------------------
+
+
+def _two_roads(path):
+    """Two campaigns on one network, on two routes with two durations, their successes far apart."""
+    from d4sumo.search.campaign import Campaign, open_store
+    from d4sumo.search.store import collision_dict
+
+    with open_store(path) as store:
+        for route, duration_s, position_m in ((("A0B0", "B0C0"), 80.0, 100.0), (("A1B1", "B1C1"), 60.0, 500.0)):
+            config = EpisodeConfig(network="grid.net.xml", route=route, duration_s=duration_s)
+            cid = store.open_campaign(Campaign(config=config, optimizer="random").definition(), 2)
+            for i in range(2):
+                store.add_sample(cid, i, (0.0,) * 9, 0.5, "success", collision_dict("v1-v2", 20.0, position_m, 10.0),
+                                 {"v0-v1": 3.0, "v1-v2": -0.1, "v2-v3": 4.0}, 0.1)
+    return load_records([path])
+
+
+def test_campaigns_on_two_routes_of_one_network_are_never_pooled(tmp_path):
+    """Regression: two campaigns on one network, on different routes and durations, were one row of
+    Table 1, its collision location the mean over both roads (300 m, a place neither crash was near)."""
+    from d4sumo.results.analysis import scenario_labels
+
+    records = _two_roads(tmp_path / "r.sqlite")
+    t1 = table_success_statistics(records)
+    location = t1.header.index("collision location m, mean (std)")
+    assert [(row[0], row[location]) for row in t1.rows] == [
+        ("route=[A0B0 B0C0], duration_s=80 knots random", "100.0 (0.0)"),
+        ("route=[A1B1 B1C1], duration_s=60 knots random", "500.0 (0.0)")]
+    assert len(table_attacker_crashes(records).header) == 3 and len(table_by_speed(records).rows) == 2
+    assert len(most_severe(records, 3)) == 2  # two configurations
+    assert sorted(scenario_labels(records).values()) == ["route=[A0B0 B0C0], duration_s=80",
+                                                         "route=[A1B1 B1C1], duration_s=60"]
+    assert scenario_labels(records[:2]) == {records[0].scenario: ""}  # one scenario: nothing to set apart
+
+
+def test_heatmap_panels_and_clusters_name_the_scenario_they_show(tmp_path):
+    from d4sumo.results.clusters import richest_conditions
+    from d4sumo.results.figures import heatmap_panels
+
+    records = _two_roads(tmp_path / "r.sqlite")
+    names = [name for name, _ in heatmap_panels(records)]
+    assert names == ["route=[A0B0 B0C0], duration_s=80: knots, RANDOM, start rest",
+                     "route=[A1B1 B1C1], duration_s=60: knots, RANDOM, start rest"]
+    assert [c for c, _ in richest_conditions(records)] == [
+        "route=[A0B0 B0C0], duration_s=80: knots random, rest, setpoint 7 m, 25 m/s",
+        "route=[A1B1 B1C1], duration_s=60: knots random, rest, setpoint 7 m, 25 m/s"]
+    several = [dataclasses.replace(r, system="sumo:ACC") for r in records[:2]] + records
+    assert [name for name, _ in heatmap_panels(several)][0] == ("route=[A0B0 B0C0], duration_s=80 sumo:ACC",
+                                                                "knots, RANDOM, start rest")

@@ -46,3 +46,17 @@ def test_a_grid_that_covers_part_of_the_papers_flags_nothing_and_shows_what_did_
     assert who == PART and cells == ("300", "-", "300 (100.0%)", "-") and far == (False,) * 4
     (_, _, _, _), (_, who, _, far) = table_1([record(sample_id=i) for i in range(600)]).rows  # at 5 m only
     assert who == PART and far == (False,) * 5
+
+
+def test_each_scenario_is_set_beside_the_paper_on_its_own():
+    """Two roads are never pooled: a collision location means something else on each."""
+    records = [record(sample_id=i, scenario=(("network", "highway_4lane"),)) for i in range(3)]
+    records += [record(sample_id=10 + i, network="mine", scenario=(("network", "mine"),), position_m=900.0)
+                for i in range(3)]
+    compared = comparisons(records)
+    assert [c.title for c in compared] == [
+        "Table 1: successful parametric attacks (steady state, 20 m/s): network=highway_4lane",
+        "Table 2: attacker crashes / no-crash samples at 2-5 m: network=highway_4lane",
+        "Table 1: successful parametric attacks (steady state, 20 m/s): network=mine",
+        "Table 2: attacker crashes / no-crash samples at 2-5 m: network=mine"]
+    assert [c.rows[1][2][3] for c in compared if c.title.startswith("Table 1")] == ["100.0 (0.0)", "900.0 (0.0)"]
