@@ -43,9 +43,22 @@ def test_a_grid_that_covers_part_of_the_papers_flags_nothing_and_shows_what_did_
     knots = [record(sample_id=i, attack="knots", start="rest", speed_mps=25.0, setpoint_m=float(5 + 2 * (i % 2)))
              for i in range(300)]
     (_, _, _, _), (_, who, cells, far) = table_3(knots).rows
-    assert who == PART and cells == ("300", "-", "300 (100.0%)", "-") and far == (False,) * 4
+    assert who == PART and cells == ("300", "-", "300", "-") and far == (False,) * 4
     (_, _, _, _), (_, who, _, far) = table_1([record(sample_id=i) for i in range(600)]).rows  # at 5 m only
     assert who == PART and far == (False,) * 5
+
+
+def test_a_share_by_speed_is_given_only_where_a_row_ran_every_speed_as_the_paper_did():
+    """Regression: a sweep at 25 m/s alone showed "229 (100.0%)" beside the paper's "473 (29.7%)": the
+    paper's share of its row's successes at 20, 25 and 30 m/s, ours of one speed, 100% by construction."""
+    one = [record(sample_id=i, attack="knots", start="rest", speed_mps=25.0) for i in range(229)]
+    t3 = table_3(one)
+    (_, _, paper_cells, _), (_, _, cells, _) = t3.rows
+    assert paper_cells[2] == "473 (29.7%)" and cells == ("229", "-", "229", "-")
+    assert "share of the row's successes at that speed" in t3.title
+    every = one + [record(sample_id=1000 + i, attack="knots", start="rest", speed_mps=v) for i, v in
+                   enumerate([20.0] * 100 + [30.0] * 171)]
+    assert table_3(every).rows[1][2] == ("500", "100 (20.0%)", "229 (45.8%)", "171 (34.2%)")
 
 
 def test_each_scenario_is_set_beside_the_paper_on_its_own():
