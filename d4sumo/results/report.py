@@ -220,11 +220,10 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, s
 
     step("time-space diagrams")
     top = most_severe(records, severe)
-    parts.append(f"<h2>Most severe attacks</h2><p>The successful attacks with the {SEVERITY}, at most one per "
-                 "configuration (network, followers, setpoint, target speed, start mode, system, attack, optimiser): "
-                 f"{count_noun(len(top), 'attack')}. Each is replayed through SUMO; its time-space diagram shows every "
-                 "car's position over time coloured by speed (one scale for all diagrams), and beside it every car's "
-                 "acceleration.</p>")
+    parts.append("<h2>Most severe attacks</h2>" + (
+        f"<p>{html.escape(severe_rule(records, top, severe))} Each is replayed through SUMO; its time-space diagram "
+        "shows every car's position over time coloured by speed (one scale for all diagrams), and beside it (below it "
+        "in a narrow window) every car's acceleration.</p>" if top else "<p>No successful attack.</p>"))
     fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml") for r in top]
     speed_max_mps = max((float(d["speed"].max()) for fcd in fcds for d in fcd.values() if len(d["speed"])), default=None)
     for r, fcd in zip(top, fcds):
@@ -235,8 +234,6 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, s
                      f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; "
                      f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
                      f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
-    if not top:
-        parts.append("<p>No successful attack.</p>")
 
     step("clusters")
     parts.append("<h2>Clusters of successful knot vectors</h2><p>For each attack, optimiser and start mode, the "
@@ -259,12 +256,24 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, s
         "<!doctype html><html><head><meta charset='utf-8'><title>d4sumo report</title><style>"
         "body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right;font-size:13px}td:first-child,th:first-child{text-align:left}"
-        ".row{display:flex;flex-wrap:wrap;gap:12px}img{max-width:100%;border:1px solid #eee}.far{background:#ffe08a}"
+        ".row{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}.row img{flex:1 1 0;min-width:min(440px,100%)}"
+        "img{max-width:100%;border:1px solid #eee}.far{background:#ffe08a}"
         "</style></head><body>"
         f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
     (out / "index.html").write_text(page, encoding="utf-8")
+
+
+def severe_rule(records: Sequence[Record], top: Sequence[Record], severe: int) -> str:
+    """How the most severe attacks were chosen, with the counts that say why there are this many."""
+    configurations = {r.configuration for r in records}
+    found = {r.configuration for r in records if r.outcome == "success" and r.speed_diff_kmh is not None}
+    return (f"An attack's severity is the {SEVERITY}. A configuration is one scenario, setpoint, target speed, start "
+            "mode, system under test, attack and optimiser (campaigns that differ in their seed alone are one). Each "
+            "configuration gives at most one attack, its most severe, so that one campaign's near-copies of its best "
+            f"attack do not fill the list: of the {count_noun(len(found), 'configuration')} that found a successful "
+            f"attack (of {len(configurations)}), the {len(top)} with the most severe are shown (--severe {severe}).")
 
 
 def clusters_caption(c) -> str:

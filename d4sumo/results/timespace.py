@@ -116,7 +116,8 @@ def _place_labels(fig, ax, labels: list[tuple[str, float, float]]) -> list:
     """Label each line just right of its end, stacked so that no two labels overprint, with a thin
     leader line to the end when a label had to move. ``labels``: (text, time, position) in data units.
     Needs the final layout (call after drawing, with the layout frozen): positions are worked out in
-    pixels, then kept in data units so that they scale with the saved file's dpi."""
+    pixels, then kept in data units so that they scale with the saved file's dpi. A line that ends with
+    the episode is labelled right of the axes, in the room `_reserve_label_room` kept there."""
     if not labels:
         return []
     to_pixels, to_data = ax.transData.transform, ax.transData.inverted().transform
@@ -130,10 +131,22 @@ def _place_labels(fig, ax, labels: list[tuple[str, float, float]]) -> list:
     for (xy, text, end), y in zip(ends, ys):
         at = to_data((xy[0] + offset_px, y + shift))
         if abs(y + shift - xy[1]) > 1.0:  # moved: leaders under every label, so none crosses a text
-            ax.plot([end[0], at[0]], [end[1], at[1]], color="0.35", linewidth=0.6, zorder=2.5)
+            ax.plot([end[0], at[0]], [end[1], at[1]], color="0.35", linewidth=0.6, zorder=2.5, clip_on=False)
         texts.append(ax.text(at[0], at[1], text, va="center", ha="left", fontsize=LABEL_FONT_PT, zorder=6,
                              bbox=dict(boxstyle="square,pad=0.1", facecolor="white", edgecolor="none", alpha=0.85)))
     return texts
+
+
+def _reserve_label_room(fig, ax, labels: list[tuple[str, float, float]]) -> list:
+    """Invisible copies of the widest label just right of the axes, so that the layout keeps room there
+    for the labels of the lines that end with the episode; remove them once the layout is frozen."""
+    from matplotlib.transforms import offset_copy
+
+    if not labels:
+        return []
+    widest = max((text for text, _, _ in labels), key=len)
+    at = offset_copy(ax.transAxes, fig=fig, x=8.0, units="points")
+    return [ax.text(1.0, y, widest, transform=at, fontsize=LABEL_FONT_PT, alpha=0.0) for y in (0.0, 1.0)]
 
 
 def _collision_lane(fcd: dict, collision: dict, lane_ids: list[str]) -> str:
@@ -189,7 +202,7 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
         _mark_moments(ax, attack_start_s, lane_change_s)
         if collision and lane == crash_lane:
             ax.plot([collision["time_s"]], [collision["position_m"]], marker="X", color="red", markeredgecolor="white",
-                    markersize=10, linestyle="none", zorder=4,
+                    markersize=10, linestyle="none", zorder=4, clip_on=False,
                     label=f"collision {collision['pair']}: {collision['speed_diff_kmh']:.1f} km/h at {collision['time_s']:.1f} s")
         if len(lane_ids) > 1:
             ax.set_title(_lane_title(lane), fontsize=9, loc="left")
@@ -201,16 +214,24 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
     positions = np.concatenate([d["pos"] for d in fcd.values()])
     t0, t1 = float(times.min()), float(times.max())
     p0, p1 = float(positions.min()), float(positions.max())
-    axes[0].set_xlim(t0, t1 + 0.16 * (t1 - t0 or 1.0))  # room on the right for the vehicle labels
+    axes[0].set_xlim(t0, _episode_end_s(t1, collision))  # the axis ends with the episode; the labels go beyond it
     axes[0].set_ylim(p0 - 0.04 * (p1 - p0 or 1.0), p1 + 0.06 * (p1 - p0 or 1.0))
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(wrap_title(title), fontsize=9)
     fig.colorbar(ScalarMappable(norm, SPEED_CMAP), ax=list(axes), label="speed [m/s]", shrink=0.9 if len(axes) > 1 else 1.0)
+    room = [t for i, ax in enumerate(axes) for t in _reserve_label_room(fig, ax, ends[i])]
     fig.canvas.draw()  # lay out, then freeze it so the labels placed in pixels stay put
     fig.set_layout_engine("none")
+    for t in room:
+        t.remove()
     for i, ax in enumerate(axes):
         _place_labels(fig, ax, ends[i])
     return fig
+
+
+def _episode_end_s(last_s: float, collision: dict | None) -> float:
+    """When the episode ended: its last recorded step (the collision's, when one ended it)."""
+    return max(last_s, float(collision["time_s"])) if collision else last_s
 
 
 def time_space(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *,
@@ -232,6 +253,8 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
     _mark_moments(ax, attack_start_s, lane_change_s)
     if collision:
         ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
+    times = np.concatenate([d["time"] for d in fcd.values()])
+    ax.set_xlim(float(times.min()), _episode_end_s(float(times.max()), collision))  # the axis ends with the episode
     ax.set_xlabel("time [s]")
     ax.set_ylabel("acceleration [m/s²]")
     ax.set_title(wrap_title(title), fontsize=9)

@@ -103,6 +103,26 @@ def test_time_space_labels_do_not_overprint_where_the_lines_end_together():
     assert len([ax for ax in fig.axes if ax.get_label() == "<colorbar>"]) == 1
 
 
+def test_time_axes_end_with_the_episode_and_the_labels_stay_in_the_figure():
+    """Regression: the time axes ran on past the episode's end (to 28 s for a 24 s episode), the room
+    for the vehicle labels being made inside the time-space diagram's axes."""
+    fcd = _platoon_fcd(lane_change=True)  # the episode ends with the collision at 20 s
+    fig = timespace.time_space_figure(fcd, "two lanes", COLLISION)
+    panels = [ax for ax in fig.axes if _speed_collections(ax)]
+    assert all(ax.get_xlim() == (0.0, 20.0) for ax in panels)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    (bar,) = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    for text in (t for ax in panels for t in ax.texts):
+        box = text.get_window_extent(renderer)
+        assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1), text.get_text()
+        assert box.x1 < bar.get_window_extent(renderer).x0, text.get_text()  # clear of the colour bar
+    ended = [t for t in panels[1].texts if t.get_text() == "v3"][0]  # its line ends with the episode: labelled beyond
+    assert ended.get_window_extent(renderer).x0 > panels[1].get_window_extent(renderer).x1
+    acc = timespace.accelerations_figure(fcd, "accelerations", COLLISION)
+    assert acc.axes[0].get_xlim() == (0.0, 20.0)
+
+
 def test_time_space_uses_a_given_speed_scale():
     fig = timespace.time_space_figure(_platoon_fcd(lane_change=False), "one lane", speed_max_mps=40.0)
     assert {(c.norm.vmin, c.norm.vmax) for ax in fig.axes for c in _speed_collections(ax)} == {(0.0, 40.0)}

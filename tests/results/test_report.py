@@ -87,12 +87,33 @@ def test_every_table_has_data_rows(report):
 
 def test_the_most_severe_attacks_come_from_different_configurations_and_say_why(report, small_db):
     index, text, page = report
-    top = most_severe(load_records([small_db]), 3)
+    records = load_records([small_db])
+    top = most_severe(records, 3)
     assert len(top) == 3 and len({(r.setpoint_m, r.speed_mps, r.start) for r in top}) == 3
     assert "largest speed difference between the colliding cars at the first collision" in text
-    assert "at most one per configuration" in text
+    # said plainly, with the counts: once "at most one per configuration (...): 3 attacks" for 8 configurations
+    found = len({r.configuration for r in records if r.outcome == "success"})
+    assert "Each configuration gives at most one attack, its most severe" in text
+    assert f"of the {found} configurations that found a successful attack (of 8), the 3 with the most severe are " \
+           "shown (--severe 3)" in text
     shown = [int(m) for m in re.findall(r"time_space_sample_(\d+)\.png", " ".join(page.images))]
     assert shown == [r.sample_id for r in top]
+
+
+def test_the_acceleration_plot_fits_beside_its_time_space_diagram_at_1400_px(report):
+    """Regression: the text said the accelerations were beside the time-space diagram, yet at 1400 px
+    they stacked below it (two figures of 880 px each kept their width and wrapped)."""
+    index, text, _ = report
+    assert "and beside it (below it in a narrow window) every car's acceleration" in text
+    style = re.search(r"<style>(.*?)</style>", text).group(1)
+    row = re.search(r"\.row\{([^}]*)\}", style).group(1)
+    figure = re.search(r"\.row img\{([^}]*)\}", style).group(1)
+    margin_px = 2 * 16 * 2  # body margin 2em each side
+    gap_px = int(re.search(r"gap:(\d+)px", row).group(1))
+    min_px = int(re.search(r"min-width:min\((\d+)px,100%\)", figure).group(1))
+    assert "flex:1 1 0" in figure  # the two figures share the row, whatever their own width
+    assert 2 * min_px + gap_px <= 1400 - margin_px  # and both fit in it at 1400 px
+    assert re.findall(r"<div class='row'><img [^>]*time_space[^>]*><img [^>]*accel", text)
 
 
 def test_the_report_never_says_one_of_something_in_the_plural(report):
