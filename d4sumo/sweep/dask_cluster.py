@@ -12,6 +12,7 @@ import traceback
 
 from ..errors import ConfigError, D4sumoError
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
+from .workers import quiet_resource_tracker
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +50,7 @@ def _dask_client(address: str, timeout_s: float, workers: int):
     with contextlib.ExitStack() as stack:
         try:
             if address == "local":
+                quiet_resource_tracker()
                 logging.getLogger("distributed").setLevel(logging.WARNING)  # not a page of start-up messages
                 logging.getLogger("tornado.application").addFilter(_interrupted_sync)
                 # the workers' warnings (a task cancelled by Ctrl-C) are not the user's business; errors are

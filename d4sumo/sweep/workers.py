@@ -14,8 +14,33 @@ from multiprocessing import get_context
 def new_pool(workers: int) -> ProcessPoolExecutor:
     """``workers`` local processes, spawned clean (libsumo keeps one simulation per process), that ignore
     Ctrl-C (the caller's to handle) and die with the caller."""
+    quiet_resource_tracker()
     return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                initargs=(os.getpid(),))
+
+
+#: multiprocessing's resource tracker, a process of the caller's, removes the semaphores of its worker
+#: processes (a pool's, a local Dask cluster's) if the caller cannot (killed by SIGKILL): once the workers
+#: are gone too, a few tenths of a second later, it warns "There appear to be 5 leaked semaphore objects
+#: to clean up at shutdown" on the terminal, often in the middle of the next command. Nothing leaks
+#: (removing them is its job), so it is told to say nothing.
+_TRACKER_QUIET = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (once a process, unless it has died) with its warnings off
+    (it reads them from the environment it starts with), before any worker process is started."""
+    from multiprocessing import resource_tracker
+
+    given = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = f"{given},{_TRACKER_QUIET}" if given else _TRACKER_QUIET
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if given is None:
+            del os.environ["PYTHONWARNINGS"]
+        else:
+            os.environ["PYTHONWARNINGS"] = given
 
 
 def kill_pool(pool: ProcessPoolExecutor) -> None:
