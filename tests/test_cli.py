@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -126,6 +127,17 @@ def test_a_missing_sumo_binary_is_one_clear_line(tmp_path, monkeypatch, capsys):
 def test_an_unknown_flag_is_exit_2():
     result = run("simulate", "--setpoitn", "3")
     assert result.returncode == 2 and "unrecognized arguments" in result.stderr
+
+
+@pytest.mark.sumo
+def test_falsify_labels_every_number_of_the_best_samples_collision(tmp_path, capsys):
+    """Regression: the summary gave 'v2-v3 at 24.00 s, 181.4 m, 63.1 km/h', three numbers without a word."""
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--optimizer", "random", "--samples", "6", "--seed", "2", "--db", str(db), "--quiet"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2].startswith("  best: sample ") and ", robustness " in lines[2]
+    assert re.fullmatch(r"  first collision: v\d-v\d collided at t = \d+\.\d\d s, -?\d+\.\d m along the road, "
+                        r"speed difference \d+\.\d km/h", lines[3]), lines[3]
 
 
 @pytest.mark.sumo

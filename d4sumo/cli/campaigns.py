@@ -10,6 +10,7 @@ import sys
 from ..errors import ConfigError, check_number
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
 from .common import check_batch, document, note_unused_flags
+from .episodes import collision_text
 
 
 def cmd_falsify(args: argparse.Namespace) -> int:
@@ -98,9 +99,9 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     print(f"campaign {summary.campaign_id} ({attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     if top is not None:
-        c = top.collision
-        hit = f", {c['pair']} at {c['time_s']:.2f} s, {c['position_m']:.1f} m, {c['speed_diff_kmh']:.1f} km/h" if c else ""
-        print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}{hit}")
+        print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}")
+        if top.collision:
+            print(f"  first collision: {collision_text(top.collision)}")
         print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
         print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
     return 0

@@ -129,6 +129,13 @@ def _gap_text(gap_m: float, collision_m: float) -> str:
     return repr(gap_m)
 
 
+def collision_text(c: dict) -> str:
+    """A first collision in words, each number labelled: its pair, time (simulation time), position along
+    the road and speed difference."""
+    return (f"{c['pair']} collided at t = {c['time_s']:.2f} s, {c['position_m']:.1f} m along the road, "
+            f"speed difference {c['speed_diff_kmh']:.1f} km/h")
+
+
 def _print_summary(s: dict, road_name: str) -> None:
     sc = s["config"]["scenario"]
     attack = s["attack"]
@@ -139,10 +146,7 @@ def _print_summary(s: dict, road_name: str) -> None:
     if c is None:
         print(f"outcome: {s['outcome']} in {s['simulated_s']:.2f} s")
     else:
-        print(
-            f"outcome: {s['outcome']}: {c['pair']} collided at t = {c['time_s']:.2f} s, "
-            f"{c['position_m']:.1f} m along the road, speed difference {c['speed_diff_kmh']:.1f} km/h"
-        )
+        print(f"outcome: {s['outcome']}: {collision_text(c)}")
     collision_m = s["config"]["scenario"].get("collision_gap_m", 0.0)
     print("min gaps: " + ", ".join(f"{k} {_gap_text(v, collision_m)} m" for k, v in s["min_gaps_m"].items()))
     if s["robustness"] is not None:
