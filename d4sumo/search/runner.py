@@ -179,8 +179,10 @@ class CampaignRunner:
 
     The optimiser is asked for as many points as it can propose before its next score
     (`Optimizer.ready`); they are played in batches of at most ``batch`` episodes side by side and
-    told in order. Built from the samples stored so far (re-told to the optimiser, whose asks must
-    match them exactly; a sample missing in between, if a database lacks one, is played again) or
+    told in order. Built from the samples stored so far, which are the truth: the optimiser is asked
+    again and told each stored point and score in order (a point the seed alone decides must be the
+    one asked; one a model proposed may differ where another machine's numerics began the campaign,
+    `numerics_note`; a sample missing in between, if a database lacks one, is played again) or
     from the ``state`` a previous runner of the same campaign handed over; ``state`` is plain
     picklable data (the optimiser, the scores told, the points asked and not yet played, the stored
     samples not reached yet), so a
@@ -202,9 +204,11 @@ class CampaignRunner:
                 raise StoreError(f"{where}: campaign samples are not numbered 0, 1, 2, ... (sample {r.index} twice or out of range)")
             self.stored[r.index] = r
         if state is not None:
-            self.optimizer, self.scores, self.queue, stored_later = state
+            self.optimizer, self.scores, self.queue, stored_later, self.numerics_differ_at = state
             self.stored.update(stored_later)
             return
+        #: the first stored sample whose point this machine's model proposes otherwise (None: none)
+        self.numerics_differ_at: int | None = None
         rng = np.random.default_rng(campaign.seed)
         family = evaluator.family
         self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
@@ -219,9 +223,10 @@ class CampaignRunner:
 
     @property
     def state(self) -> tuple:
-        """Everything to go on with: the optimiser, the scores told, the points asked and not played, and
-        the stored samples not reached yet (a database may have a gap before them)."""
-        return self.optimizer, self.scores, self.queue, dict(self.stored)
+        """Everything to go on with: the optimiser, the scores told, the points asked and not played, the
+        stored samples not reached yet (a database may have a gap before them), and the first stored
+        sample this machine's model proposed otherwise."""
+        return self.optimizer, self.scores, self.queue, dict(self.stored), self.numerics_differ_at
 
     def _fill(self) -> None:
         if not self.queue:
@@ -235,16 +240,39 @@ class CampaignRunner:
             x = self.queue.pop(0)
             r = self.stored.pop(self.done)
             self._check(x, r)
-            self._tell(x, r)
+            self._tell(r)
 
     def _check(self, x: np.ndarray, r: SampleResult) -> None:
-        if not np.allclose(x, r.params, rtol=0, atol=1e-12):
-            raise StoreError(f"{self.where}: stored sample {r.index} is not what this seed asks for; "
-                             "it was written by another d4sumo version or changed: use a new database")
+        """A stored sample stands where this machine asks for its point, or where a model asked for it
+        (`Optimizer.first_modelled`: another machine's BLAS may have proposed another point there, all
+        of whose successors it told). A point the seed alone decides, one outside the box or of another
+        length, is another campaign's or was changed."""
+        if len(r.params) == len(x) and np.allclose(x, r.params, rtol=0, atol=1e-12):
+            return
+        opt = self.optimizer
+        params = np.asarray(r.params, dtype=float)
+        slack = 1e-9 * np.maximum(1.0, np.maximum(np.abs(opt.lower), np.abs(opt.upper)))  # a bound's rounding
+        inside = len(params) == len(x) and bool(np.all((params >= opt.lower - slack) & (params <= opt.upper + slack)))
+        if not inside or opt.first_modelled is None or r.index < opt.first_modelled:
+            what = ("a point this seed draws alike on every machine" if inside
+                    else "not a point of this campaign's box")
+            raise StoreError(f"{self.where}: stored sample {r.index} is not what this seed asks for ({what}); "
+                             "the database holds another campaign or was changed: use a new database")
+        if self.numerics_differ_at is None:
+            self.numerics_differ_at = r.index
 
-    def _tell(self, x: np.ndarray, r: SampleResult) -> None:
+    def numerics_note(self) -> str | None:
+        """One line for a resumed campaign whose stored points another machine's numerics proposed."""
+        if self.numerics_differ_at is None or self.done >= self.campaign.samples:
+            return None
+        return (f"{self.where}: resumed on a machine whose numerics differ from the one that began it (stored "
+                f"sample {self.numerics_differ_at} is not what this machine's model proposes there): the stored "
+                f"samples stand, and the samples from {self.done} on follow this machine's proposals")
+
+    def _tell(self, r: SampleResult) -> None:
+        """Tell the optimiser a sample as it is stored (or played): its point and score."""
         score = _score(r, self.scores)
-        self.optimizer.tell(x, score)
+        self.optimizer.tell(np.asarray(r.params, dtype=float), score)
         self.scores.append(score)
 
     def pending(self) -> list[tuple[int, list[np.ndarray]]]:
@@ -267,7 +295,7 @@ class CampaignRunner:
         results = []
         for i, x in enumerate(xs):
             r = self.stored.pop(first + i, None) or played[first + i]
-            self._tell(x, r)
+            self._tell(r)
             if first + i in played:
                 results.append(r)
         del self.queue[:len(xs)]
@@ -353,6 +381,8 @@ def run_campaign(
         campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep)
     if results:
         log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
+    if runner.numerics_note():
+        log.warning("%s", runner.numerics_note())
     if on_sample:
         for r in results:
             on_sample(r)

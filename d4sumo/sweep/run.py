@@ -126,7 +126,16 @@ def run_sweep(
         total = sweep.samples
         counts = list(store.sweep_counts(sweep.name))
 
+        said = [False]  # a campaign begun where the numerics differ: said once a sweep
+
         def store_results(active: _Active, results: list[SampleResult]) -> None:
+            if active.numerics_differ_at is not None and not said[0] and results:
+                said[0] = True
+                log.warning("%s: campaign %d was resumed on a machine whose numerics differ from the one that began "
+                            "it (stored sample %d is not what this machine's model proposes there): the stored samples "
+                            "stand, and the samples from %d on follow this machine's proposals (other campaigns resumed "
+                            "so are not named)", store.path, active.campaign_id, active.numerics_differ_at,
+                            results[0].index)
             store.add_samples(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
                                                     r.wall_s, r.error) for r in results])
             active.done += len(results)

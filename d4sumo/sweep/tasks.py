@@ -95,6 +95,8 @@ class _Active:
     failures: int = 0
     batch: int = DEFAULT_BATCH
     added: set = field(default_factory=set)  # indices stored by this sweep run (a stored campaign may have gaps)
+    #: the first stored sample whose point this machine's model proposes otherwise (`CampaignRunner`)
+    numerics_differ_at: int | None = None
 
     def chunk(self) -> Chunk:
         # the stored samples travel only until a state exists
@@ -109,6 +111,7 @@ def _accept(active: _Active, chunk_result: tuple[list[SampleResult], tuple], sto
     if (indices != sorted(set(indices)) or any(i in stored or not 0 <= i < active.campaign.samples for i in indices)):
         raise D4sumoError(f"campaign {active.campaign_id}: a worker returned samples out of order or stored already; "
                           "nothing of them was stored")
+    active.numerics_differ_at = state[-1]
     store_results(active, results)
     active.added.update(indices)
     active.state = state

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import json
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from d4sumo.errors import ConfigError, SumoError
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import run_campaign
 from d4sumo.search.store import Store, StoreError
+from histories import nudge_numerics
 
 pytestmark = pytest.mark.sumo
 
@@ -71,6 +73,63 @@ def test_stored_samples_that_this_seed_would_not_ask_are_refused(tmp_path):
         with pytest.raises(StoreError, match="not what this seed asks for"):
             run_campaign(SMALL.replace(optimizer="random", samples=5), store)
         assert len(store.samples()) == 3
+
+
+def stored_rows(store):
+    return [(s.index, s.params, s.robustness, s.outcome) for s in store.samples()]
+
+
+@pytest.mark.parametrize("optimizer, begun", [("turbo", 14), ("bo", 34)])
+def test_a_campaign_begun_where_the_numerics_differ_resumes_with_its_stored_samples(tmp_path, monkeypatch, optimizer, begun):
+    """Issue 36: a campaign interrupted on one machine and resumed on another (another CPU's BLAS kernel, a
+    numpy upgrade) was refused ("stored sample 41 is not what this seed asks for") where its GP proposed
+    otherwise. The stored samples are the truth: each is told to the optimiser in order, and the campaign
+    goes on from there. Here the samples were begun with the GP's scores one ulp off (on the machine this
+    was written on, turbo's proposals then differ from sample 10 on, bo's from 30)."""
+    campaign = SMALL.replace(optimizer=optimizer)
+    path = tmp_path / "r.sqlite"
+    with monkeypatch.context() as other_machine:
+        nudge_numerics(other_machine)
+        with Store(path) as store:
+            run_campaign(campaign.replace(samples=begun), store)
+            stored = stored_rows(store)
+    with Store(path) as store:
+        resumed = run_campaign(campaign.replace(samples=begun + 4), store)
+        assert stored_rows(store)[:begun] == stored and len(store.samples()) == begun + 4
+    assert [s.params for s in resumed.samples[:begun]] == [p for _, p, _, _ in stored]
+
+
+@pytest.mark.parametrize("edit, refused", [
+    (("idx = 12", 1e-9), False),  # a point BO's model proposed (past its 10 initial points): another machine's
+    (("idx = 4", 1e-9), True),  # a point of the initial design, which the seed draws alike everywhere
+    (("idx = 12", 5.0), True),  # outside the box of knots in [-1, 1]
+])
+def test_a_stored_point_a_model_proposed_stands_and_one_the_seed_draws_must_match(tmp_path, caplog, edit, refused):
+    """How a campaign begun on another machine is told from another campaign or an edited database:
+    points the seed alone decides (a design, a sampler's draws) are the same on every machine, bit for
+    bit; a point a model proposed (BLAS) may differ and stands, if it lies in the box."""
+    where, change = edit
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        run_campaign(SMALL, store)
+        params = store.db.execute(f"SELECT params FROM sample WHERE {where}").fetchone()[0]
+        changed = [float(v) for v in params.strip("[]").split(",")]
+        changed[0] = changed[0] + change if abs(change) < 1 else change
+        store.db.execute(f"UPDATE sample SET params = ? WHERE {where}", (json.dumps(changed),))
+        store.db.commit()
+        before = stored_rows(store)
+    with Store(path) as store:
+        if refused:
+            with pytest.raises(StoreError, match="another campaign or was changed"):
+                run_campaign(SMALL.replace(samples=16), store)
+            assert stored_rows(store) == before
+            return
+        with caplog.at_level("WARNING"):
+            summary = run_campaign(SMALL.replace(samples=16), store)
+        assert stored_rows(store)[:14] == before and len(summary.samples) == 16
+    notes = [r.getMessage() for r in caplog.records if "numerics differ" in r.getMessage()]
+    assert len(notes) == 1 and "stored sample 12 is not what this machine's model proposes" in notes[0]
+    assert "the samples from 14 on follow this machine's proposals" in notes[0]
 
 
 def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goes_on(tmp_path, monkeypatch):

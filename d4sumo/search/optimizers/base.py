@@ -12,7 +12,13 @@ class Optimizer:
 
     ``signals`` says how the parameters lay out in time, for an optimiser that reads them as signals:
     consecutive runs of that many values, each run one signal in time order (a scalar is a run of one).
-    By default all the parameters are one signal."""
+    By default all the parameters are one signal.
+
+    Points come from the seed alone (a design, a sampler's draws: every machine draws them alike, bit for
+    bit) or from a model fitted through BLAS and LAPACK, whose last bits depend on the CPU and the library
+    build: an argmax over an acquisition can turn those into another point. ``first_modelled`` is the
+    first point (0-based, in the order asked) a model proposed: from there on, another machine may ask
+    otherwise (`search.runner` lets a resumed campaign's stored points stand there)."""
 
     name = ""
     #: option -> (default, low, high); an int default means a whole number
@@ -30,6 +36,7 @@ class Optimizer:
         self.rng = rng
         self.options = self.resolve_together(check_options(self.name, self.OPTIONS, options))
         self.asked = 0
+        self.first_modelled: int | None = None
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
 
@@ -59,6 +66,11 @@ class Optimizer:
 
     def _ask(self) -> np.ndarray:
         raise NotImplementedError
+
+    def _modelled(self) -> None:
+        """The point being asked comes from a model (its last bits are this machine's)."""
+        if self.first_modelled is None:
+            self.first_modelled = self.asked - 1
 
     def tell(self, x: np.ndarray, score: float) -> None:
         score = float(score)

@@ -59,6 +59,7 @@ class GaussianProcessSearch(Optimizer):
         if len(self.y) - self._run < self.initial_points:
             z = self._initial.random(1)[0]
         else:
+            self._modelled()
             z = self._propose()
         self._pending.append(z)
         return self._unit_to_box(z)

@@ -40,6 +40,7 @@ class CMAES(Optimizer):
         return population - len(self._scores) - self.outstanding
 
     def _ask(self) -> np.ndarray:
+        self._modelled()  # pycma samples through an eigendecomposition (LAPACK), its first population too
         if not self._pending:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -51,6 +52,9 @@ class CMAES(Optimizer):
     def tell(self, x: np.ndarray, score: float) -> None:
         super().tell(x, score)
         self._scores.append(self.y[-1])
+        i = len(self._scores) - 1  # told in the order asked: a point told other than asked (a stored one) stands
+        if not np.array_equal(self.X[-1], self._unit_to_box(self._population[i])):
+            self._population[i] = np.clip(self._box_to_unit(self.X[-1]), 0.0, 1.0)
         if len(self._scores) < len(self._population):
             return
         with warnings.catch_warnings():  # flat fitness is reported as a warning; CMA widens by itself
