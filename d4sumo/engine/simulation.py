@@ -133,9 +133,48 @@ def fcd_file(path: str | Path | None) -> Iterator[Path | None]:
         yield part
         if not _ends_whole(part):
             raise SumoError(f"the FCD output {path} could not be written completely (is the disk full?)")
+        name_fcd(part, part, path)
         os.replace(part, path)
     finally:
         part.unlink(missing_ok=True)
+
+
+#: how far into an FCD file its header (SUMO's configuration, in a comment) reaches, at most
+FCD_HEADER_BYTES = 1 << 16
+
+
+def name_fcd(fcd: Path, written_as: str | Path, name: str | Path) -> None:
+    """Make the header of an FCD file name the file ``name`` where it names ``written_as``: SUMO records the
+    file it was told to write (a part, renamed once whole) in the configuration at the file's top. The
+    header is edited in place (the line padded with spaces, inside its comment) where ``name`` is no longer,
+    else the file is written anew beside itself and renamed over it."""
+    old, new = (b'<fcd-output value="' + _xml_attribute(str(p)) + b'"/>' for p in (written_as, name))
+    with open(fcd, "r+b") as fh:
+        head = fh.read(FCD_HEADER_BYTES)
+        at = head.find(old)
+        if at < 0:  # no such header: nothing to name
+            return
+        if len(new) <= len(old):
+            fh.seek(at)
+            fh.write(new + b" " * (len(old) - len(new)))
+            return
+        fh.seek(at + len(old))
+        anew = fcd.with_name(fcd.name + ".named")
+        try:
+            with open(anew, "wb") as out:
+                out.write(head[:at] + new)
+                while chunk := fh.read(1 << 20):
+                    out.write(chunk)
+            os.replace(anew, fcd)
+        finally:
+            anew.unlink(missing_ok=True)
+
+
+def _xml_attribute(text: str) -> bytes:
+    """An attribute's value as SUMO writes it into its XML: the five XML escapes, UTF-8."""
+    for raw, escaped in (("&", "&amp;"), ("<", "&lt;"), (">", "&gt;"), ("'", "&apos;"), ('"', "&quot;")):
+        text = text.replace(raw, escaped)
+    return text.encode("utf-8")
 
 
 def _ends_whole(fcd: Path) -> bool:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .. import __version__
-from ..engine.simulation import simulate
+from ..engine.simulation import name_fcd, simulate
 from ..errors import ConfigError
 from ..files import part_of, remove_stale_parts
 from ..search.campaign import Campaign, open_store
@@ -34,8 +34,9 @@ PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
 SEVERITY = "largest speed difference between the colliding cars at the first collision"
 
 
-def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
-    """Re-simulate a stored sample into an FCD file; returns the parsed FCD."""
+def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None = None) -> dict:
+    """Re-simulate a stored sample into an FCD file; returns the parsed FCD. ``name``: where the file will
+    be once moved (a report's, built in a folder beside its own), for its header to name."""
     with open_store(record.db, create=False) as store:
         definition = store.campaign(record.campaign_id).definition
     campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
@@ -45,6 +46,8 @@ def replay_to_fcd(record: Record, fcd_path: str | Path) -> dict:
     except ConfigError as exc:  # a damaged database: say which sample of which
         raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
     simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd_path)
+    if name is not None:
+        name_fcd(Path(fcd_path), fcd_path, name)
     return timespace.read_fcd(fcd_path)
 
 
@@ -151,7 +154,7 @@ def build_report(
     shutil.rmtree(staging, ignore_errors=True)  # this process's own, from a report it made before
     staging.mkdir()
     try:
-        _write_report(records, dbs, staging, severe, progress or (lambda what: log.info("%s", what)))
+        _write_report(records, dbs, staging, out, severe, progress or (lambda what: log.info("%s", what)))
         for f in sorted(staging.rglob("*"), key=lambda f: f.name == "index.html"):
             if f.is_file():
                 target = out / f.relative_to(staging)
@@ -162,8 +165,10 @@ def build_report(
     return out / "index.html"
 
 
-def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, severe: int,
+def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, final: Path, severe: int,
                   step: Callable[[str], None]) -> None:
+    """The report into ``out``, a folder beside ``final`` that will be moved there (the FCD files name
+    themselves as they will be)."""
     (out / "fcd").mkdir()
     parts: list[str] = []
     db_names = [str(db) for db in dbs]
@@ -213,7 +218,7 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, s
                              f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
                 continue
             r = worst[0]
-            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml")
+            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml", final / "fcd" / f"worst_{stem(r)}.xml")
             ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
             parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
                          f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
@@ -224,7 +229,7 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, s
         f"<p>{html.escape(severe_rule(records, top, severe))} Each is replayed through SUMO; its time-space diagram "
         "shows every car's position over time coloured by speed (one scale for all diagrams), and beside it (below it "
         "in a narrow window) every car's acceleration.</p>" if top else "<p>No successful attack.</p>"))
-    fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml") for r in top]
+    fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml", final / "fcd" / f"{stem(r)}.xml") for r in top]
     speed_max_mps = max((float(d["speed"].max()) for fcd in fcds for d in fcd.values() if len(d["speed"])), default=None)
     for r, fcd in zip(top, fcds):
         ts = _sample_figure(r, "time-space", fcd, out / f"time_space_{stem(r)}.png", speed_max_mps)

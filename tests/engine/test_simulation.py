@@ -76,6 +76,32 @@ def test_fcd_gaps_agree_with_the_trace_to_one_centimetre(road, tmp_path):
         assert np.max(np.abs(fcd_gap - episode.trace[f"gap_{i}"])) < 0.01
 
 
+def test_an_fcd_file_names_itself_in_its_header_not_the_part_it_was_written_as(road, tmp_path):
+    """Regression: SUMO's header in an FCD file gave the temporary name it was written under
+    (<fcd-output value=".sample_81.xml.6436.part"/>), not the file's."""
+    folder = tmp_path / "a&b"
+    folder.mkdir()
+    fcd = folder / "sample_81.xml"
+    simulate(EpisodeConfig(duration_s=1.0), np.zeros(20), road=road, fcd_path=fcd)
+    head = fcd.read_text()[:4000]
+    assert f'<fcd-output value="{str(fcd).replace("&", "&amp;")}"/>' in head and ".part" not in head
+    assert fcd.read_text().rstrip().endswith("</fcd-export>") and [p.name for p in folder.iterdir()] == ["sample_81.xml"]
+
+
+def test_an_fcd_header_takes_a_longer_name_too(tmp_path):
+    from d4sumo.engine.simulation import name_fcd
+
+    fcd = tmp_path / "f.xml"
+    body = "<fcd-export>\n" + "<timestep time=\"0.00\"/>\n" * 50_000 + "</fcd-export>\n"
+    fcd.write_text('<!--\n    <output>\n        <fcd-output value=".f.xml.1.part"/>\n    </output>\n-->\n' + body)
+    name_fcd(fcd, ".f.xml.1.part", "a much longer name than the part's <&>.xml")
+    text = fcd.read_text()
+    assert '<fcd-output value="a much longer name than the part&apos;s &lt;&amp;&gt;.xml"/>\n' in text
+    assert text.endswith(body) and [p.name for p in tmp_path.iterdir()] == ["f.xml"]
+    name_fcd(fcd, "a much longer name than the part's <&>.xml", "f.xml")  # shorter: in place, padded
+    assert '<fcd-output value="f.xml"/>' in fcd.read_text() and fcd.read_text().endswith(body)
+
+
 def test_the_same_inputs_give_the_same_trace_twice(road, success):
     again = simulate(CONFIG, knots_signal(SUCCESS_KNOTS, CONFIG), road=road)
     assert again.collisions == success.collisions

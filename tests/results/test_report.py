@@ -116,6 +116,17 @@ def test_the_acceleration_plot_fits_beside_its_time_space_diagram_at_1400_px(rep
     assert re.findall(r"<div class='row'><img [^>]*time_space[^>]*><img [^>]*accel", text)
 
 
+def test_the_reports_fcd_files_name_themselves_where_they_are(report):
+    """Regression: an FCD file's header named the temporary file it was written as, in the folder the
+    report was built in beside its own."""
+    index, _, _ = report
+    files = sorted((index.parent / "fcd").glob("*.xml"))
+    assert len(files) == 3
+    for fcd in files:
+        head = fcd.read_text()[:4000]
+        assert f'<fcd-output value="{fcd}"/>' in head and ".part" not in head, fcd
+
+
 def test_the_report_never_says_one_of_something_in_the_plural(report):
     _, text, _ = report
     assert re.search(r"\b1 (attacks|clusters|noise points|successes|samples|panels)\b", text) is None
