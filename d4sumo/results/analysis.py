@@ -28,16 +28,16 @@ def _grouped(records: Iterable[Record], key: Callable[[Record], tuple]) -> dict[
 
 
 def scenario_labels(records: Iterable[Record]) -> dict[tuple, str]:
-    """Each scenario of the records named by what sets it apart from the others: the keys whose values
-    differ ("network=grid.net.xml, route=[A0B0 B0C0]"), each scenario with those it stores (a key without
-    effect in a scenario is not stored). One scenario: named "". No two scenarios get the same name."""
+    """Each scenario of the records named by what sets it apart from the others: the keys it holds whose
+    values differ among the scenarios that hold them ("route=[A0B0 B0C0], duration_s=80"). A key a scenario
+    does not hold has no effect there (warmup_s without a warm-up) and sets nothing apart, so that two
+    scenarios may share a name: they are one scenario to the tables. Scenarios alike in every key are ""."""
     scenarios = list(dict.fromkeys(r.scenario for r in records))
-    if len(scenarios) < 2:
-        return {s: "" for s in scenarios}
-    absent = object()
-    keys = dict.fromkeys(k for s in scenarios for k, _ in s)
-    differ = {k for k in keys if len({_hashable(dict(s).get(k, absent)) for s in scenarios}) > 1}
-    return {s: ", ".join(f"{k}={_value_text(v)}" for k, v in s if k in differ) for s in scenarios}
+    values: dict[str, set] = defaultdict(set)
+    for s in scenarios:
+        for k, v in s:
+            values[k].add(_hashable(v))
+    return {s: ", ".join(f"{k}={_value_text(v)}" for k, v in s if len(values[k]) > 1) for s in scenarios}
 
 
 def _hashable(value):
@@ -54,13 +54,15 @@ def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict
     """Group by ``fields``, led by the scenario (by its name in `scenario_labels`) and the system under test
     when the records hold more than one: campaigns on two roads, routes or durations are never pooled."""
     labels = scenario_labels(records)
-    lead = (("scenario",) if len(labels) > 1 else ()) + (("system",) if len({r.system for r in records}) > 1 else ())
+    lead = (("scenario",) if len(set(labels.values())) > 1 else ()) + (
+        ("system",) if len({r.system for r in records}) > 1 else ())
     return lead + fields, _grouped(records, lambda r: tuple(
         labels[r.scenario] if f == "scenario" else getattr(r, f) for f in (*lead, *fields)))
 
 
 def run_label(key: tuple) -> str:
-    return " ".join(str(k) for k in key)
+    """A group's key as words; a scenario named "" (the one the others are set apart from) says nothing."""
+    return " ".join(str(k) for k in key if k != "")
 
 
 def count_noun(count: int, singular: str, plural: str | None = None) -> str:
@@ -164,7 +166,7 @@ def table_systems(records: Sequence[Record]) -> Table:
         wins = [r for r in rs if r.outcome == "success"]
         setpoints = sorted({r.setpoint_m for r in wins})
         rows.append((
-            run_label(tuple(k for k in key if k)), str(len(rs)), f"{len(wins)} ({100 * len(wins) / len(rs):.1f}%)",
+            run_label(key), str(len(rs)), f"{len(wins)} ({100 * len(wins) / len(rs):.1f}%)",
             str(sum(r.outcome == "attacker_crash" for r in rs)),
             ", ".join(f"{d:g}" for d in setpoints) or "none",
             f"{max(r.speed_diff_kmh for r in wins):.1f}" if wins else "-",

@@ -189,6 +189,7 @@ def richest_conditions(records: Sequence[Record]) -> list[tuple[str, list[Record
         *scenario_system, attack, optimizer, start = key
         conditions = group(rs, "network", "setpoint_m", "speed_mps")
         (_, d, v), best = max(conditions.items(), key=lambda kv: sum(r.outcome == "success" for r in kv[1]))
-        lead = f"{run_label(tuple(scenario_system))}: " if scenario_system else ""
+        lead = run_label(tuple(scenario_system))
+        lead = f"{lead}: " if lead else ""
         out.append((f"{lead}{attack} {optimizer}, {start}, setpoint {d:g} m, {v:g} m/s", best))
     return out

@@ -97,10 +97,11 @@ def heatmap_panels(records: Sequence[Record]) -> list[tuple[str | tuple[str, str
     panels = []
     for key, rs in groups.items():
         run = f"{key[-3]}, {key[-2].upper()}, start {key[-1]}"
+        label = run_label(key[:lead])
         if "system" in fields:
-            panels.append(((run_label(key[:lead]), run), rs))
+            panels.append(((label, run), rs))
         else:
-            panels.append((f"{run_label(key[:lead])}: {run}" if lead else run, rs))
+            panels.append((f"{label}: {run}" if label else run, rs))
     return panels
 
 

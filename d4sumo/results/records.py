@@ -5,6 +5,7 @@ ran under, read through the one reader of stored campaigns (`search.campaign`). 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -12,7 +13,7 @@ from typing import Any, Sequence
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.control import names_only
-from ..model.maneuvers import LANE_CHANGE_PARAMETER, lane_change_steps
+from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
 #: Every other key a campaign stores (network, route, duration, step, warm-up, followers, the maneuver and
@@ -119,7 +120,23 @@ def _campaign_settings(campaign) -> dict[str, Any]:
 
 
 def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
-    """A campaign's scenario: the [scenario] keys its definition stores, but GRID_KEYS (a list as a tuple)."""
-    return tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in config.to_dict()["scenario"].items()
-                 if k not in GRID_KEYS)
+    """A campaign's scenario: its [scenario] keys but GRID_KEYS, in the config's order (a route as a tuple).
+    A key the definition leaves out at its default so that earlier campaigns keep their identity (route,
+    collision_gap_m, the inlane maneuver, ...) is part of it all the same; one it leaves out because it has
+    no effect in this campaign (`NO_EFFECT_WHEN_LEFT_OUT`) is not."""
+    stored = config.to_dict()["scenario"]
+    out = []
+    for key in SCENARIO_KEYS:
+        if key in GRID_KEYS or (key not in stored and key in NO_EFFECT_WHEN_LEFT_OUT):
+            continue
+        value = stored.get(key, getattr(config, key))
+        out.append((key, tuple(value) if isinstance(value, (list, tuple)) else value))
+    return tuple(out)
 
+
+#: the [scenario] keys: every field of EpisodeConfig but those of its [vehicle] and [controller] tables
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "vehicles", "controller"))
+#: the keys a definition leaves out where they have no effect: the warm-up's length without a warm-up, the
+#: attacker's declared deceleration without a SUMO model to read it, another maneuver's settings
+NO_EFFECT_WHEN_LEFT_OUT = frozenset({"warmup_s", "attacker_declared_decel_mps2"} | {
+    k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"})

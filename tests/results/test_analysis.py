@@ -198,3 +198,29 @@ def test_heatmap_panels_and_clusters_name_the_scenario_they_show(tmp_path):
     several = [dataclasses.replace(r, system="sumo:ACC") for r in records[:2]] + records
     assert [name for name, _ in heatmap_panels(several)][0] == ("route=[A0B0 B0C0], duration_s=80 sumo:ACC",
                                                                 "knots, RANDOM, start rest")
+
+
+def test_a_key_without_effect_sets_no_scenario_apart_and_one_left_out_at_zero_does(tmp_path):
+    """A sweep over start modes stores warmup_s for its warm-up campaigns alone: still one scenario, as
+    before. collision_gap_m is stored only where set, yet a campaign at 0 m and one at 0.05 m are two."""
+    from d4sumo.results.analysis import scenario_labels
+    from d4sumo.results.records import scenario_of
+
+    starts = [EpisodeConfig(start=start) for start in ("rest", "steady", "warmup")]
+    assert len({scenario_of(c) for c in starts}) == 2  # warmup_s is the warm-up's alone
+    records = [_record_of(c, i) for i, c in enumerate(starts)]
+    assert set(scenario_labels(records).values()) == {""}
+    assert [row[0] for row in table_success_statistics(records).rows] == ["knots bo"]
+    gaps = [_record_of(EpisodeConfig(collision_gap_m=g), i) for i, g in enumerate((0.0, 0.05))]
+    assert sorted(scenario_labels(gaps).values()) == ["collision_gap_m=0", "collision_gap_m=0.05"]
+    assert len(table_success_statistics(gaps).rows) == 2
+    maneuvers = [_record_of(EpisodeConfig(maneuver=m, start="steady"), i) for i, m in enumerate(("inlane", "cutin"))]
+    assert [row[0] for row in table_success_statistics(maneuvers).rows] == ["maneuver=cutin knots bo",
+                                                                           "maneuver=inlane knots bo"]
+
+
+def _record_of(config, i):
+    from d4sumo.results.records import scenario_of
+
+    return _record([0] * 9, sample_id=i, start=config.start, scenario=scenario_of(config))
+
