@@ -234,6 +234,13 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     pairs = fcd_pairs(config, positions, y, road.lane_width_m)
     if any(g < crash - FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
         broken.append("FCD collision before the end")
+    if config.maneuver == "inlane":  # the minimum gaps from the attack's start, as the FCD shows them
+        ids, seen = config.vehicle_ids, {}
+        for sample in pairs[config.attack_start_step:]:
+            for a, b, g in sample:
+                seen[f"{ids[a]}-{ids[b]}"] = min(seen.get(f"{ids[a]}-{ids[b]}", g), g)
+        if seen.keys() != row.min_gaps.keys() or any(abs(seen[k] - row.min_gaps[k]) > FCD_TOLERANCE_M for k in seen):
+            broken.append("FCD/min gaps")
     if c is not None:
         if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
             broken.append("collision time/end of episode")

@@ -65,8 +65,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     check_display(args.gui)
     with open_store(args.db, create=False) as store:
         row = store.sample(args.sample)
-        campaign = Campaign.from_definition(store.campaign(row.campaign_id).definition,
-                                            where=f"{args.db}: campaign {row.campaign_id}", imports=True)
+        stored_campaign = store.campaign(row.campaign_id)
+        campaign = Campaign.from_definition(stored_campaign.definition, where=f"{args.db}: campaign {row.campaign_id}",
+                                            imports=True)
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
     evaluator = Evaluator(campaign)
@@ -74,9 +75,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives
+    # d4sumo 0.11 and before stored the minimum gaps of a warm-up's whole episode, warm-up included
+    whole = campaign.config.start == "warmup" and _version(stored_campaign.version) < (0, 12)
     replayed = {"robustness": rho, "outcome": episode.outcome,
                 "collision": episode.first_collision_record(),
-                "min_gaps": episode.min_gaps_m()}
+                "min_gaps": episode.min_gaps_with_warmup_m() if whole else episode.min_gaps_m()}
     stored = {"robustness": row.robustness, "outcome": row.outcome, "collision": row.collision, "min_gaps": row.min_gaps}
     differs = [k for k in stored if stored[k] != replayed[k]]
     summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
@@ -87,6 +90,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print("reproduces the stored sample exactly" if not differs else
               "differs from the stored sample: " + "; ".join(f"{k}: stored {stored[k]}, replayed {replayed[k]}" for k in differs))
     return 0 if not differs else EXIT_DIFFERS
+
+
+def _version(text: str) -> tuple[int, ...]:
+    """A d4sumo version as numbers ("0.11.0" -> (0, 11, 0)); an unreadable one as the oldest."""
+    try:
+        return tuple(int(part) for part in text.split(".")[:3])
+    except ValueError:
+        return (0,)
 
 
 def episode_plan(family, params, config: EpisodeConfig):
@@ -104,7 +115,11 @@ def episode_summary(config, family, params, episode, robustness, d_safe, fcd) ->
         "outcome": episode.outcome,
         "first_collision": episode.first_collision_record(),
         "collisions": [c.to_dict() for c in episode.collisions],
-        "min_gaps_m": episode.min_gaps_m(),  # unrounded: a gap a hair under the collision distance stays under
+        # unrounded: a gap a hair under the collision distance stays under; from the attack's start, as the
+        # outcome and robustness, and a warm-up's apart
+        "min_gaps_m": episode.min_gaps_m(),
+        "warmup_min_gaps_m": episode.warmup_min_gaps and dict(episode.warmup_min_gaps),
+        "attack_start_s": config.attack_start_s,
         "robustness": robustness,
         "d_safe_m": d_safe,
         "simulated_s": float(episode.trace.times_s[-1]),
@@ -148,7 +163,14 @@ def _print_summary(s: dict, road_name: str) -> None:
     else:
         print(f"outcome: {s['outcome']}: {collision_text(c)}")
     collision_m = s["config"]["scenario"].get("collision_gap_m", 0.0)
-    print("min gaps: " + ", ".join(f"{k} {_gap_text(v, collision_m)} m" for k, v in s["min_gaps_m"].items()))
+    def gaps(minima: dict) -> str:
+        return ", ".join(f"{k} {_gap_text(v, collision_m)} m" for k, v in minima.items())
+
+    if s.get("warmup_min_gaps_m") is None:
+        print("min gaps: " + gaps(s["min_gaps_m"]))
+    else:  # the window the outcome and robustness speak of, and the warm-up's apart
+        print(f"min gaps from the attack's start at {s['attack_start_s']:.2f} s: " + gaps(s["min_gaps_m"]))
+        print("min gaps in the warm-up before it: " + gaps(s["warmup_min_gaps_m"]))
     if s["robustness"] is not None:
         what = "the formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
         print(f"robustness of {what}: {s['robustness']:.4f}")

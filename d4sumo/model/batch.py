@@ -233,9 +233,9 @@ class PlatoonBatch:
         """Episode ``e`` after ``steps`` steps, from its sensed rows (steps + 1 samples x n)."""
         times = np.arange(steps + 1) * self.config.step_s
         modes = self.modes[:steps, e] if self.modes is not None else None
-        trace, min_gaps = assemble_trace(self.configs[e], self.followers, self.commanded, times, positions, speeds,
-                                         self.commands[:steps, e], modes, pairs or [], lateral_m)
-        return Episode(trace, collisions, min_gaps)
+        trace, min_gaps, warmup_min_gaps = assemble_trace(self.configs[e], self.followers, self.commanded, times, positions,
+                                                          speeds, self.commands[:steps, e], modes, pairs or [], lateral_m)
+        return Episode(trace, collisions, min_gaps, warmup_min_gaps)
 
 
 def _carry(cruise: CruiseArray, at, to: CruiseControl) -> None:

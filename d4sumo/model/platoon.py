@@ -232,10 +232,10 @@ class Platoon:
         return new_speeds
 
     def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray,
-              lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float]]:
+              lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float], dict[str, float] | None]:
         """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands (and, for a
         lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
-        gap of every pair of cars that followed each other."""
+        gaps (`assemble_trace`)."""
         commands = np.array(self.commands, dtype=float).reshape(-1, len(self.commanded))
         modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
         return assemble_trace(self.config, self.followers, self.commanded, times_s, positions, speeds, commands, modes,
@@ -252,12 +252,15 @@ def cruise_params(config: EpisodeConfig) -> SwitchingParams:
 
 def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int, ...], times_s: np.ndarray,
                    positions: np.ndarray, speeds: np.ndarray, commands: np.ndarray, modes: np.ndarray | None,
-                   pairs: list[list[Pair]], lateral_m: np.ndarray | None) -> tuple[Trace, dict[str, float]]:
+                   pairs: list[list[Pair]], lateral_m: np.ndarray | None
+                   ) -> tuple[Trace, dict[str, float], dict[str, float] | None]:
     """The Trace of an episode from its sensed rows (samples x cars), the commands recorded per step
     (steps x ``commanded`` cars) and the modes of the followers that have one (steps x those); for a
     lane-changing maneuver also the pairs of each sample and each car's lateral position. With it the
-    minimum gap of every pair of cars that followed each other. One function for an episode played
-    alone or in a batch, so both give the same trace."""
+    minimum gap of every pair of cars that followed each other from the attack's start, the window the
+    specification scores and the outcome counts (a collision in a warm-up is an error), and after a
+    warm-up the minimum gaps during it (None without one). One function for an episode played alone or
+    in a batch, so both give the same trace."""
     n_samples = times_s.size
     ids = config.vehicle_ids
     accel = np.zeros_like(speeds)
@@ -277,20 +280,38 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
         signals[f"accel_{vid}"] = accel[:, i]
         signals[f"cmd_{vid}"] = cmds[:, i]
     if config.maneuver_class.lateral:
-        min_gaps = _lane_gaps(ids, signals, pairs, lateral_m)
+        rows = _lane_gaps(ids, signals, pairs, lateral_m)
     else:
-        min_gaps = _column_gaps([v.length_m for v in config.car_vehicles], signals, positions)
+        rows = _column_gaps([v.length_m for v in config.car_vehicles], signals, positions)
+    start = min(config.attack_start_step, n_samples - 1)
+    min_gaps = _window_minima(rows, start, n_samples)
+    warmup_min_gaps = _window_minima(rows, 0, start) if start > 0 else None
     if modes is not None and modes.size:
         modes = _hold_last(modes, n_samples)
         with_mode = [i for i, f in enumerate(followers, start=1) if f.has_mode]
         for column, i in enumerate(with_mode):
             signals[f"mode_v{i}"] = modes[:, column]
-    return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps
+    return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps, warmup_min_gaps
 
 
-def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -> dict[str, float]:
+def _window_minima(rows: dict[str, list[tuple[int, float]] | np.ndarray], start: int, stop: int) -> dict[str, float]:
+    """Each pair's minimum gap over samples [start, stop): ``rows`` is a pair's gap at every sample (an
+    array) or at the samples where it followed ((sample, gap) pairs); a pair that never did is left out."""
+    minima = {}
+    for name, gaps in rows.items():
+        if isinstance(gaps, np.ndarray):
+            minima[name] = float(gaps[start:stop].min())
+        else:
+            inside = [gap for k, gap in gaps if start <= k < stop]
+            if inside:
+                minima[name] = min(inside)
+    return minima
+
+
+def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -> dict[str, np.ndarray]:
     """The paper's column v0, v1, .., vN: gap_I between vI and vI+1 (vI's length behind its front bumper),
-    vectorised (the same arithmetic as the maneuver's pairs), and the named gaps every maneuver's trace has."""
+    vectorised (the same arithmetic as the maneuver's pairs), and the named gaps every maneuver's trace has;
+    each pair's gap at every sample."""
     n = positions.shape[1]
     for i in range(n - 1):
         signals[f"gap_{i}"] = positions[:, i] - lengths_m[i] - positions[:, i + 1]
@@ -300,17 +321,19 @@ def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -
         signals[f"gap_v{i}"] = signals[f"gap_{i - 1}"]
     signals["attacker_gap"] = signals["gap_0"]
     signals["victim_gap"] = np.min([signals[f"gap_{i}"] for i in range(1, n - 1)], axis=0) if n > 2 else free
-    return {f"v{i}-v{i + 1}": float(signals[f"gap_{i}"].min()) for i in range(n - 1)}
+    return {f"v{i}-v{i + 1}": signals[f"gap_{i}"] for i in range(n - 1)}
 
 
-def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lateral_m: np.ndarray) -> dict[str, float]:
+def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]],
+               lateral_m: np.ndarray) -> dict[str, list[tuple[int, float]]]:
     """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
-    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions."""
+    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions; each
+    pair's gaps at the samples where it followed."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
     victim = np.full(n_samples, FREE_ROAD_GAP_M)
     attacker = np.full(n_samples, FREE_ROAD_GAP_M)
-    min_gaps: dict[str, float] = {}
+    rows: dict[str, list[tuple[int, float]]] = {}
     for k, sample in enumerate(pairs):
         for a, b, gap in sample:
             gaps[k, b] = min(gaps[k, b], gap)
@@ -318,14 +341,13 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
                 attacker[k] = min(attacker[k], gap)
             else:
                 victim[k] = min(victim[k], gap)
-            name = f"{ids[a]}-{ids[b]}"
-            min_gaps[name] = min(min_gaps.get(name, gap), gap)
+            rows.setdefault(f"{ids[a]}-{ids[b]}", []).append((k, gap))
     for i, vid in enumerate(ids):
         signals[f"gap_{vid}"] = gaps[:, i]
         signals[f"y_{vid}"] = lateral_m[:, i]
     signals["victim_gap"] = victim
     signals["attacker_gap"] = attacker
-    return min_gaps
+    return rows
 
 
 def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:

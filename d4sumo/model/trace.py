@@ -88,8 +88,11 @@ class Episode:
 
     trace: Trace
     collisions: tuple[Collision, ...] = field(default=())
-    #: the minimum gap of every pair of cars that followed each other in a lane ("v1-v2": metres)
+    #: the minimum gap of every pair of cars that followed each other in a lane ("v1-v2": metres), from the
+    #: attack's start: the window the specification scores and the outcome counts
     min_gaps: Mapping[str, float] | None = None
+    #: the same during a warm-up before the attack (None without one)
+    warmup_min_gaps: Mapping[str, float] | None = None
 
     @property
     def first_collision(self) -> Collision | None:
@@ -107,6 +110,13 @@ class Episode:
         if any(c.involves_attacker for c in self.collisions):
             return "attacker_crash"
         return "success"
+
+    def min_gaps_with_warmup_m(self) -> dict[str, float]:
+        """The minimum gaps over the whole episode, a warm-up included: what d4sumo 0.11 and before stored."""
+        gaps = self.min_gaps_m()
+        for pair, gap in (self.warmup_min_gaps or {}).items():
+            gaps[pair] = min(gaps.get(pair, gap), gap)
+        return gaps
 
     def min_gaps_m(self) -> dict[str, float]:
         if self.min_gaps is not None:

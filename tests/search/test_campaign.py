@@ -472,3 +472,17 @@ def test_the_optimiser_reads_the_attack_familys_layout_in_time():
     for config, signals in ((EpisodeConfig(maneuver="cutin", start="warmup", warmup_s=5.0), (9, 1)), (EpisodeConfig(), (9,))):
         campaign = Campaign(config=config, optimizer="auto", samples=4)
         assert CampaignRunner(campaign, Evaluator(campaign)).optimizer.signals == signals == campaign.family().signals
+
+
+def test_minimum_gaps_after_a_warm_up_speak_of_the_window_robustness_and_outcome_do(tmp_path):
+    """Issue 36: after a warm-up from rest the stored minimum gaps were the warm-up's (7.00 m, the setpoint
+    at the start, for every sample of a time-gap ACC campaign) beside a robustness of -36.7: the near-miss
+    columns said nothing. They are taken from the attack's start, the window the specification scores."""
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+
+    config = EpisodeConfig(start="warmup", controller=ControllerConfig(cls="timegap"))
+    summary = run_campaign(Campaign(config=config, optimizer="random", samples=6, seed=0))
+    for s in summary.samples:  # psi with d_safe 0: the followers' nearest gap negated, or the attacker's if less
+        followers = min(g for pair, g in s.min_gaps.items() if pair != "v0-v1")
+        assert s.robustness == min(-followers, s.min_gaps["v0-v1"])
+    assert any(s.outcome == "no_crash" for s in summary.samples)
