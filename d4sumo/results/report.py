@@ -23,8 +23,8 @@ from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
 from . import figures, paper, timespace
-from .analysis import (Table, count_noun, most_severe, table_attacker_crashes, table_by_speed, table_success_statistics,
-                       table_systems)
+from .analysis import (Table, count_noun, most_severe, scenario_labels, table_attacker_crashes, table_by_speed,
+                       table_success_statistics, table_systems)
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records
 
@@ -191,7 +191,8 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
     step("heatmaps")
     panels = figures.heatmap_panels(records)
     parts.append("<h2>Successful attacks over setpoint and target speed</h2>"
-                 f"<p>One panel per attack, optimiser and start mode ({count_noun(len(panels), 'panel')}"
+                 f"<p>One panel per {'scenario, ' if len(set(scenario_labels(records).values())) > 1 else ''}"
+                 f"attack, optimiser and start mode ({count_noun(len(panels), 'panel')}"
                  f"{'; a row per system under test' if panels and isinstance(panels[0][0], tuple) else ''}), "
                  "all on one colour range; grey cells were not run.</p>")
     figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
