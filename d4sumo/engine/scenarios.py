@@ -497,7 +497,7 @@ def _describe(net_file: Path, name: str) -> dict:
 
 def _closed_to(chain, lane: int) -> list[tuple[str, str]]:
     """The vehicle classes some edge of the chain closes its lane ``lane`` to, each with the first such edge."""
-    from ..model.control import VEHICLE_CLASSES
+    from ..model.vehicle import VEHICLE_CLASSES
 
     closed: dict[str, str] = {}
     for edge in chain:

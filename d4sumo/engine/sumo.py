@@ -23,9 +23,9 @@ import numpy as np
 
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
-from ..model.control import VehicleParams
 from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
 from ..model.platoon import SumoFollower, followers_of
+from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary
 from .scenarios import Road, default_cache_dir
 

@@ -20,7 +20,9 @@ else:  # Python 3.10: the same parser, published as tomli
 
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
-from .control import AS_RUN_DEFAULTS, ControllerImportError, NotImported, SwitchingParams, VehicleParams, build_params, resolve_controller, user_module
+from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
+from .plugins import ControllerImportError, NotImported, build_params
+from .vehicle import VehicleParams
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the

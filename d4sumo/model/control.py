@@ -3,25 +3,22 @@ constant time-gap variant (the paper's suggested mitigation).
 
 Pure code, no SUMO. A follower controller turns what the car senses (bumper gap to the car ahead,
 its own speed, the speed of the car ahead) into a command u in [-1, 1] (-1 full brake, +1 full
-throttle). Controllers are pluggable: a config names a registered controller ("switching",
-"timegap") or any class as "package.module:ClassName" that follows the `FollowerController`
-protocol. (Followers driven by SUMO's own car-following models are named "sumo:MODEL"; see
-`carfollowing`.)
+throttle), which the car's actuator (`vehicle`) turns into an acceleration. Controllers are
+pluggable: a config names a registered controller ("switching", "timegap", the registry at the end
+of this module) or any class as "package.module:ClassName" that follows the `FollowerController`
+protocol (imported by `plugins`). (Followers driven by SUMO's own car-following models are named
+"sumo:MODEL"; see `carfollowing`.)
 """
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import dataclasses
-import importlib
-import math
-import os
-import sys
 from dataclasses import dataclass
-from typing import Any, Mapping, Protocol
+from typing import Protocol
 
 from ..errors import ConfigError, check_number
+from .plugins import ControllerImportError, import_controller, names_only  # noqa: F401 (ControllerImportError, names_only re-exported)
+from .vehicle import Actuator, VehicleParams, acceleration_to_command  # noqa: F401 (Actuator, acceleration_to_command re-exported)
 
 #: Mode values recorded in traces (signal ``mode_vI``).
 MODE_CC = 0.0
@@ -32,105 +29,6 @@ MODE_ACC = 1.0
 #: within these tolerances a value counts as at the threshold, so no mode decision hinges on rounding.
 GAP_TOLERANCE_M = 1e-6
 SPEED_TOLERANCE_MPS = 1e-6
-
-
-#: SUMO's classes of road vehicle (its vClass): a lane's permissions say which may drive on it
-VEHICLE_CLASSES = ("passenger", "private", "taxi", "hov", "emergency", "authority", "army", "vip", "evehicle", "delivery",
-                   "truck", "trailer", "bus", "coach", "motorcycle", "moped", "custom1", "custom2")
-#: how sumo-gui draws a car (SUMO's guiShape; "": the class's own shape)
-GUI_SHAPES = ("", "passenger", "passenger/sedan", "passenger/hatchback", "passenger/wagon", "passenger/van", "delivery",
-              "truck", "truck/semitrailer", "truck/trailer", "bus", "bus/city", "bus/flexible", "bus/overland", "evehicle",
-              "emergency", "firebrigade", "police", "motorcycle", "moped", "scooter", "unknown")
-
-
-@dataclass(frozen=True)
-class VehicleParams:
-    """Vehicle body and actuator: [vehicle] for every car, and a [vehicle.vI] table for a car that differs
-    (`EpisodeConfig.vehicle_of`)."""
-
-    length_m: float = 4.5
-    max_accel_mps2: float = 3.5  # at full throttle, u = +1
-    max_decel_mps2: float = 8.0  # at full brake, u = -1 (a positive number)
-    actuator_lag_s: float = 0.5  # first-order lag between command and acceleration
-    #: a moving car's deceleration with no pedal (engine braking, drag, rolling resistance), added to what
-    #: the pedal asks for; 0: none (the model as printed). Not a calibration of any car: CARLA's figures
-    #: are not in the authors' code.
-    coast_decel_mps2: float = 0.0
-    #: SUMO's vehicle class: which lanes it may use (a road that closes a lane of the platoon's to it is
-    #: refused); the car's dimensions and limits are the keys above, never the class's defaults
-    vclass: str = "passenger"
-    shape: str = ""  # how sumo-gui draws it (SUMO's guiShape; "": the class's own)
-
-    def __post_init__(self) -> None:
-        for name, low, high, unit in (("length_m", 0.5, 30.0, "metres"), ("max_accel_mps2", 0.1, 20.0, "m/s^2"),
-                                      ("max_decel_mps2", 0.1, 20.0, "m/s^2 (positive)"), ("actuator_lag_s", 0.0, 5.0, "seconds"),
-                                      ("coast_decel_mps2", 0.0, 5.0, "m/s^2 (positive)")):
-            object.__setattr__(self, name, check_number(f"vehicle.{name}", getattr(self, name), low, high, unit))
-        if self.vclass not in VEHICLE_CLASSES:
-            raise ConfigError("vehicle.vclass", self.vclass, f"one of SUMO's road vehicle classes: {', '.join(VEHICLE_CLASSES)}")
-        if self.shape not in GUI_SHAPES:
-            raise ConfigError("vehicle.shape", self.shape, f"one of SUMO's shapes: {', '.join(s for s in GUI_SHAPES if s)}, or \"\"")
-
-    def to_dict(self) -> dict:
-        """As a definition stores it: the keys added after the first (coasting, class, shape) only where
-        they differ from their defaults (campaigns stored before them keep their identity)."""
-        d = dataclasses.asdict(self)
-        for key in LATER_KEYS:
-            if d[key] == LATER_KEYS[key]:
-                del d[key]
-        return d
-
-
-#: [vehicle] keys a definition holds only where set (`VehicleParams.to_dict`), with their defaults
-LATER_KEYS = {"coast_decel_mps2": 0.0, "vclass": "passenger", "shape": ""}
-
-
-def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:
-    """Map a throttle/brake command in [-1, 1] to the acceleration it asks for [m/s^2]."""
-    return u * vehicle.max_accel_mps2 if u >= 0.0 else u * vehicle.max_decel_mps2
-
-
-def acceleration_to_command(a_mps2: float, vehicle: VehicleParams) -> float:
-    """The low-level controller: a wanted acceleration to throttle (u > 0) or brake (u < 0), never both."""
-    u = a_mps2 / vehicle.max_accel_mps2 if a_mps2 >= 0.0 else a_mps2 / vehicle.max_decel_mps2
-    return 1.0 if u > 1.0 else (-1.0 if u < -1.0 else u)
-
-
-class Actuator:
-    """A car's drivetrain: command -> first-order-lagged acceleration -> speed (never below 0).
-
-    The lag is discretised exactly for a command held over one step. The speed is integrated from
-    the sensed speed, so the simulator stays the single source of the car's state.
-    """
-
-    __slots__ = ("accel_max", "decel_max", "alpha", "step_s", "max_speed_mps", "accel_mps2", "coast")
-
-    def __init__(self, vehicle: VehicleParams, step_s: float, max_speed_mps: float = math.inf):
-        self.accel_max = vehicle.max_accel_mps2
-        self.decel_max = vehicle.max_decel_mps2
-        lag = vehicle.actuator_lag_s
-        self.alpha = 1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag)
-        self.step_s = step_s
-        self.max_speed_mps = max_speed_mps
-        self.accel_mps2 = 0.0
-        self.coast = vehicle.coast_decel_mps2
-
-    def apply(self, u: float, speed_mps: float) -> float:
-        """Hold command u for one step from ``speed_mps``; return the speed at the step's end [m/s]."""
-        target = u * self.accel_max if u >= 0.0 else u * self.decel_max
-        self.accel_mps2 += (target - self.accel_mps2) * self.alpha
-        drag = self.coast if speed_mps > 0.0 else 0.0  # a standing car does not roll back
-        v = speed_mps + (self.accel_mps2 - drag) * self.step_s if drag else speed_mps + self.accel_mps2 * self.step_s
-        if v < 0.0:  # brakes stop the car, they never reverse it
-            v = 0.0
-        elif v > self.max_speed_mps:
-            v = self.max_speed_mps
-        else:
-            return v
-        # Clamped: the drivetrain's acceleration is what the car actually did, so the lag does not
-        # wind up while the car stands still or rides the speed limit.
-        self.accel_mps2 = (v - speed_mps) / self.step_s + drag
-        return v
 
 
 SWITCHING_RULES = ("eq1", "code")
@@ -482,98 +380,18 @@ def registered_controllers() -> tuple[str, ...]:
     return tuple(sorted(_REGISTRY))
 
 
-#: Whether a user's controller module may be imported here. Reading a results database someone sent
-#: must never run code: its readers name controllers without importing them (`names_only`).
-_IMPORTS = contextvars.ContextVar("d4sumo_controller_imports", default=True)
-
-
-class NotImported(ConfigError):
-    """A user's controller named where nothing may be imported (`names_only`)."""
-
-
-class ControllerImportError(ConfigError):
-    """A user's controller class that cannot be had here: its module does not import (says how to make
-    it importable), or it imports without the class (says which classes it has)."""
-
-    def __init__(self, name: str, allowed: str, hint: str):
-        self.hint = hint
-        super().__init__("controller.class", name, f"{allowed}; {hint}")
-
-    @classmethod
-    def no_module(cls, name: str, reason: Exception) -> "ControllerImportError":
-        module = name.partition(":")[0]
-        return cls(name, "an importable 'package.module:ClassName'",
-                   f"{module} did not import here ({reason}): run from the folder that holds "
-                   f"{module.replace('.', '/')}.py, or put its folder on PYTHONPATH")
-
-    @classmethod
-    def no_class(cls, name: str, module: Any) -> "ControllerImportError":
-        module_name, _, attr = name.partition(":")
-        classes = sorted(k for k, v in vars(module).items()
-                         if isinstance(v, type) and v.__module__ == module.__name__ and not k.startswith("_"))
-        where = getattr(module, "__file__", None) or module_name
-        has = f"its classes: {', '.join(classes[:12])}{', ...' if len(classes) > 12 else ''}" if classes else "it defines no class"
-        return cls(name, f"a class of {module_name}", f"{module_name} imported ({where}) but has no class {attr} ({has})")
-
-
-@contextlib.contextmanager
-def names_only():
-    """Within it, a user's controller ("package.module:ClassName") is a name: nothing is imported, its
-    parameters are taken as stored, unchecked."""
-    token = _IMPORTS.set(False)
-    try:
-        yield
-    finally:
-        _IMPORTS.reset(token)
-
-
 def user_module(name: str) -> str | None:
     """The module a controller name imports: None for a registered controller or a SUMO model."""
     return name.partition(":")[0] if name not in _REGISTRY and ":" in name and not name.startswith("sumo:") else None
 
 
 def resolve_controller(name: str) -> type:
-    """A registered name, or "package.module:ClassName" for a user's own controller class, found as
-    Python's ``-m`` would: installed, on PYTHONPATH, or in the current folder.
+    """A registered name, or "package.module:ClassName" for a user's own controller class (`plugins`).
 
     (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
     if name in _REGISTRY:
         return _REGISTRY[name]
-    allowed = f"one of {', '.join(registered_controllers())}, a SUMO model as 'sumo:MODEL' or 'package.module:ClassName'"
     if ":" not in name:
-        raise ConfigError("controller.class", name, allowed)
-    if not _IMPORTS.get():
-        raise NotImported("controller.class", name, "a controller read by its name only (nothing is imported here)")
-    module_name, _, attr = name.partition(":")
-    cwd = os.getcwd()
-    if cwd not in sys.path and "" not in sys.path:  # the `d4sumo` script does not see the current folder
-        sys.path.append(cwd)
-    try:
-        module = importlib.import_module(module_name)
-    except (ImportError, ValueError) as exc:
-        raise ControllerImportError.no_module(name, exc) from None
-    except Exception as exc:  # found, but the module itself fails: a syntax error, an error raised at import
-        raise ConfigError("controller.class", name, f"a module that imports without error ({module_name} raised "
-                          f"{type(exc).__name__}: {exc})") from None
-    cls = getattr(module, attr, None)
-    if cls is None:
-        raise ControllerImportError.no_class(name, module)
-    params = getattr(cls, "Params", None)
-    if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not callable(getattr(cls, "command", None)):
-        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
-    return cls
-
-
-def build_params(cls: type, values: Mapping[str, Any]) -> Any:
-    """The controller's Params from a config table, refusing keys the class does not know."""
-    known = {f.name for f in dataclasses.fields(cls.Params)}
-    for key in values:
-        if key not in known:
-            raise ConfigError(f"controller.{key}", values[key], f"a key of {', '.join(sorted(known))}")
-    try:
-        return cls.Params(**values)
-    except ConfigError:  # a check of ours, naming its field
-        raise
-    except Exception as exc:  # a user's Params may check its values itself
-        raise ConfigError("controller", dict(values), str(exc) if isinstance(exc, TypeError) else f"parameters its Params "
-                          f"accepts ({type(exc).__name__}: {exc})") from None
+        raise ConfigError("controller.class", name, f"one of {', '.join(registered_controllers())}, a SUMO model as "
+                                                    "'sumo:MODEL' or 'package.module:ClassName'")
+    return import_controller(name)

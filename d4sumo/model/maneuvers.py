@@ -22,15 +22,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 
 from ..errors import ConfigError
 from .attacks import AttackFamily, Parameter
-
-if TYPE_CHECKING:
-    from .config import EpisodeConfig
+from .vehicle import VehicleParams
 
 #: the gap a car with nobody ahead in its lane sees [m]: beyond any ACC's range, and finite for rtamt
 FREE_ROAD_GAP_M = 1000.0
@@ -42,6 +40,49 @@ LANE_TOLERANCE_M = 1e-6
 Pair = tuple[int, int, float]  # (leader index, follower index, bumper gap [m])
 
 
+class EpisodeSettings(Protocol):
+    """What a maneuver reads of an episode's configuration. `config.EpisodeConfig` is one: it checks each
+    maneuver's settings, so it imports the maneuvers, and they know it by what they read."""
+
+    @property
+    def followers(self) -> int: ...
+    @property
+    def setpoint_m(self) -> float: ...
+    @property
+    def speed_mps(self) -> float: ...
+    @property
+    def start(self) -> str: ...
+    @property
+    def step_s(self) -> float: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def warmup_s(self) -> float: ...
+    @property
+    def attack_start_step(self) -> int: ...
+    @property
+    def attack_start_s(self) -> float: ...
+    @property
+    def maneuver(self) -> str: ...
+    @property
+    def maneuver_class(self) -> type[Maneuver]: ...
+    @property
+    def vehicle_ids(self) -> tuple[str, ...]: ...
+    @property
+    def car_vehicles(self) -> tuple[VehicleParams, ...]: ...
+    def vehicle_of(self, car: int) -> VehicleParams: ...
+    @property
+    def cutin_follower(self) -> int: ...
+    @property
+    def cutin_offset_m(self) -> float: ...
+    @property
+    def obstacle_distance_m(self) -> float: ...
+    @property
+    def obstacle_speed_mps(self) -> float: ...
+
+
 @dataclass(frozen=True)
 class Car:
     id: str
@@ -50,7 +91,7 @@ class Car:
     speed_mps: float
 
 
-def initial_state(config: "EpisodeConfig", front: int = 0) -> tuple[list[float], list[float]]:
+def initial_state(config: EpisodeSettings, front: int = 0) -> tuple[list[float], list[float]]:
     """Front-bumper positions and speeds at t = 0 of a column of followers + 1 cars in one lane, front to
     back, each a setpoint behind the rear bumper of the car ahead: the attacker and the followers, or with
     ``front`` the index of another car (a cut-in's benign lead) in the attacker's place."""
@@ -92,13 +133,13 @@ class Maneuver:
     other_cruises = False  # that car cruises at the target speed (else it holds its own constant speed)
     settings: tuple[str, ...] = ()  # the scenario keys the maneuver reads
 
-    def __init__(self, config: "EpisodeConfig"):
+    def __init__(self, config: EpisodeSettings):
         self.config = config
         self.ids = config.vehicle_ids
         self.lengths_m = [v.length_m for v in config.car_vehicles]  # by index into ids
 
     @classmethod
-    def check(cls, config: "EpisodeConfig") -> None:
+    def check(cls, config: EpisodeSettings) -> None:
         """Refuse settings this maneuver cannot play (each value's own range is checked by the config)."""
 
     def cars(self) -> list[Car]:
@@ -155,7 +196,7 @@ class CutIn(LaneChange):
     settings = (*LaneChange.settings, "cutin_follower", "cutin_offset_m")
 
     @classmethod
-    def check(cls, config: "EpisodeConfig") -> None:
+    def check(cls, config: EpisodeSettings) -> None:
         if config.cutin_follower > config.followers:
             raise ConfigError("scenario.cutin_follower", config.cutin_follower,
                               f"a follower: 1 for v1 .. {config.followers} for v{config.followers}")
@@ -183,7 +224,7 @@ class CutOut(LaneChange):
     settings = (*LaneChange.settings, "obstacle_distance_m", "obstacle_speed_mps")
 
     @classmethod
-    def check(cls, config: "EpisodeConfig") -> None:
+    def check(cls, config: EpisodeSettings) -> None:
         closed = (config.speed_mps - config.obstacle_speed_mps) * config.attack_start_s  # at most, cruising
         if config.obstacle_distance_m <= closed:
             raise ConfigError("scenario.obstacle_distance_m", config.obstacle_distance_m,
@@ -203,7 +244,7 @@ class CutOut(LaneChange):
 MANEUVERS: dict[str, type[Maneuver]] = {m.name: m for m in (Maneuver, CutIn, CutOut)}
 
 
-def maneuver_of(config: "EpisodeConfig") -> Maneuver:
+def maneuver_of(config: EpisodeSettings) -> Maneuver:
     return MANEUVERS[config.maneuver](config)
 
 
@@ -249,7 +290,7 @@ class AttackPlan:
     lane_change_step: int | None = None
 
 
-def attack_plan(family: AttackFamily | None, params, config: "EpisodeConfig") -> AttackPlan:
+def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) -> AttackPlan:
     """The plan of an attack that begins after the warm-up (if any): the longitudinal signal, and the
     lane change at the step nearest to t_lc_s after the attack's start."""
     from .attacks import attack_signal
@@ -272,7 +313,7 @@ def lane_change_steps(t_lc_s: float, step_s: float) -> int:
     return int(math.floor(t_lc_s / step_s + 0.5 + HALF_STEP_TOLERANCE))
 
 
-def check_road_lanes(config: "EpisodeConfig", road_name: str, lanes: int) -> None:
+def check_road_lanes(config: EpisodeSettings, road_name: str, lanes: int) -> None:
     maneuver = config.maneuver_class
     if lanes < maneuver.lanes_needed:
         raise ConfigError("scenario.maneuver", config.maneuver,

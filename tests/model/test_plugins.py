@@ -1,0 +1,33 @@
+"""A user's own controller class, named package.module:ClassName: what is said when it cannot be had."""
+
+from __future__ import annotations
+
+import pytest
+
+from d4sumo.errors import ConfigError
+from d4sumo.model.plugins import import_controller, names_only
+
+
+def test_a_module_that_imports_without_the_class_says_so_and_names_its_classes(tmp_path, monkeypatch):
+    """Regression: `--controller mymodule:Missing` said "mymodule did not import here" of a module that imported."""
+    import uuid
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"  # a module of its own: Python caches what it imported
+    (tmp_path / f"{name}.py").write_text("class Gentle:\n    pass\n\n\nclass Firm:\n    pass\n\n\ndef helper():\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ConfigError) as info:
+        import_controller(f"{name}:Missing")
+    assert str(info.value) == (f"controller.class: got '{name}:Missing'; allowed: a class of {name}; {name} imported "
+                               f"({tmp_path / name}.py) but has no class Missing (its classes: Firm, Gentle)")
+
+
+def test_within_names_only_a_users_controller_is_never_imported(tmp_path, monkeypatch):
+    """Reading a database someone sent must never run its code."""
+    import uuid
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{name}.py").write_text(f"open({str(tmp_path / 'ran')!r}, 'w').close()\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with names_only(), pytest.raises(ConfigError, match="read by its name only"):
+        import_controller(f"{name}:X")
+    assert not (tmp_path / "ran").exists()
