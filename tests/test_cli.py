@@ -115,10 +115,10 @@ def test_malformed_toml_is_one_clear_line(tmp_path, capsys):
 
 
 def test_a_missing_sumo_binary_is_one_clear_line(tmp_path, monkeypatch, capsys):
-    import d4sumo.engine.scenarios as scenarios
+    import d4sumo.engine.netconvert as netconvert
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # nothing cached: netconvert must run
-    monkeypatch.setattr(scenarios, "sumo_binary", lambda name, explicit=None: str(tmp_path / "no" / name))
+    monkeypatch.setattr(netconvert, "sumo_binary", lambda name, explicit=None: str(tmp_path / "no" / name))
     assert main(["simulate"]) == 2
     err = capsys.readouterr().err
     assert "netconvert" in err and "Traceback" not in err

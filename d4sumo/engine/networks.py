@@ -1,0 +1,184 @@
+"""What ``--network`` names, and the road's plain XML by value (`NetworkSource`).
+
+A network is a shipped variant (a folder of ``sumo_scenarios/``, installed with d4sumo inside its
+package), a folder of the user's own holding one ``*.nod.xml`` and one ``*.edg.xml`` (SUMO's plain node
+and edge files) or one ``*.net.xml``, or the path of a ``*.net.xml`` (netconvert's, netgenerate's, an OSM
+import's), which netconvert takes back to plain XML, its lane connections kept. A name that is none of
+these is refused saying what is wrong with it. With ``scenario.route``, the source is the route's edges
+alone. A `NetworkSource` carries the XML itself, so a worker on another machine builds the same road
+without seeing the client's disk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import ConfigError
+from .netconvert import plain_xml
+
+
+def _shipped_variants() -> Path:
+    # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
+    # d4sumo/sumo_scenarios). Run from a checkout, or an editable install, they are the folder beside it.
+    package = Path(__file__).resolve().parent.parent
+    inside = package / "sumo_scenarios"
+    return inside if inside.is_dir() else package.parent / "sumo_scenarios"
+
+
+#: The variants shipped with d4sumo (a folder of data).
+SCENARIOS_DIR = _shipped_variants()
+
+
+def list_scenarios(root: Path | None = None) -> list[str]:
+    root = root or SCENARIOS_DIR
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if p.is_dir() and _inputs(p, strict=False))
+
+
+def scenario_folder(name: str, root: Path | None = None) -> Path:
+    """The folder of a named variant, or the folder or ``.net.xml`` file given directly."""
+    root = root or SCENARIOS_DIR
+    candidates = [root / name] if "/" not in name and os.sep not in name else []
+    candidates.append(Path(name))
+    for folder in candidates:
+        if folder.is_file() and folder.name.endswith(".net.xml"):
+            return folder.resolve()
+        if folder.is_dir() and _inputs(folder, strict=False):
+            return folder.resolve()
+    raise ConfigError("scenario.network", name, _not_a_network(Path(name), root))
+
+
+def _not_a_network(path: Path, root: Path) -> str:
+    """What ``--network`` takes, said for the path given that is none of it: a file that is not there, an
+    OpenStreetMap file (netconvert imports it first), a node or edge file (its folder is the road), a
+    folder without one road's files."""
+    if any(s.lower() == ".osm" for s in path.suffixes):
+        if not path.is_file():
+            return f"an OpenStreetMap file that exists, imported with netconvert first (there is no {path.absolute()})"
+        net = path.name[:path.name.lower().index(".osm")] + ".net.xml"
+        return (f"a network file (*.net.xml): import an OpenStreetMap file with netconvert first: "
+                f"netconvert --osm-files {shlex.quote(str(path))} -o {shlex.quote(net)}")
+    if path.name.endswith(".net.xml") and not path.exists():
+        return f"a *.net.xml that exists (there is no {path.absolute()})"
+    if path.name.endswith((".nod.xml", ".edg.xml")) and path.is_file():
+        return f"the folder that holds the node and edge files ({path.absolute().parent}), not one of them"
+    if path.is_dir():
+        found = ", ".join(f"{len(list(path.glob(g)))} {g}" for g in ("*.nod.xml", "*.edg.xml", "*.net.xml"))
+        return f"a folder with exactly one *.nod.xml and one *.edg.xml, or one *.net.xml (it holds {found})"
+    names = list_scenarios(root)
+    allowed = (f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, a folder with *.nod.xml and *.edg.xml, "
+               "or a *.net.xml")
+    if path.is_file():
+        return f"{allowed} ({path.name} is not one: a network file's name ends in .net.xml)"
+    return allowed + (f" (there is no {path.absolute()})" if len(path.parts) > 1 or path.suffix else "")
+
+
+def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | Path | None:
+    """A variant's node and edge files, or its lone network file."""
+    nodes = sorted(folder.glob("*.nod.xml"))
+    edges = sorted(folder.glob("*.edg.xml"))
+    if len(nodes) == 1 and len(edges) == 1:
+        return nodes[0], edges[0]
+    nets = sorted(folder.glob("*.net.xml"))
+    if not nodes and not edges and len(nets) == 1:
+        return nets[0]
+    if strict:
+        raise ConfigError("scenario.network", str(folder), "a folder with exactly one *.nod.xml and one *.edg.xml, or one *.net.xml")
+    return None
+
+
+@dataclass(frozen=True)
+class NetworkSource:
+    """A variant's plain XML (nodes, edges, and the connections and types a network file had), by value:
+    what a road is built from, anywhere."""
+
+    name: str  # as the user named it (a variant, or the path given): what messages say
+    stem: str  # the folder's or the network file's own name: its built files' names in the cache
+    nodes_xml: bytes
+    edges_xml: bytes
+    connections_xml: bytes = b""
+    types_xml: bytes = b""
+
+    @property
+    def digest(self) -> str:
+        parts = [self.nodes_xml, self.edges_xml] + ([self.connections_xml, self.types_xml]
+                                                   if self.connections_xml or self.types_xml else [])
+        return hashlib.sha256(b"\0".join(parts)).hexdigest()[:16]
+
+    def parsed(self):
+        """The node, edge and connection XML as element trees (no connections: None)."""
+        from xml.etree import ElementTree as ET
+
+        try:
+            return (ET.fromstring(self.nodes_xml), ET.fromstring(self.edges_xml),
+                    ET.fromstring(self.connections_xml) if self.connections_xml else None)
+        except ET.ParseError as exc:
+            raise ConfigError("scenario.network", self.name, f"node and edge XML that parses ({exc})") from None
+
+
+def network_source(name: str, root: Path | None = None, route: tuple[str, ...] = ()) -> NetworkSource:
+    """The XML of a named variant, of a folder given directly, or of a lone network file (netgenerate's,
+    an OSM import's, netconvert's), taken back to plain XML by netconvert; with a ``route``, only its
+    edges (the road the platoon drives, and each copy of it in a batch)."""
+    source = _network_source(name, root)
+    return _restrict(source, tuple(route)) if route else source
+
+
+def _network_source(name: str, root: Path | None = None) -> NetworkSource:
+    folder = scenario_folder(name, root)
+    found = folder if folder.is_file() else _inputs(folder)
+    try:
+        if isinstance(found, Path):
+            return _plain_source(found, name, folder.name.removesuffix(".net.xml") if folder.is_file() else folder.name)
+        nodes, edges = found
+        return NetworkSource(name, folder.name, nodes.read_bytes(), edges.read_bytes())
+    except OSError as exc:
+        raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
+
+
+def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
+    """The route's edges alone, with their nodes and the connections from each to the next."""
+    from xml.etree import ElementTree as ET
+
+    nodes, edges, connections = source.parsed()
+    by_id = {e.get("id"): e for e in edges.iter("edge")}
+    for edge in route:
+        if edge not in by_id:
+            raise ConfigError("scenario.route", list(route), f"edges of {source.name} (it has no edge {edge!r})")
+    if len(set(route)) != len(route):
+        raise ConfigError("scenario.route", list(route), "each edge once")
+    used = {by_id[e].get(k) for e in route for k in ("from", "to")}
+    out_nodes, out_edges = ET.Element(nodes.tag, nodes.attrib), ET.Element(edges.tag, edges.attrib)
+    for node in nodes.iter("node"):
+        if node.get("id") in used:
+            out_nodes.append(node)
+    for edge in route:
+        out_edges.append(by_id[edge])
+    out_connections = b""
+    if connections is not None:
+        follows = set(zip(route, route[1:]))
+        kept = ET.Element(connections.tag, connections.attrib)
+        for c in connections.iter("connection"):
+            if (c.get("from"), c.get("to")) in follows:
+                kept.append(c)
+        out_connections = ET.tostring(kept)
+    return NetworkSource(source.name, source.stem, ET.tostring(out_nodes), ET.tostring(out_edges), out_connections,
+                         source.types_xml)
+
+
+_PLAIN: dict[tuple[str, int, int], NetworkSource] = {}  # a network file, by path, size and time -> its plain XML
+
+
+def _plain_source(net_file: Path, name: str, stem: str) -> NetworkSource:
+    """A network file as plain node, edge, connection and type XML, taken back once a file version."""
+    stat = net_file.stat()
+    key = (str(net_file), stat.st_size, stat.st_mtime_ns)
+    if key not in _PLAIN:
+        _PLAIN[key] = NetworkSource(name, stem, *plain_xml(net_file, name))
+    return dataclasses.replace(_PLAIN[key], name=name, stem=stem)
