@@ -159,6 +159,31 @@ def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path):
     assert outcomes(tmp_path / "dask.sqlite") == outcomes(tmp_path / "local.sqlite")
 
 
+@pytest.mark.parametrize("proposals", ["client", "workers"])
+def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_proposes(tmp_path, proposals):
+    """Issue 36: on a cluster of mixed machines a sweep's samples differed from the same sweep run locally:
+    each worker asked its campaigns' GPs with its own BLAS. With the optimisers on the client (the
+    default) the workers only play episodes, which are the same on every machine: here workers whose
+    GP numerics are one ulp off store, bit for bit, what the client's machine proposes alone. With
+    them on the workers, every sample is still stored once and replays (its proposals are the workers')."""
+    from pathlib import Path
+
+    from distributed import LocalCluster
+
+    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["turbo"]').replace("samples = 6", "samples = 16")
+    sweep = Sweep.load(write(tmp_path, text))
+    preload = str(Path(__file__).parent / "search" / "nudged_worker.py")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
+                      preload=[preload]) as cluster:
+        result = run_sweep(sweep, tmp_path / "dask.sqlite", dask_address=cluster.scheduler_address, dask_proposals=proposals)
+    assert result.samples == 64
+    rows = outcomes(tmp_path / "dask.sqlite")
+    assert len({(r[0], r[1]) for r in rows}) == 64
+    if proposals == "client":
+        run_sweep(sweep, tmp_path / "local.sqlite", workers=1)
+        assert rows == outcomes(tmp_path / "local.sqlite")
+
+
 @pytest.mark.sumo
 def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_on_the_client(tmp_path):
     """Regression: Dask workers wrote into a database on their own side and the client reported

@@ -131,6 +131,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     try:
         result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
+                           dask_proposals=args.dask_proposals,
                            progress=progress, batch=args.batch)
     except KeyboardInterrupt as exc:
         if bar is not None:

@@ -315,30 +315,46 @@ class CampaignRunner:
 def step_together(runners: Sequence[CampaignRunner], batch: int = DEFAULT_BATCH,
                   on_result: Callable[[CampaignRunner, SampleResult], None] | None = None) -> list[list[SampleResult]]:
     """One step of several campaigns at once: each runner's next batch, played side by side in as few
-    SUMO instances as hold them (at most ``batch`` episodes each); campaigns whose configurations do
-    not share a `batch.batch_key` play apart. The same samples as stepping each runner alone.
+    SUMO instances as hold them (`play_pending`). The same samples as stepping each runner alone.
     ``on_result(runner, result)`` hears of each sample as its episode ends."""
-    cap = max(1, min(int(batch), MAX_COPIES))
-    groups: dict[tuple, list[tuple[CampaignRunner, int, list[np.ndarray]]]] = {}
+    jobs, owner = [], []
     for runner in runners:
         for first, xs in runner.pending():
-            key = (runner.evaluate.batch_key, runner.evaluate.network)
-            groups.setdefault(key, []).append((runner, first, xs))
-    played: dict[int, dict[int, SampleResult]] = {id(r): {} for r in runners}
+            jobs.append((runner.evaluate, first, xs))
+            owner.append(runner)
+    heard = (lambda j, r: on_result(owner[j], r)) if on_result else None
+    played = play_pending(jobs, batch, heard)
+    by_runner: dict[int, dict[int, SampleResult]] = {id(r): {} for r in runners}
+    for runner, results in zip(owner, played):
+        by_runner[id(runner)].update((r.index, r) for r in results)
+    return [runner.accept(by_runner[id(runner)]) for runner in runners]
+
+
+def play_pending(jobs: Sequence[Job], batch: int = DEFAULT_BATCH,
+                 on_result: Callable[[int, SampleResult], None] | None = None) -> list[list[SampleResult]]:
+    """Play runs of consecutive samples of several campaigns (each job: its evaluator, first index and
+    points, as `CampaignRunner.pending` gives them) side by side in as few SUMO instances as hold them (at
+    most ``batch`` episodes each); campaigns whose configurations do not share a `batch.batch_key` and
+    road play apart. Each job's results in order, each the one its evaluator gives alone.
+    ``on_result(job, result)`` hears of each sample as its episode ends."""
+    cap = max(1, min(int(batch), MAX_COPIES))
+    groups: dict[tuple, list[tuple[int, int, Sequence[np.ndarray]]]] = {}
+    for j, (evaluator, first, xs) in enumerate(jobs):
+        groups.setdefault((evaluator.batch_key, evaluator.network), []).append((j, first, xs))
+    played: list[list[SampleResult]] = [[] for _ in jobs]
     for members in groups.values():
-        loads: list[list[tuple[CampaignRunner, int, list[np.ndarray]]]] = [[]]
-        for runner, first, xs in members:  # fill one SUMO after the other, each with at most `cap` episodes
+        loads: list[list[tuple[int, int, Sequence[np.ndarray]]]] = [[]]
+        for j, first, xs in members:  # fill one SUMO after the other, each with at most `cap` episodes
             for at in range(0, len(xs), cap):
                 part = xs[at:at + cap]
                 if sum(len(p) for _, _, p in loads[-1]) + len(part) > cap:
                     loads.append([])
-                loads[-1].append((runner, first + at, part))
+                loads[-1].append((j, first + at, part))
         for load in loads:
-            heard = (lambda j, r, load=load: on_result(load[j][0], r)) if on_result else None
-            jobs = [(r.evaluate, first, xs) for r, first, xs in load]
-            for (runner, _, _), results in zip(load, play_together(jobs, heard)):
-                played[id(runner)].update((r.index, r) for r in results)
-    return [runner.accept(played[id(runner)]) for runner in runners]
+            heard = (lambda k, r, load=load: on_result(load[k][0], r)) if on_result else None
+            for (j, _, _), results in zip(load, play_together([(jobs[j][0], first, xs) for j, first, xs in load], heard)):
+                played[j] += results
+    return played
 
 
 def _runs(indices: list[int]) -> list[list[int]]:

@@ -11,7 +11,8 @@ import threading
 import traceback
 
 from ..errors import ConfigError, D4sumoError
-from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
+from ..search.runner import CampaignRunner
+from .tasks import Play, _accept_gang, _Active, _after_failure, _evaluator, _gangs, _share, _task, play_chunks, run_chunks
 from .workers import quiet_resource_tracker
 
 log = logging.getLogger(__name__)
@@ -110,6 +111,59 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
         result = future.result()
         future.release()
         gang = _accept_gang(gang, result, store_results)
+        if gang:
+            submit(_share(gang, queue, len(running) + 1, slots() - 1))
+        while queue and len(running) < slots():
+            submit(queue.pop(0))
+
+
+def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) -> None:
+    """The sweep with every campaign's optimiser on the client and only episodes on the workers: each
+    campaign asks and is told on one machine, so its samples are, bit for bit, the ones it gives alone
+    on the client's, whatever mix of CPUs and libraries the workers have. A task plays the next batch
+    of a gang of campaigns; the client tells their optimisers and sends the next."""
+    from distributed import as_completed
+
+    runners = {id(a): CampaignRunner(a.campaign, _evaluator(_task([a])[0]), stored=a.stored, batch=a.batch,
+                                     where=f"{where}: campaign {a.campaign_id}") for a in todo}
+    for a in todo:
+        a.numerics_differ_at = runners[id(a)].numerics_differ_at
+    queue = _gangs(todo, max(1, sum(client.nthreads().values())))
+    running: dict = {}
+    futures = as_completed()
+
+    def slots() -> int:
+        return max(1, sum(client.nthreads().values())) + 1
+
+    def submit(gang: list[_Active]) -> None:
+        owners, plays = [], []
+        for a in gang:
+            for first, xs in runners[id(a)].pending():
+                owners.append(a)
+                plays.append(Play(a.campaign, a.network, first, tuple(xs)))
+        future = client.submit(play_chunks, tuple(plays), gang[0].batch, pure=False)  # pure=False: sent again, run again
+        running[future] = gang, owners
+        futures.add(future)
+
+    while queue and len(running) < slots():
+        submit(queue.pop(0))
+    for future in futures:
+        gang, owners = running.pop(future)
+        if future.status == "error":
+            exc = future.exception()
+            if isinstance(exc, D4sumoError):
+                raise exc
+            for part in _after_failure(gang, f"{type(exc).__name__}: {exc}"):
+                submit(part)  # the same points: nothing was told
+            continue
+        played: dict[int, dict] = {id(a): {} for a in gang}
+        for owner, results in zip(owners, future.result()):
+            played[id(owner)].update((r.index, r) for r in results)
+        future.release()
+        for a in gang:
+            store_results(a, runners[id(a)].accept(played[id(a)]))
+            a.failures = 0
+        gang = [a for a in gang if runners[id(a)].done < a.campaign.samples]
         if gang:
             submit(_share(gang, queue, len(running) + 1, slots() - 1))
         while queue and len(running) < slots():

@@ -16,12 +16,13 @@ from pathlib import Path
 from typing import Callable
 
 from ..engine.scenarios import NetworkSource, network_source
+from ..errors import ConfigError
 from ..model.batch import DEFAULT_BATCH
 from ..search.campaign import SampleResult, open_store
 from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import stored_results
 from ..search.store import Store, StoreError
-from .dask_cluster import _dask_client, _run_dask, check_dask_address
+from .dask_cluster import _dask_client, _run_dask, _run_dask_proposing, check_dask_address
 from .grid import Sweep
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
 from .workers import kill_pool, new_pool
@@ -81,6 +82,10 @@ def claim(store: Store, sweep: Sweep) -> None:
         store.set_meta("sweep", json.dumps(mine))
 
 
+#: where a Dask sweep's optimisers run (`run_sweep`)
+DASK_PROPOSALS = ("client", "workers")
+
+
 @dataclass
 class SweepResult:
     campaigns: int
@@ -98,12 +103,18 @@ def run_sweep(
     dask_timeout_s: float = 30.0,
     progress: Callable[[int, int, int], None] | None = None,
     batch: int = DEFAULT_BATCH,
+    dask_proposals: str = "client",
 ) -> SweepResult:
     """Run every campaign of the sweep not yet complete in ``db_path``. ``progress(done, total, successes)``
     is called as samples are stored. ``dask_address``: a scheduler's address, or "local" for a local
     Dask cluster of ``workers`` processes. ``batch``: at most this many episodes of a campaign side by
-    side in one SUMO (1: one at a time); the results do not depend on it."""
+    side in one SUMO (1: one at a time); the results do not depend on it. ``dask_proposals``: where a
+    Dask sweep's optimisers run: on the ``client`` (the samples are the ones each campaign gives alone
+    on the client's machine, whatever machines the workers are) or on the ``workers`` (the client's work
+    spread, but a campaign proposes with the numerics of whichever worker steps it)."""
     sweep.check()
+    if dask_proposals not in DASK_PROPOSALS:
+        raise ConfigError("--dask-proposals", dask_proposals, f"one of {', '.join(DASK_PROPOSALS)}")
     if dask_address is not None:
         dask_address = check_dask_address(dask_address)
     workers = workers or os.cpu_count() or 1
@@ -148,7 +159,9 @@ def run_sweep(
             progress(min(counts[0], total), total, counts[1])
         if todo:
             log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
-            if client is not None:
+            if client is not None and dask_proposals == "client":
+                _run_dask_proposing(todo, store_results, client, str(store.path))
+            elif client is not None:
                 _run_dask(todo, store_results, client)
             elif workers == 1:
                 _run_inline(todo, store_results)

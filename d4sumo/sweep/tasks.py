@@ -8,11 +8,13 @@ import logging
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..engine.scenarios import NetworkSource, build_road
 from ..errors import D4sumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
 from ..search.campaign import Campaign, SampleResult
-from ..search.runner import CampaignRunner, Evaluator, step_together
+from ..search.runner import CampaignRunner, Evaluator, play_pending, step_together
 from ..search.store import campaign_key
 
 log = logging.getLogger(__name__)
@@ -47,7 +49,7 @@ class Chunk:
 _EVALUATORS: dict[str, Evaluator] = {}  # per worker process: roads built and formulas parsed once
 
 
-def _evaluator(chunk: Chunk) -> Evaluator:
+def _evaluator(chunk: Chunk | Play) -> Evaluator:
     key = campaign_key(chunk.campaign.definition())
     evaluator = _EVALUATORS.get(key)
     if evaluator is None:
@@ -80,6 +82,23 @@ def run_chunks(chunks: tuple[Chunk, ...]) -> list[tuple[list[SampleResult], tupl
             if time.monotonic() - t0 > CHUNK_WALL_S:
                 break
     return [(r, runner.state) for r, runner in zip(results, runners)]
+
+
+@dataclass(frozen=True)
+class Play:
+    """A task's share of one campaign whose optimiser runs on the client: play ``points``, samples
+    ``first``, ``first`` + 1, ..."""
+
+    campaign: Campaign
+    network: NetworkSource
+    first: int
+    points: tuple[np.ndarray, ...]
+
+
+def play_chunks(plays: tuple[Play, ...], batch: int = DEFAULT_BATCH) -> list[list[SampleResult]]:
+    """Worker task: episodes only, no optimiser: each play's samples in order, side by side in as few SUMO
+    instances as hold them. An episode is the same on every machine, whatever its numerics."""
+    return play_pending([(_evaluator(p), p.first, p.points) for p in plays], batch)
 
 
 @dataclass
