@@ -13,7 +13,8 @@ from .common import EXIT_DIFFERS, check_display, check_output_file, document, no
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
-    from ..engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
+    from ..engine.networks import SCENARIOS_DIR, list_scenarios
+    from ..engine.scenarios import build_road
 
     names = list_scenarios()
     if not names:

@@ -19,7 +19,7 @@ from ..errors import ConfigError
 from .copies import copies_alike, copy_prefix, side_by_side
 from .layout import OR_ROUTE, describe
 from .netconvert import build_net
-from .networks import SCENARIOS_DIR, NetworkSource, list_scenarios, network_source  # noqa: F401 (SCENARIOS_DIR, list_scenarios re-exported)
+from .networks import NetworkSource, network_source
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..errors import ConfigError, check_number
-from .plugins import ControllerImportError, import_controller, names_only  # noqa: F401 (ControllerImportError, names_only re-exported)
-from .vehicle import Actuator, VehicleParams, acceleration_to_command  # noqa: F401 (Actuator, acceleration_to_command re-exported)
+from .plugins import import_controller
+from .vehicle import VehicleParams
 
 #: Mode values recorded in traces (signal ``mode_vI``).
 MODE_CC = 0.0

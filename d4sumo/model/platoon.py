@@ -19,7 +19,8 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
-from .control import Actuator, CruiseControl, SwitchingController, SwitchingParams, acceleration_to_command, user_module
+from .control import CruiseControl, SwitchingController, SwitchingParams, user_module
+from .vehicle import Actuator, acceleration_to_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 

@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
-from ..model.control import names_only
+from ..model.plugins import names_only
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).

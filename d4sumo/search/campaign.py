@@ -17,7 +17,8 @@ from typing import Any
 from ..errors import ConfigError, D4sumoError, check_int, check_number
 from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig
-from ..model.control import ControllerImportError, names_only, user_module
+from ..model.control import user_module
+from ..model.plugins import ControllerImportError, names_only
 from ..model.maneuvers import maneuver_of
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification

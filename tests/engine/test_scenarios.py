@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from d4sumo.engine.scenarios import SCENARIOS_DIR, build_road, list_scenarios
+from d4sumo.engine.networks import SCENARIOS_DIR, list_scenarios
+from d4sumo.engine.scenarios import build_road
 from d4sumo.errors import ConfigError, SumoError
 
 

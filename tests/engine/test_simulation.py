@@ -772,7 +772,7 @@ def test_a_road_that_closes_the_platoons_lane_to_a_cars_class_is_refused(tmp_pat
 def test_an_episode_written_to_fcd_is_the_episode_played_without(tmp_path):
     """SUMO's output precision reached a Krauss follower's answer to a cut-in: with the FCD's 6 decimals it
     drove 5 mm apart from the campaign's episode, so a replay was another episode. Found by check_invariants."""
-    from d4sumo.model.control import VehicleParams
+    from d4sumo.model.vehicle import VehicleParams
 
     config = EpisodeConfig(network=str(ROADS / "three_edges"), setpoint_m=8.43871715046162, start="steady",
                            vehicle=VehicleParams(max_decel_mps2=8.792978395245848, actuator_lag_s=0.0),

@@ -66,7 +66,7 @@ def test_a_step_is_checked_only_against_the_times_the_episode_reads():
 # --- a platoon of different vehicles: [vehicle.vI] ------------------------------------------------
 
 def test_a_cars_own_vehicle_table_lays_over_vehicle_and_round_trips():
-    from d4sumo.model.control import VehicleParams
+    from d4sumo.model.vehicle import VehicleParams
 
     c = EpisodeConfig(vehicle=VehicleParams(max_decel_mps2=7.0),
                       vehicles={"v2": {"length_m": 12.0, "max_decel_mps2": 5.0, "vclass": "truck"}})

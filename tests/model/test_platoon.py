@@ -11,9 +11,10 @@ import pytest
 from d4sumo.engine.ballistic import integrate
 from d4sumo.model.attacks import attack_signal, make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.control import MODE_ACC, CruiseControl, SwitchingParams, acceleration_to_command, register_controller
+from d4sumo.model.control import MODE_ACC, CruiseControl, SwitchingParams, register_controller
 from d4sumo.model.maneuvers import Maneuver
 from d4sumo.model.platoon import ControllerError, Platoon, collisions_at, initial_state
+from d4sumo.model.vehicle import acceleration_to_command
 
 ALTERNATING = [1, -1, 1, -1, 1, -1, 1, -1, 1]
 
@@ -83,7 +84,7 @@ def test_the_attackers_cruise_pid_starts_afresh_after_an_attack_window():
 
 def test_the_actuator_lag_does_not_wind_up_while_the_car_stands_still():
     """Regression: 5 s of braking at standstill left -8 m/s^2 in the lag, delaying the next throttle."""
-    from d4sumo.model.control import Actuator, VehicleParams
+    from d4sumo.model.vehicle import Actuator, VehicleParams
 
     vehicle = VehicleParams()
     act = Actuator(vehicle, 0.05)
@@ -94,7 +95,7 @@ def test_the_actuator_lag_does_not_wind_up_while_the_car_stands_still():
 
 
 def test_the_actuator_lag_does_not_wind_up_at_the_speed_limit():
-    from d4sumo.model.control import Actuator, VehicleParams
+    from d4sumo.model.vehicle import Actuator, VehicleParams
 
     act = Actuator(VehicleParams(), 0.05, max_speed_mps=40.0)
     for _ in range(100):
