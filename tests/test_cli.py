@@ -196,6 +196,32 @@ def test_replay_compares_the_whole_stored_verdict_and_exits_1_when_it_differs(tm
 
 
 @pytest.mark.sumo
+def test_a_warm_up_campaign_stored_by_0_11_replays_with_the_minimum_gaps_it_stored(tmp_path, capsys):
+    """d4sumo 0.11 and before stored the minimum gaps of a warm-up's whole episode, the warm-up included;
+    0.12 stores them from the attack's start. A sample stored by 0.11 still reproduces exactly, and one
+    stored now is compared with the attack's window."""
+    import sqlite3
+
+    db = tmp_path / "r.sqlite"
+    assert main(["falsify", "--start", "warmup", "--controller", "timegap", "--optimizer", "random", "--samples", "2",
+                 "--db", str(db), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(db), "1", "--json"]) == 0
+    now = json.loads(capsys.readouterr().out)
+    whole = {k: min(v, now["warmup_min_gaps_m"][k]) for k, v in now["min_gaps_m"].items()}
+    assert whole != now["min_gaps_m"]  # the warm-up from rest came closer than the attack
+    with sqlite3.connect(db) as con:  # as 0.11 stored it
+        con.execute("UPDATE campaign SET version = '0.11.0'")
+        con.execute("UPDATE sample SET min_gaps = ? WHERE id = 1", (json.dumps(whole),))
+    assert main(["replay", str(db), "1"]) == 0
+    assert "reproduces the stored sample exactly" in capsys.readouterr().out
+    with sqlite3.connect(db) as con:  # the same minima, stored by this version: the attack's window was meant
+        con.execute("UPDATE campaign SET version = '0.12.0'")
+    assert main(["replay", str(db), "1"]) == 1
+    assert "differs from the stored sample: min_gaps" in capsys.readouterr().out
+
+
+@pytest.mark.sumo
 def test_a_cut_in_campaign_is_stored_exported_replayed_and_plotted_by_lane(tmp_path, capsys):
     db = tmp_path / "r.sqlite"
     argv = ["falsify", "--maneuver", "cutin", "--set", "scenario.cutin_follower=2", "--start", "steady",
