@@ -82,6 +82,50 @@ def dask_setup(worker) -> None:
 
 
 def _run_dask(todo: list[_Active], store_results, client) -> None:
+    """The sweep with each campaign's optimiser stepped on the workers, its state carried from task to task."""
+    def task(gang: list[_Active]):
+        return run_chunks, (_task(gang),), None
+
+    def accept(gang: list[_Active], _, result) -> list[_Active]:
+        return _accept_gang(gang, result, store_results)
+
+    _schedule(todo, client, task, accept)
+
+
+def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) -> None:
+    """The sweep with every campaign's optimiser on the client and only episodes on the workers: each
+    campaign asks and is told on one machine, so its samples are, bit for bit, the ones it gives alone
+    on the client's, whatever mix of CPUs and libraries the workers have. A task plays the next batch
+    of a gang of campaigns; the client tells their optimisers and sends the next."""
+    runners = {id(a): CampaignRunner(a.campaign, _evaluator(_task([a])[0]), stored=a.stored, batch=a.batch,
+                                     where=f"{where}: campaign {a.campaign_id}") for a in todo}
+    for a in todo:
+        a.numerics_differ_at = runners[id(a)].numerics_differ_at
+
+    def task(gang: list[_Active]):
+        owners, plays = [], []
+        for a in gang:  # the same points again after a failure: nothing was told
+            for first, xs in runners[id(a)].pending():
+                owners.append(a)
+                plays.append(Play(a.campaign, a.network, first, tuple(xs)))
+        return play_chunks, (tuple(plays), gang[0].batch), owners
+
+    def accept(gang: list[_Active], owners: list[_Active], result) -> list[_Active]:
+        played: dict[int, dict] = {id(a): {} for a in gang}
+        for owner, results in zip(owners, result):
+            played[id(owner)].update((r.index, r) for r in results)
+        for a in gang:
+            store_results(a, runners[id(a)].accept(played[id(a)]))
+            a.failures = 0
+        return [a for a in gang if runners[id(a)].done < a.campaign.samples]
+
+    _schedule(todo, client, task, accept)
+
+
+def _schedule(todo: list[_Active], client, task, accept) -> None:
+    """Gangs of campaigns on the cluster, a task at a time each, one more in flight than it has threads.
+    ``task(gang)``: the function, its arguments and what ``accept(gang, that, result)`` needs to take the
+    result, which gives the gang's campaigns not complete yet."""
     from distributed import as_completed
 
     queue = _gangs(todo, max(1, sum(client.nthreads().values())))
@@ -92,15 +136,16 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
         return max(1, sum(client.nthreads().values())) + 1
 
     def submit(gang: list[_Active]) -> None:
-        # pure=False: the same chunk sent again after a failure is run again, not looked up
-        future = client.submit(run_chunks, _task(gang), pure=False)
-        running[future] = gang
+        function, args, context = task(gang)
+        # pure=False: the same task sent again after a failure is run again, not looked up
+        future = client.submit(function, *args, pure=False)
+        running[future] = gang, context
         futures.add(future)
 
     while queue and len(running) < slots():
         submit(queue.pop(0))
     for future in futures:
-        gang = running.pop(future)
+        gang, context = running.pop(future)
         if future.status == "error":
             exc = future.exception()
             if isinstance(exc, D4sumoError):
@@ -110,60 +155,7 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
             continue
         result = future.result()
         future.release()
-        gang = _accept_gang(gang, result, store_results)
-        if gang:
-            submit(_share(gang, queue, len(running) + 1, slots() - 1))
-        while queue and len(running) < slots():
-            submit(queue.pop(0))
-
-
-def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) -> None:
-    """The sweep with every campaign's optimiser on the client and only episodes on the workers: each
-    campaign asks and is told on one machine, so its samples are, bit for bit, the ones it gives alone
-    on the client's, whatever mix of CPUs and libraries the workers have. A task plays the next batch
-    of a gang of campaigns; the client tells their optimisers and sends the next."""
-    from distributed import as_completed
-
-    runners = {id(a): CampaignRunner(a.campaign, _evaluator(_task([a])[0]), stored=a.stored, batch=a.batch,
-                                     where=f"{where}: campaign {a.campaign_id}") for a in todo}
-    for a in todo:
-        a.numerics_differ_at = runners[id(a)].numerics_differ_at
-    queue = _gangs(todo, max(1, sum(client.nthreads().values())))
-    running: dict = {}
-    futures = as_completed()
-
-    def slots() -> int:
-        return max(1, sum(client.nthreads().values())) + 1
-
-    def submit(gang: list[_Active]) -> None:
-        owners, plays = [], []
-        for a in gang:
-            for first, xs in runners[id(a)].pending():
-                owners.append(a)
-                plays.append(Play(a.campaign, a.network, first, tuple(xs)))
-        future = client.submit(play_chunks, tuple(plays), gang[0].batch, pure=False)  # pure=False: sent again, run again
-        running[future] = gang, owners
-        futures.add(future)
-
-    while queue and len(running) < slots():
-        submit(queue.pop(0))
-    for future in futures:
-        gang, owners = running.pop(future)
-        if future.status == "error":
-            exc = future.exception()
-            if isinstance(exc, D4sumoError):
-                raise exc
-            for part in _after_failure(gang, f"{type(exc).__name__}: {exc}"):
-                submit(part)  # the same points: nothing was told
-            continue
-        played: dict[int, dict] = {id(a): {} for a in gang}
-        for owner, results in zip(owners, future.result()):
-            played[id(owner)].update((r.index, r) for r in results)
-        future.release()
-        for a in gang:
-            store_results(a, runners[id(a)].accept(played[id(a)]))
-            a.failures = 0
-        gang = [a for a in gang if runners[id(a)].done < a.campaign.samples]
+        gang = accept(gang, context, result)
         if gang:
             submit(_share(gang, queue, len(running) + 1, slots() - 1))
         while queue and len(running) < slots():
