@@ -42,6 +42,7 @@ def test_bo_turbo_ce_and_cmaes_find_the_maximum_of_a_9d_function_far_better_than
         assert found > (-0.2 if name == "bo" else -0.35), found
 
 
+@pytest.mark.usefixtures("numerics")
 @pytest.mark.parametrize("name", OPTIMIZERS)
 def test_one_seed_repeats_the_same_asks(name):
     def asks(seed):
@@ -212,6 +213,7 @@ def test_cmaes_restarts_with_a_larger_population_and_never_touches_numpys_global
     assert state[0] == after[0] and np.array_equal(state[1], after[1]) and state[2:] == after[2:]
 
 
+@pytest.mark.usefixtures("numerics")
 @pytest.mark.parametrize("name", OPTIMIZERS)
 def test_an_optimisers_state_pickles_midway_and_goes_on_exactly(name):
     """Regression: CMA-ES held a lambda, so a sweep on two worker processes could not send its state."""
@@ -351,6 +353,7 @@ def play_in_batches(opt, f):
             opt.tell(x, f(x))
 
 
+@pytest.mark.usefixtures("numerics")
 def test_turbo_shrinks_its_trust_region_on_failures_and_restarts_from_a_new_design():
     opt = make_optimizer("turbo", LOWER, UPPER, budget=200, rng=np.random.default_rng(0),
                          options={"initial_points": 5, "batch_size": 2, "failure_tolerance": 1, "length_min": 0.1})
@@ -371,6 +374,7 @@ def test_turbo_shrinks_its_trust_region_on_failures_and_restarts_from_a_new_desi
     assert ready[:4] == [2, 2, 2, 5]
 
 
+@pytest.mark.usefixtures("numerics")
 def test_turbo_grows_its_trust_region_on_successes_and_keeps_its_candidates_in_it():
     opt = make_optimizer("turbo", LOWER, UPPER, budget=40, rng=np.random.default_rng(1),
                          options={"initial_points": 5, "batch_size": 1, "success_tolerance": 2, "length_init": 0.2})
@@ -436,6 +440,7 @@ def test_auto_moves_its_budget_to_bo_where_the_model_informs(version):
     assert sum(bo for (bo, *_), _ in runs) > sum(sum(explore) for (_, *explore), _ in runs)
 
 
+@pytest.mark.usefixtures("numerics")
 @pytest.mark.parametrize("version, stall, expected", [(1, 25, 0.5), (2, 0, 0.5), (2, 25, 0.8)])
 def test_auto_keeps_half_its_budget_exploring_on_a_plateau_and_more_once_it_stalls(version, stall, expected):
     """Nothing improves: the share stays where it started, then (held sampling, ``stall`` scores without a new
@@ -445,6 +450,7 @@ def test_auto_keeps_half_its_budget_exploring_on_a_plateau_and_more_once_it_stal
     assert (piece > 0) == (version == 2)
 
 
+@pytest.mark.usefixtures("numerics")
 def test_a_stall_turns_every_exploring_point_to_a_fresh_held_one_until_a_new_best():
     """CC4's failed runs: piece moves crept up a dead end for a thousand scores, held sampling got a tenth of
     the budget. Stalled, the exploring points are held samples at share_max; a new best ends the stall."""
@@ -470,6 +476,7 @@ def _rising_then_flat(opt, rising: int = 40):
     return lambda x: -1000.0 + len(opt.y) if len(opt.y) < rising else -1000.0
 
 
+@pytest.mark.usefixtures("numerics")
 @pytest.mark.parametrize("patience", [5, 12])
 def test_auto_explores_once_bos_points_stop_improving(patience):
     """Every point after the design is BO's until ``patience`` of BO's points in a row bring no new best
@@ -486,6 +493,7 @@ def test_auto_explores_once_bos_points_stop_improving(patience):
     assert resolve_options("auto", {"version": 1})["patience"] == 0 and resolve_options("auto", {})["patience"] == 5
 
 
+@pytest.mark.usefixtures("numerics")
 def test_bo_alone_earns_no_credit_before_exploring_starts():
     """Credits say which arm improves while the arms compete: improvements BO made alone (before
     ``patience`` of its points brought nothing) do not hold the exploring share at its floor afterwards."""
@@ -494,6 +502,7 @@ def test_bo_alone_earns_no_credit_before_exploring_starts():
     assert opt._explores and opt.credits.tolist() == [1.0, 0.5, 0.5] and opt.random_share == 0.5
 
 
+@pytest.mark.usefixtures("numerics")
 def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
     """Exploring serves the first falsification; past a positive score BO collects attacks around it."""
     (bo, random, piece), share = _arms_after(lambda x: 1.0, budget=60)
@@ -502,6 +511,7 @@ def test_auto_leaves_every_point_to_bo_once_an_attack_is_found():
     assert share == 0.5 and random > 0  # version 1 explored whatever the scores
 
 
+@pytest.mark.usefixtures("numerics")
 def test_auto_is_bo_point_for_point_once_its_initial_design_holds_an_attack():
     """d4sumo's campaigns: an attack among the initial design, and auto with its defaults proposes what bo does."""
     f = lambda x: 1.0 - float(np.sum((x - 0.3) ** 2)) / 100.0  # noqa: E731  (positive in the whole box)
@@ -515,6 +525,7 @@ def test_auto_is_bo_point_for_point_once_its_initial_design_holds_an_attack():
             bo.tell(b, f(b))
 
 
+@pytest.mark.usefixtures("numerics")
 @pytest.mark.parametrize("dimension", [1, 3, 9])
 def test_auto_never_proposes_a_point_twice_while_it_explores(dimension):
     """Regression: with a few parameters held points are few (one piece when d <= 3), and a piece move
@@ -669,6 +680,7 @@ def test_auto_refuses_a_share_outside_its_bounds():
     assert info.value.field == "search.auto.random_share"
 
 
+@pytest.mark.usefixtures("numerics")
 def test_auto_proposes_what_bo_does_until_it_plays_an_exploring_point():
     """Its arms draw from a stream of their own: with no exploring point, auto is bo, proposal for proposal."""
     f = lambda x: -float(np.sum((x - 0.3) ** 2))  # noqa: E731
