@@ -196,10 +196,21 @@ def test_replay_compares_the_whole_stored_verdict_and_exits_1_when_it_differs(tm
 
 
 @pytest.mark.sumo
+def test_knots_that_act_past_the_episodes_end_are_named(tmp_path, capsys):
+    """Issue 37: a 17 s episode searched 9 knots over 48 s without a word. Knots from 30 s on (PCHIP: a
+    knot shapes the two intervals before it) change nothing in it, and the note says which."""
+    assert main(["falsify", "--duration", "17", "--samples", "2", "--db", str(tmp_path / "a.sqlite"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "4 of the knots attack's 9 parameters (m5, m6, m7, m8) change nothing in a 17 s episode" in err
+    assert main(["falsify", "--samples", "2", "--db", str(tmp_path / "b.sqlite"), "--quiet"]) == 0
+    assert "change nothing" not in capsys.readouterr().err
+
+
+@pytest.mark.sumo
 def test_a_warm_up_campaign_stored_by_0_11_replays_with_the_minimum_gaps_it_stored(tmp_path, capsys):
     """d4sumo 0.11 and before stored the minimum gaps of a warm-up's whole episode, the warm-up included;
-    0.12 stores them from the attack's start. A sample stored by 0.11 still reproduces exactly, and one
-    stored now is compared with the attack's window."""
+    0.12 stores them from the attack's start. A campaign 0.11 began holds samples of either meaning (0.12
+    resumed it): each reproduces exactly; one stored now is compared with the attack's window."""
     import sqlite3
 
     db = tmp_path / "r.sqlite"
@@ -214,6 +225,8 @@ def test_a_warm_up_campaign_stored_by_0_11_replays_with_the_minimum_gaps_it_stor
         con.execute("UPDATE campaign SET version = '0.11.0'")
         con.execute("UPDATE sample SET min_gaps = ? WHERE id = 1", (json.dumps(whole),))
     assert main(["replay", str(db), "1"]) == 0
+    assert "reproduces the stored sample exactly" in capsys.readouterr().out
+    assert main(["replay", str(db), "2"]) == 0  # a sample 0.12 added when it resumed the campaign
     assert "reproduces the stored sample exactly" in capsys.readouterr().out
     with sqlite3.connect(db) as con:  # the same minima, stored by this version: the attack's window was meant
         con.execute("UPDATE campaign SET version = '0.12.0'")

@@ -133,6 +133,23 @@ def note_unused_flags(args: argparse.Namespace, config, family, formula: str | N
             unused.append((f"--set {key}", f"the {config.maneuver} maneuver does not read it"))
     for flag, why in unused:
         print(f"d4sumo: note: {flag} is unused: {why}", file=sys.stderr)
+    if family is not None:
+        note_inert_parameters(family, config)
+
+
+def note_inert_parameters(family, config) -> None:
+    """Parameters of the attack that change nothing in this episode (past its end): said, as the search
+    still spends its samples over them."""
+    from ..model.maneuvers import inert_parameters
+
+    inert = inert_parameters(family, config)
+    if inert:
+        names = family.names
+        knots = "horizon_s" in getattr(family, "options", {})
+        hint = " (--horizon sets where the knots end)" if knots else ""
+        print(f"d4sumo: note: {len(inert)} of the {family.name} attack's {len(names)} parameters "
+              f"({', '.join(names[i] for i in inert)}) change nothing in a {config.duration_s:g} s episode: they act "
+              f"past its end, and the search spends its samples over them all the same{hint}", file=sys.stderr)
 
 
 def check_distinct(dbs) -> None:

@@ -76,12 +76,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives
-    # d4sumo 0.11 and before stored the minimum gaps of a warm-up's whole episode, warm-up included
-    whole = campaign.config.start == "warmup" and _version(stored_campaign.version) < (0, 12)
     replayed = {"robustness": rho, "outcome": episode.outcome,
                 "collision": episode.first_collision_record(),
-                "min_gaps": episode.min_gaps_with_warmup_m() if whole else episode.min_gaps_m()}
+                "min_gaps": evaluator.min_gaps(episode)}
     stored = {"robustness": row.robustness, "outcome": row.outcome, "collision": row.collision, "min_gaps": row.min_gaps}
+    # d4sumo 0.11 and before stored a warm-up's minimum gaps over the whole episode, warm-up included: a
+    # campaign it began holds samples of either meaning
+    if (row.min_gaps != replayed["min_gaps"] and campaign.config.attack_start_step
+            and _version(stored_campaign.version) < (0, 12) and row.min_gaps == episode.min_gaps_with_warmup_m()):
+        replayed["min_gaps"] = row.min_gaps
     differs = [k for k in stored if stored[k] != replayed[k]]
     summary.update(sample_id=row.id, campaign_id=row.campaign_id, formula=campaign.formula,
                    stored_robustness=row.robustness, stored_outcome=row.outcome, stored_collision=row.collision,

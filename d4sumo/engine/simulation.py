@@ -9,6 +9,7 @@ first one: SUMO lets the cars drive through each other afterwards, so later data
 
 from __future__ import annotations
 
+import math
 import contextlib
 import logging
 import os
@@ -63,10 +64,15 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
         )
     needed = road_needed_m(config, road.speed_limit_mps)
     if needed > road.length_m:
+        # the longest that fits: what is left past the front car's start, at the limit, less a warm-up
+        longest = math.floor(((road.length_m - start) / road.speed_limit_mps - config.attack_start_s) / config.step_s) * config.step_s
+        fits = (f"at most {longest:g} s fits, the frontmost car at most at the {road.speed_limit_mps:g} m/s limit"
+                + (f" after the {config.attack_start_s:g} s warm-up" if config.attack_start_s else "")
+                if longest > 0 else "none fits: use a longer road")
         raise ConfigError(
             "scenario.duration_s",
             config.duration_s,
-            f"an episode that fits on {road.name} ({road.length_m:g} m; this one may need {needed:.0f} m)",
+            f"an episode that fits on {road.name} ({road.length_m:g} m; this one may need {needed:.0f} m; {fits})",
         )
 
 

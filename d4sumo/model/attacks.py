@@ -18,6 +18,13 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 from ..errors import ConfigError, check_int, check_number
 
 
+def sine(x: np.ndarray) -> np.ndarray:
+    """sin, element by element, from the C library (correctly rounded in glibc): numpy's own vectorised
+    sin takes other paths on CPUs with AVX-512 and may differ in the last bit, and an episode must be
+    the same on every machine."""
+    return np.array([math.sin(v) for v in np.ravel(x)], dtype=float).reshape(np.shape(x))
+
+
 @dataclass(frozen=True)
 class Parameter:
     name: str
@@ -166,7 +173,7 @@ class Sine(AttackFamily):
 
     def _signal(self, x, t):
         a, f, phase = x
-        return a * np.sin(2.0 * math.pi * f * t + phase)
+        return a * sine(2.0 * math.pi * f * t + phase)
 
 
 class Knots(AttackFamily):
@@ -235,7 +242,7 @@ class PersistentCoded(AttackFamily):
         c, f, t_a = x
         if t_a == 0.0:  # the code tests `elif attack_time:`, false at 0: no attack at all
             return np.full_like(t, np.nan)
-        return np.where(t >= t_a, np.sign(np.sin(f * t)) * c, np.nan)
+        return np.where(t >= t_a, np.sign(sine(f * t)) * c, np.nan)
 
 
 #: the authors' control period: their controllers' clock adds it at every call

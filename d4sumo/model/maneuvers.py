@@ -303,6 +303,31 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
     return AttackPlan(u, step if step < config.steps else None)
 
 
+def inert_parameters(family: AttackFamily, config: EpisodeSettings, draws: int = 4) -> list[int]:
+    """The parameters that change nothing in an episode of this configuration (a knot that acts only past
+    its end, say): each moved from a few points of the box (``draws``, fixed) to a few other values, none
+    changed the attacker's plan. The search still spends its samples over them."""
+    rng = np.random.default_rng(0)
+    lower, upper = family.lower, family.upper
+    inert = []
+    for i in range(len(lower)):
+        moved = False
+        for x in rng.uniform(lower, upper, size=(draws, len(lower))):
+            plan = attack_plan(family, x, config)
+            for value in rng.uniform(lower[i], upper[i], size=2):
+                y = x.copy()
+                y[i] = value
+                other = attack_plan(family, y, config)
+                if not np.array_equal(plan.u, other.u, equal_nan=True) or plan.lane_change_step != other.lane_change_step:
+                    moved = True
+                    break
+            if moved:
+                break
+        if not moved:
+            inert.append(i)
+    return inert
+
+
 #: a lane change time within this many steps of a half step counts as the half step (which rounds up)
 HALF_STEP_TOLERANCE = 1e-9
 

@@ -76,7 +76,12 @@ class Evaluator:
         except Exception as exc:  # a user's formula
             return self._failed(index, x, exc, time.perf_counter() - t0)
         collision = episode.first_collision_record()
-        return SampleResult(index, x, rho, episode.outcome, collision, episode.min_gaps_m(), time.perf_counter() - t0)
+        return SampleResult(index, x, rho, episode.outcome, collision, self.min_gaps(episode), time.perf_counter() - t0)
+
+    def min_gaps(self, episode) -> dict[str, float]:
+        """The minimum gaps over the window the specification scores: from the attack's start, or, for a
+        campaign stored before that window existed (``score_from_attack_start`` false), the whole episode."""
+        return episode.min_gaps_m() if self.spec.start_step else episode.min_gaps_with_warmup_m()
 
     def _failed(self, index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
         message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"

@@ -13,7 +13,7 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.ballistic import integrate
 from d4sumo.engine.scenarios import build_road
-from d4sumo.engine.simulation import simulate, simulate_batch
+from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.errors import ConfigError
 from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
@@ -150,9 +150,19 @@ def test_a_users_controller_class_runs_in_sumo(road):
 def test_a_road_too_short_or_too_slow_is_refused(road):
     with pytest.raises(ConfigError, match="speed limit"):
         simulate(EpisodeConfig(speed_mps=45.0), np.full(1200, np.nan), road=road)
-    with pytest.raises(ConfigError, match="fits on"):
+    with pytest.raises(ConfigError, match="fits on") as refused:
         cfg = EpisodeConfig(duration_s=200.0)
         simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+    # issue 37: the refusal says the longest duration that fits, which does (a warm-up's included)
+    for start in ("rest", "warmup"):
+        cfg = EpisodeConfig(duration_s=200.0, start=start)
+        with pytest.raises(ConfigError) as refused:
+            simulate(cfg, np.full(cfg.steps, np.nan), road=road)
+        longest = float(re.search(r"at most ([\d.]+) s fits", str(refused.value)).group(1))
+        fits = EpisodeConfig(duration_s=longest, start=start)
+        check_road(fits, road)
+        with pytest.raises(ConfigError):
+            check_road(EpisodeConfig(duration_s=longest + fits.step_s, start=start), road)
 
 
 def test_an_overlap_sumo_does_not_report_ends_the_episode_at_once(road):

@@ -474,14 +474,17 @@ def test_the_optimiser_reads_the_attack_familys_layout_in_time():
         assert CampaignRunner(campaign, Evaluator(campaign)).optimizer.signals == signals == campaign.family().signals
 
 
-def test_minimum_gaps_after_a_warm_up_speak_of_the_window_robustness_and_outcome_do(tmp_path):
+@pytest.mark.parametrize("from_attack_start", [True, False])
+def test_minimum_gaps_after_a_warm_up_speak_of_the_window_robustness_and_outcome_do(tmp_path, from_attack_start):
     """Issue 36: after a warm-up from rest the stored minimum gaps were the warm-up's (7.00 m, the setpoint
     at the start, for every sample of a time-gap ACC campaign) beside a robustness of -36.7: the near-miss
-    columns said nothing. They are taken from the attack's start, the window the specification scores."""
+    columns said nothing. They are taken over the window the specification scores: from the attack's
+    start, or the whole episode for a campaign stored before that window existed."""
     from d4sumo.model.config import ControllerConfig, EpisodeConfig
 
     config = EpisodeConfig(start="warmup", controller=ControllerConfig(cls="timegap"))
-    summary = run_campaign(Campaign(config=config, optimizer="random", samples=6, seed=0))
+    summary = run_campaign(Campaign(config=config, optimizer="random", samples=6, seed=0,
+                                    score_from_attack_start=from_attack_start))
     for s in summary.samples:  # psi with d_safe 0: the followers' nearest gap negated, or the attacker's if less
         followers = min(g for pair, g in s.min_gaps.items() if pair != "v0-v1")
         assert s.robustness == min(-followers, s.min_gaps["v0-v1"])
