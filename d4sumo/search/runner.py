@@ -172,6 +172,13 @@ def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], 
     return out
 
 
+def numerics_note(where: str, index: int) -> str:
+    """What a resumed campaign says once when a stored point is not what this machine's model proposes."""
+    return (f"{where}: resumed on a machine whose numerics differ from the one that began it (stored sample "
+            f"{index} is not what this machine's model proposes there): the stored samples stand, and the samples "
+            "this run plays follow this machine's proposals")
+
+
 def _score(result: SampleResult, history: list[float]) -> float:
     """What the optimiser is told: the robustness, or for an errored sample the worst seen so far."""
     if result.robustness is not None and math.isfinite(result.robustness):
@@ -249,16 +256,16 @@ class CampaignRunner:
 
     def _check(self, x: np.ndarray, r: SampleResult) -> None:
         """A stored sample stands where this machine asks for its point, or where a model asked for it
-        (`Optimizer.first_modelled`: another machine's BLAS may have proposed another point there, all
-        of whose successors it told). A point the seed alone decides, one outside the box or of another
-        length, is another campaign's or was changed."""
+        (`Optimizer.modelled`: another machine's BLAS may have proposed another point there). A point the
+        seed and the stored scores alone decide (a design, a sampler's draws, an exploring arm's), one
+        outside the box or of another length, is another campaign's or was changed."""
         if len(r.params) == len(x) and np.allclose(x, r.params, rtol=0, atol=1e-12):
             return
         opt = self.optimizer
         params = np.asarray(r.params, dtype=float)
         slack = 1e-9 * np.maximum(1.0, np.maximum(np.abs(opt.lower), np.abs(opt.upper)))  # a bound's rounding
         inside = len(params) == len(x) and bool(np.all((params >= opt.lower - slack) & (params <= opt.upper + slack)))
-        if not inside or opt.first_modelled is None or r.index < opt.first_modelled:
+        if not inside or r.index not in opt.modelled:
             what = ("a point this seed draws alike on every machine" if inside
                     else "not a point of this campaign's box")
             raise StoreError(f"{self.where}: stored sample {r.index} is not what this seed asks for ({what}); "
@@ -268,11 +275,9 @@ class CampaignRunner:
 
     def numerics_note(self) -> str | None:
         """One line for a resumed campaign whose stored points another machine's numerics proposed."""
-        if self.numerics_differ_at is None or self.done >= self.campaign.samples:
+        if self.numerics_differ_at is None:
             return None
-        return (f"{self.where}: resumed on a machine whose numerics differ from the one that began it (stored "
-                f"sample {self.numerics_differ_at} is not what this machine's model proposes there): the stored "
-                f"samples stand, and the samples from {self.done} on follow this machine's proposals")
+        return numerics_note(self.where, self.numerics_differ_at)
 
     def _tell(self, r: SampleResult) -> None:
         """Tell the optimiser a sample as it is stored (or played): its point and score."""
@@ -402,8 +407,14 @@ def run_campaign(
         campaign_id = store.open_campaign(campaign.definition(), campaign.samples, sweep)
     if results:
         log.info("campaign %s: resumed after %d stored samples", campaign_id, len(results))
-    if runner.numerics_note():
-        log.warning("%s", runner.numerics_note())
+    said = [False]
+
+    def say_numerics() -> None:  # once, when found: at the start, or past a gap in the stored samples
+        if runner.numerics_note() and not said[0] and runner.done < campaign.samples:
+            said[0] = True
+            log.warning("%s", runner.numerics_note())
+
+    say_numerics()
     if on_sample:
         for r in results:
             on_sample(r)
@@ -430,5 +441,6 @@ def run_campaign(
 
     while runner.done < campaign.samples:
         runner.step(finished)
+        say_numerics()
     results.sort(key=lambda r: r.index)
     return CampaignSummary(campaign_id, results)

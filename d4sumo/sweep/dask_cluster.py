@@ -99,8 +99,6 @@ def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) 
     of a gang of campaigns; the client tells their optimisers and sends the next."""
     runners = {id(a): CampaignRunner(a.campaign, _evaluator(_task([a])[0]), stored=a.stored, batch=a.batch,
                                      where=f"{where}: campaign {a.campaign_id}") for a in todo}
-    for a in todo:
-        a.numerics_differ_at = runners[id(a)].numerics_differ_at
 
     def task(gang: list[_Active]):
         owners, plays = [], []
@@ -115,7 +113,9 @@ def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) 
         for owner, results in zip(owners, result):
             played[id(owner)].update((r.index, r) for r in results)
         for a in gang:
-            store_results(a, runners[id(a)].accept(played[id(a)]))
+            results = runners[id(a)].accept(played[id(a)])
+            a.numerics_differ_at = runners[id(a)].numerics_differ_at  # found at the start, or past a gap
+            store_results(a, results)
             a.failures = 0
         return [a for a in gang if runners[id(a)].done < a.campaign.samples]
 

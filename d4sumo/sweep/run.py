@@ -20,7 +20,7 @@ from ..errors import ConfigError
 from ..model.batch import DEFAULT_BATCH
 from ..search.campaign import SampleResult, open_store
 from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
-from ..search.runner import stored_results
+from ..search.runner import numerics_note, stored_results
 from ..search.store import Store, StoreError
 from .dask_cluster import _dask_client, _run_dask, _run_dask_proposing, check_dask_address
 from .grid import Sweep
@@ -142,11 +142,8 @@ def run_sweep(
         def store_results(active: _Active, results: list[SampleResult]) -> None:
             if active.numerics_differ_at is not None and not said[0] and results:
                 said[0] = True
-                log.warning("%s: campaign %d was resumed on a machine whose numerics differ from the one that began "
-                            "it (stored sample %d is not what this machine's model proposes there): the stored samples "
-                            "stand, and the samples from %d on follow this machine's proposals (other campaigns resumed "
-                            "so are not named)", store.path, active.campaign_id, active.numerics_differ_at,
-                            results[0].index)
+                log.warning("%s (other campaigns resumed so are not named)",
+                            numerics_note(f"{store.path}: campaign {active.campaign_id}", active.numerics_differ_at))
             store.add_samples(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
                                                     r.wall_s, r.error) for r in results])
             active.done += len(results)

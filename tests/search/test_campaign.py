@@ -79,7 +79,7 @@ def stored_rows(store):
     return [(s.index, s.params, s.robustness, s.outcome) for s in store.samples()]
 
 
-@pytest.mark.parametrize("optimizer, begun", [("turbo", 14), ("bo", 34)])
+@pytest.mark.parametrize("optimizer, begun", [("turbo", 14), ("bo", 34), ("auto", 34), ("cmaes", 20)])
 def test_a_campaign_begun_where_the_numerics_differ_resumes_with_its_stored_samples(tmp_path, monkeypatch, optimizer, begun):
     """Issue 36: a campaign interrupted on one machine and resumed on another (another CPU's BLAS kernel, a
     numpy upgrade) was refused ("stored sample 41 is not what this seed asks for") where its GP proposed
@@ -129,7 +129,7 @@ def test_a_stored_point_a_model_proposed_stands_and_one_the_seed_draws_must_matc
         assert stored_rows(store)[:14] == before and len(summary.samples) == 16
     notes = [r.getMessage() for r in caplog.records if "numerics differ" in r.getMessage()]
     assert len(notes) == 1 and "stored sample 12 is not what this machine's model proposes" in notes[0]
-    assert "the samples from 14 on follow this machine's proposals" in notes[0]
+    assert "the samples this run plays follow this machine's proposals" in notes[0]
 
 
 def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goes_on(tmp_path, monkeypatch):
@@ -489,3 +489,20 @@ def test_minimum_gaps_after_a_warm_up_speak_of_the_window_robustness_and_outcome
         followers = min(g for pair, g in s.min_gaps.items() if pair != "v0-v1")
         assert s.robustness == min(-followers, s.min_gaps["v0-v1"])
     assert any(s.outcome == "no_crash" for s in summary.samples)
+
+
+def test_a_stored_point_another_machine_proposed_past_a_gap_is_said_once(tmp_path, caplog):
+    """Review of issue 36: a divergence found past a missing sample (where the resumed campaign checks the
+    stored samples it does not play again) went unsaid."""
+    path = tmp_path / "r.sqlite"
+    with Store(path) as store:
+        run_campaign(SMALL, store)
+        params = json.loads(store.db.execute("SELECT params FROM sample WHERE idx = 12").fetchone()[0])
+        store.db.execute("UPDATE sample SET params = ? WHERE idx = 12", (json.dumps([params[0] + 1e-9, *params[1:]]),))
+        store.db.execute("DELETE FROM sample WHERE idx = 11")
+        store.db.commit()
+    with Store(path) as store, caplog.at_level("WARNING"):
+        run_campaign(SMALL.replace(samples=16), store)
+        assert sorted(s.index for s in store.samples()) == list(range(16))
+    notes = [r.getMessage() for r in caplog.records if "numerics differ" in r.getMessage()]
+    assert len(notes) == 1 and "stored sample 12" in notes[0]

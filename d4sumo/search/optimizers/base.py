@@ -16,9 +16,10 @@ class Optimizer:
 
     Points come from the seed alone (a design, a sampler's draws: every machine draws them alike, bit for
     bit) or from a model fitted through BLAS and LAPACK, whose last bits depend on the CPU and the library
-    build: an argmax over an acquisition can turn those into another point. ``first_modelled`` is the
-    first point (0-based, in the order asked) a model proposed: from there on, another machine may ask
-    otherwise (`search.runner` lets a resumed campaign's stored points stand there)."""
+    build: an argmax over an acquisition can turn those into another point. ``modelled`` holds the
+    points (0-based, in the order asked) a model proposed, or that depend on one: there another machine
+    may ask otherwise (`search.runner` lets a resumed campaign's stored points stand there). Every other
+    point is the seed's and the scores told's alone."""
 
     name = ""
     #: option -> (default, low, high); an int default means a whole number
@@ -36,7 +37,7 @@ class Optimizer:
         self.rng = rng
         self.options = self.resolve_together(check_options(self.name, self.OPTIONS, options))
         self.asked = 0
-        self.first_modelled: int | None = None
+        self.modelled: set[int] = set()
         self.X: list[np.ndarray] = []
         self.y: list[float] = []
 
@@ -69,8 +70,7 @@ class Optimizer:
 
     def _modelled(self) -> None:
         """The point being asked comes from a model (its last bits are this machine's)."""
-        if self.first_modelled is None:
-            self.first_modelled = self.asked - 1
+        self.modelled.add(self.asked - 1)
 
     def tell(self, x: np.ndarray, score: float) -> None:
         score = float(score)

@@ -43,6 +43,7 @@ class GaussianProcessSearch(Optimizer):
         self.batch_size = o["batch_size"]
         self._initial = qmc.Halton(d=self.dimension, scramble=True, seed=self.rng)
         self._pending: list[np.ndarray] = []  # asked, not told yet (unit box)
+        self._pending_modelled: list[bool] = []  # of each: whether a model proposed it
         self._told: list[np.ndarray] = []  # the points told, in the unit box
         self._gp = None
         self._fitted = 0  # the scores told when the GP was last fitted
@@ -62,6 +63,7 @@ class GaussianProcessSearch(Optimizer):
             self._modelled()
             z = self._propose()
         self._pending.append(z)
+        self._pending_modelled.append(self.asked - 1 in self.modelled)
         return self._unit_to_box(z)
 
     def tell(self, x: np.ndarray, score: float) -> None:
@@ -69,6 +71,7 @@ class GaussianProcessSearch(Optimizer):
         self._told.append(self._box_to_unit(self.X[-1]))
         if self._pending:
             self._pending.pop(0)  # told in the order asked
+            self._pending_modelled.pop(0)
 
     @property
     def X_unit(self) -> list[np.ndarray]:

@@ -139,9 +139,12 @@ class Portfolio(BayesianOptimization):
                 arm, z = PIECE, self._piece_move(self._told[int(np.argmax(self.y))])
             else:
                 arm, z = RANDOM, self._held()
+            if any(self._pending_modelled):  # whether it repeats one depends on a model's points too
+                self._modelled()
             if self._seen(z):  # a point already played or pending (a few parameters, few pieces): a uniform one
                 z = rng.random(self.dimension)
         self._pending.append(z)
+        self._pending_modelled.append(self.asked - 1 in self.modelled)
         self._arms.append(arm)
         return self._unit_to_box(z)
 
