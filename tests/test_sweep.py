@@ -186,6 +186,13 @@ def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_propos
         assert rows == outcomes(tmp_path / "local.sqlite")
 
 
+def test_dask_proposals_without_dask_is_said_to_be_unused(tmp_path, capsys):
+    path = write(tmp_path, TINY)
+    assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--workers", "1", "--dask-proposals", "workers",
+                 "--quiet"]) == 0
+    assert "--dask-proposals is unused" in capsys.readouterr().err
+
+
 @pytest.mark.sumo
 def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_on_the_client(tmp_path):
     """Regression: Dask workers wrote into a database on their own side and the client reported

@@ -117,6 +117,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.dask is not None:
         check_dask_address(args.dask)
     check_number("--dask-timeout", args.dask_timeout, 0.0, 3600.0, "seconds", low_open=True)
+    if args.dask is None and args.dask_proposals is not None:
+        print("d4sumo: note: --dask-proposals is unused: it says where a Dask sweep's optimisers run (--dask), and "
+              "local workers run on this machine", file=sys.stderr)
     check_batch(args.batch)
     sweep = Sweep.load(args.sweep)
     bar = None  # made at the first progress report: an error before it stays one line
@@ -131,7 +134,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     try:
         result = run_sweep(sweep, args.db, workers=args.workers, dask_address=args.dask, dask_timeout_s=args.dask_timeout,
-                           dask_proposals=args.dask_proposals,
+                           dask_proposals=args.dask_proposals or "client",
                            progress=progress, batch=args.batch)
     except KeyboardInterrupt as exc:
         if bar is not None:

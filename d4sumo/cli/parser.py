@@ -123,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on a Dask scheduler (e.g. tcp://10.0.0.5:8786), or 'local' for a local Dask cluster of --workers")
     p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")
-    p.add_argument("--dask-proposals", choices=["client", "workers"], default="client",
+    p.add_argument("--dask-proposals", choices=["client", "workers"], default=None,
                    help="where a Dask sweep's optimisers run: on this client, so that every campaign's samples are "
                         "the ones it gives alone here whatever machines the workers are, or spread over the workers, "
                         "each proposing with its own numerics [client]")
