@@ -42,7 +42,7 @@ def describe(net_file: Path, name: str) -> dict:
     if lanes == 0:
         raise ConfigError("scenario.network", name,
                           f"a road whose rightmost lane (the platoon's, lane 0) leads on through every junction; "
-                          f"lane 0 of {_lane_end(chain)} ends there")
+                          f"lane 0 of {_lane_end(chain)} ends there; {_longest_piece(chain)}")
     return {
         "route_edges": [e.getID() for e in chain],
         "length_m": sum(e.getLength() for e in chain),
@@ -99,6 +99,21 @@ def _through_lanes(chain) -> int:
     for edge, to in zip(chain, chain[1:]):
         lanes = next((i for i in range(lanes) if not _leads_on(edge, i, to)), lanes)
     return lanes
+
+
+def _longest_piece(chain) -> str:
+    """The longest run of the chain's edges whose lane 0 leads on from each to the next, as a route to take."""
+    pieces = [[chain[0]]]
+    for edge, to in zip(chain, chain[1:]):
+        if _leads_on(edge, 0, to):
+            pieces[-1].append(to)
+        else:
+            pieces.append([to])
+    piece = max(pieces, key=lambda p: sum(e.getLength() for e in p))
+    route = ", ".join(f'"{e.getID()}"' for e in piece)
+    return (f"the longest piece whose lane 0 leads on is {len(piece)} edge{'s' if len(piece) > 1 else ''} "
+            f"({sum(e.getLength() for e in piece):.0f} m, speed limit {min(e.getSpeed() for e in piece):g} m/s): "
+            f"scenario.route = [{route}]")
 
 
 def _lane_end(chain) -> str:

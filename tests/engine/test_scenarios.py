@@ -71,6 +71,11 @@ def test_a_road_of_several_edges_counts_only_the_lanes_that_lead_on_through_ever
                                              '<edge id="e2" from="b" to="c" numLanes="1" speed="40"/>')
     with pytest.raises(ConfigError, match="rightmost lane .* leads on through every junction; lane 0 of e1 ends there"):
         build_road(str(right), cache_dir=tmp_path / "cache")
+    # issue 37: the refusal names the longest piece that does lead on, as a route to take
+    with pytest.raises(ConfigError, match=r'the longest piece whose lane 0 leads on is 1 edge \(29\d\d m, speed limit 40 m/s\): '
+                                          r'scenario.route = \["e2"\]'):
+        build_road(str(right), cache_dir=tmp_path / "cache")
+    assert build_road(str(right), route=("e2",), cache_dir=tmp_path / "cache").route_edges == ("e2",)
 
 
 @pytest.mark.sumo
