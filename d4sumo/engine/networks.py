@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
 import os
 import shlex
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ from pathlib import Path
 from ..errors import ConfigError
 from .netconvert import plain_xml
 
+log = logging.getLogger(__name__)
+_SAID: set[tuple[str, tuple[str, ...]]] = set()  # networks (and routes) whose dropped signal plans were said
 
 def _shipped_variants() -> Path:
     # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
@@ -127,7 +130,31 @@ def network_source(name: str, root: Path | None = None, route: tuple[str, ...] =
     an OSM import's, netconvert's), taken back to plain XML by netconvert; with a ``route``, only its
     edges (the road the platoon drives, and each copy of it in a batch)."""
     source = _network_source(name, root)
-    return _restrict(source, tuple(route)) if route else source
+    source = _restrict(source, tuple(route)) if route else source
+    if scenario_folder(name, root).is_file():
+        _note_signals(source, tuple(route))
+    return source
+
+
+def _note_signals(source: NetworkSource, route: tuple[str, ...]) -> None:
+    """Say once that a network file's own signal plans do not reach the road built from it: its plain
+    nodes and edges keep which junctions are traffic lights, and netconvert gives each its default
+    program. Only lights the road drives through are named."""
+    from xml.etree import ElementTree as ET
+
+    if (source.name, route) in _SAID:
+        return
+    _SAID.add((source.name, route))
+    edges = list(ET.fromstring(source.edges_xml).iter("edge"))
+    passed = {e.get("to") for e in edges} & {e.get("from") for e in edges}  # junctions a car drives through
+    lights = sorted({n.get("tl") or n.get("id") for n in ET.fromstring(source.nodes_xml).iter("node")
+                     if "traffic_light" in (n.get("type") or "") and n.get("id") in passed})
+    if lights:
+        several = len(lights) > 1
+        log.warning("%s: the road d4sumo builds from it gives its %d traffic light%s %s(%s) netconvert's default "
+                    "program%s, not the network's own: it is built from the network's nodes and edges, which keep no "
+                    "signal plans", source.name, len(lights), "s" if several else "", "on the route " if route else "",
+                    ", ".join(lights[:5]) + (", ..." if len(lights) > 5 else ""), "s" if several else "")
 
 
 def _network_source(name: str, root: Path | None = None) -> NetworkSource:

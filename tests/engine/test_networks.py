@@ -32,3 +32,29 @@ def test_a_network_that_is_none_says_what_is_wrong_with_the_path_given(tmp_path,
     with pytest.raises(ConfigError) as info:
         network_source(given)
     assert str(info.value) == f"scenario.network: got {given!r}; allowed: {allowed}"
+
+
+@pytest.mark.sumo
+def test_a_network_files_signal_plans_that_the_built_road_drops_are_said_once(tmp_path, caplog):
+    """Issue 37: a corridor's traffic lights came out with netconvert's default programs in the road d4sumo
+    builds (its nodes and edges keep no signal plans) and nothing said so."""
+    import subprocess
+
+    from d4sumo.sumohome import sumo_binary
+
+    (tmp_path / "r.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="1000" y="0" type="traffic_light"/>'
+                                        '<node id="c" x="3000" y="0"/></nodes>')
+    (tmp_path / "r.edg.xml").write_text('<edges><edge id="e1" from="a" to="b" numLanes="2" speed="30"/>'
+                                        '<edge id="e2" from="b" to="c" numLanes="2" speed="30"/></edges>')
+    net = tmp_path / "signals.net.xml"
+    subprocess.run([sumo_binary("netconvert"), "-n", str(tmp_path / "r.nod.xml"), "-e", str(tmp_path / "r.edg.xml"),
+                    "-o", str(net)], check=True, capture_output=True)
+    with caplog.at_level("WARNING"):
+        network_source(str(net))
+        network_source(str(net))
+        network_source(str(net), route=("e2",))  # starts past the light
+    notes = [r.getMessage() for r in caplog.records if "traffic light" in r.getMessage()]
+    assert len(notes) == 1 and "its 1 traffic light (b) netconvert's default program, not the network's own" in notes[0]
+    caplog.clear()
+    network_source(str(tmp_path / "r.nod.xml").replace("r.nod.xml", ""))  # the same nodes as a folder: the user's own plan
+    assert not [r for r in caplog.records if "traffic light" in r.getMessage()]
