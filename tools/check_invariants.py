@@ -1,7 +1,8 @@
 """Verdict invariants over many random episodes, checked against SUMO's own FCD output.
 
-Plays N random episodes (on the shipped 4-lane highway and on roads of several edges: a speed change,
-a lane drop, a curve, a route through netgenerate's grid; one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
+Plays N random episodes (on the shipped 4-lane highway, in lane 0, 1 or 2, and on roads of several edges: a
+speed change, a lane drop, a curve, an acceleration lane, a route through netgenerate's grid, SUMO's own
+Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
@@ -20,7 +21,8 @@ campaign stores a sample, and counts the samples where any of these disagree:
   edges: its first lane position plus SUMO's odometer) agrees with the trace to the FCD's
   precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
   coordinate) is below c (beyond that precision) before the stored collision time, nor is the
-  collision pair's FCD gap above c at it;
+  collision pair's FCD gap above c at it; every car that keeps its lane drove the road's lane path
+  (the platoon's lane on each edge, as d4sumo reads it from the network's connections);
 - the episode played in a batch (beside --batch - 1 other random attacks, half of them of its
   configuration, half of other campaigns' that may share its SUMO: other setpoints, target speeds and
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
@@ -61,10 +63,25 @@ FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 
 #: change, a lane drop, a curve (in-lane maneuvers only there: lanes are told from the FCD's y); then
 #: netgenerate's grid and three sharp turns (`sharp_turns`), made at the first run
 ROADS = ["highway_4lane", *(str(Path(__file__).resolve().parent.parent / "examples" / "roads" / name)
-                            for name in ("three_edges", "lane_drop", "curved"))]
+                            for name in ("three_edges", "lane_drop", "curved", "acceleration_lane"))]
 STRAIGHT = ROADS[:3]
-#: networks with many ways, driven along a named route: netgenerate's grid (made at the first run)
+#: networks with many ways, driven along a named route: netgenerate's grid (made at the first run), and
+#: SUMO's own Bremen motorway (in the eclipse-sumo wheel), whose on-ramp moves the platoon's lane 0 -> 1 -> 0
 ROUTES: dict[str, tuple[str, ...]] = {}
+#: roads too short for the default 60 s episode: the duration drawn there
+DURATIONS: dict[str, float] = {}
+#: the lanes the platoon is put in (scenario.lane) besides the road's own choice, by road
+LANES = {"highway_4lane": (1, 2)}
+
+
+def bremen_motorway() -> str:
+    """SUMO's own example motorway (tools/game/highway), its main route through an on-ramp: 1.9 km."""
+    from d4sumo.sumohome import sumo_home
+
+    path = str(Path(sumo_home()) / "tools" / "game" / "highway" / "highway.net.xml")
+    ROUTES[path] = ("145354574", "189597495", "E0", "191842213")
+    DURATIONS[path] = 20.0
+    return path
 
 
 def sharp_turns() -> str:
@@ -114,9 +131,12 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
     maneuver = lane_change(rng, followers) if rng.random() < 0.25 else {}
     network = str(rng.choice(STRAIGHT if maneuver else ROADS))
+    lanes = LANES.get(network, ())
     config = EpisodeConfig(
         network=network,
         route=ROUTES.get(network, ()),
+        lane=int(rng.choice(lanes)) if lanes and rng.random() < 0.3 else None,
+        duration_s=DURATIONS.get(network, 60.0),
         followers=followers,
         setpoint_m=setpoint,
         speed_mps=float(rng.choice([20.0, 25.0, 30.0])),
@@ -168,16 +188,30 @@ def lane_change(rng: np.random.Generator, followers: int) -> dict:
                 obstacle_speed_mps=float(rng.choice([0.0, 5.0, 12.5])), lane_change_s=float(rng.choice([0.0, 2.0])))
 
 
-def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Positions along the route and lateral coordinates, samples x cars. On a route of many edges a
-    position is the car's first lane position (every car starts on the first edge) plus SUMO's
-    odometer, not the lane position, which starts again at 0 on each edge."""
+def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool) -> tuple[np.ndarray, np.ndarray, dict[str, list[str]]]:
+    """Positions along the route and lateral coordinates, samples x cars, and each car's lanes in the
+    order it drove them (junction lanes left out). On a route of many edges a position is the car's first
+    lane position (every car starts on the first edge) plus SUMO's odometer, not the lane position, which
+    starts again at 0 on each edge."""
     rows: dict[float, dict[str, tuple[float, float, float]]] = {}
-    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos", "odometer"]):
+    lanes: dict[str, list[str]] = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos", "lane", "odometer"]):
         rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y), float(v.odometer))
+        driven = lanes.setdefault(v.id, [])
+        if not v.lane.startswith(":") and (not driven or driven[-1] != v.lane):
+            driven.append(v.lane)
     table = np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
     positions = table[:, :, 0] if one_edge else table[0, :, 0] + table[:, :, 2]
-    return positions, table[:, :, 1]
+    return positions, table[:, :, 1], lanes
+
+
+def fcd_lanes_differ(config: EpisodeConfig, road, lanes: dict[str, list[str]]) -> bool:
+    """Whether a car that keeps its lane (every car in-lane; the followers in a lane change) drove other
+    lanes than the road's lane path (`Road.lane_path`) edge by edge."""
+    path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+    expected = [f"{edge}_{lane}" for edge, lane in zip(road.route_edges, path)]
+    keeping = config.vehicle_ids[1:config.followers + 1] if config.maneuver_class.lateral else config.vehicle_ids
+    return any(lanes[vid] != expected[:len(lanes[vid])] for vid in keeping)
 
 
 def fcd_pairs(config: EpisodeConfig, positions: np.ndarray, y: np.ndarray, lane_width_m: float) -> list[list[tuple]]:
@@ -225,7 +259,9 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
             and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step), campaign.d_safe_m) - row.robustness) > 1e-9):
         broken.append("rtamt/numpy psi")
     road = evaluator.road
-    positions, y = read_fcd(fcd, config.vehicle_ids, road.one_edge)
+    positions, y, lanes = read_fcd(fcd, config.vehicle_ids, road.one_edge)
+    if fcd_lanes_differ(config, road, lanes):
+        broken.append("FCD/platoon lane")
     trace_positions = np.column_stack([episode.trace[f"pos_{vid}"] for vid in config.vehicle_ids])
     rounding = 0.6e-6 if road.one_edge else 1.1e-6  # one number rounded to 6 decimals, or two
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > rounding:
@@ -307,8 +343,9 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     parser.check_counts({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0, MAX_COPIES)})
     rng = np.random.default_rng(args.seed)
-    ROADS.extend([netgenerate_grid(), sharp_turns()])
-    roads = {name: build_road(name, route=ROUTES.get(name, ())) for name in ROADS}
+    ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
+    roads = {(name, lane): build_road(name, route=ROUTES.get(name, ()), lane=lane)
+             for name in ROADS for lane in (None, *LANES.get(name, ()))}
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
     examples: dict[str, str] = {}
@@ -319,7 +356,7 @@ def main(argv=None) -> int:
         for index in range(args.n):
             while True:  # a draw its road refuses (a platoon longer than the sharp turns' first edge) is drawn again
                 campaign, params = random_episode(rng)
-                road = roads[campaign.config.network]
+                road = roads[campaign.config.network, campaign.config.lane]
                 try:
                     evaluator = Evaluator(campaign, road=road)
                     break

@@ -48,7 +48,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                              maneuver=config.maneuver)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
-    road = build_road(config.network, route=config.route)
+    road = build_road(config.network, route=config.route, lane=config.lane)
     episode = simulate(config, episode_plan(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
     robustness = spec.robustness(episode.trace) if spec else None
     summary = episode_summary(config, family, params, episode, robustness, d_safe, fcd)

@@ -1,7 +1,10 @@
 """A built network as the platoon drives it: the straight chain of edges from its one start, its length,
-its lowest speed limit, the lanes that lead on through every junction, whether they are as long and as
-wide as each other, and which vehicle classes each closes to. What no platoon can drive (branches, a
-lane 0 that ends, speed limits that are no numbers) is refused naming scenario.network."""
+its lowest speed limit, and, for each lane of the first edge that leads on through every junction, the
+platoon's corridor from it: the lane it is in on each edge (an on-ramp adds a lane on the right and an
+exit or lane drop takes one away, so its index changes along the route as SUMO's connections say), the
+lanes beside it that lead on with it, whether they are as long and as wide as each other, and which
+vehicle classes each closes to. What no platoon can drive (branches, no lane that leads on, speed
+limits that are no numbers) is refused naming scenario.network."""
 
 from __future__ import annotations
 
@@ -15,8 +18,8 @@ OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles 
 
 
 def describe(net_file: Path, name: str) -> dict:
-    """The straight chain of edges from the road's start, its length and its lowest speed limit (refusals
-    name the network ``name``)."""
+    """The straight chain of edges from the road's start, its length, and the corridor from each lane of
+    its first edge that leads on through it (refusals name the network ``name``)."""
     import sumolib
 
     net = sumolib.net.readNet(str(net_file))
@@ -38,84 +41,121 @@ def describe(net_file: Path, name: str) -> dict:
         if not 0 < lane.getSpeed() < math.inf:
             raise ConfigError("scenario.network", name,
                               f"speed limits that are positive numbers of m/s (lane {lane.getID()}: {lane.getSpeed()})")
-    lanes = _through_lanes(chain)
-    if lanes == 0:
+    paths = [lane_path(chain, i) for i in range(chain[0].getLaneNumber())]
+    through = [path for path in paths if len(path) == len(chain)]
+    if not through:
+        furthest = max(range(len(paths)), key=lambda i: (len(paths[i]), -i))
+        end = chain[len(paths[furthest]) - 1]
         raise ConfigError("scenario.network", name,
-                          f"a road whose rightmost lane (the platoon's, lane 0) leads on through every junction; "
-                          f"lane 0 of {_lane_end(chain)} ends there; {_longest_piece(chain)}")
+                          f"a road with a lane that leads on through every junction (none of {chain[0].getID()}'s does: the "
+                          f"furthest, lane {furthest}, ends on {end.getID()} as lane {paths[furthest][-1]}); "
+                          f"{_longest_piece(chain)}")
+    corridors = {str(path[0]): _corridor(net_file, chain, path) for path in through}
     return {
         "route_edges": [e.getID() for e in chain],
         "length_m": sum(e.getLength() for e in chain),
-        "speed_limit_mps": min(e.getSpeed() for e in chain),
-        "lanes": lanes,
         "first_edge_m": chain[0].getLength(),
-        "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], lanes),
-        "lane_widths_m": sorted({e.getLanes()[i].getWidth() for e in chain for i in range(lanes)}),
-        "lane_width_m": min(e.getLanes()[0].getWidth() for e in chain),  # what d4sumo 0.10, sharing the cache, reads
-        "closed_to": [_closed_to(chain, i) for i in range(lanes)],
+        "platoon_lane": through[0][0],  # the rightmost lane that leads on: the platoon's unless scenario.lane says
+        "corridors": corridors,
     }
 
 
-def _closed_to(chain, lane: int) -> list[tuple[str, str]]:
-    """The vehicle classes some edge of the chain closes its lane ``lane`` to, each with the first such edge."""
+def _corridor(net_file: Path, chain, path: list[int]) -> dict:
+    """The platoon's corridor from the first edge's lane ``path[0]``: its lane on each edge, the lanes
+    (as offsets from it, 0 the platoon's, 1 the one to its left, ..) that lead on beside it, their
+    lowest speed limit, whether they are even, their widths, and the classes each closes to."""
+    lanes = _lanes_beside(chain, path)
+    in_corridor = [e.getLanes()[p + j] for e, p in zip(chain, path) for j in range(lanes)]
+    return {
+        "lane_path": path,
+        "lanes": lanes,
+        "speed_limit_mps": min(lane.getSpeed() for lane in in_corridor),
+        "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], path, lanes),
+        "lane_widths_m": sorted({lane.getWidth() for lane in in_corridor}),
+        "closed_to": [_closed_to(chain, path, j) for j in range(lanes)],
+    }
+
+
+def lane_path(chain, first: int) -> list[int]:
+    """The lane a car in lane ``first`` of the chain's first edge is in on each edge, following SUMO's
+    connections without a lane change; shorter than the chain where that lane ends (a lane drop, an exit).
+
+    Where a lane connects to several lanes of the next edge (a lane added beside it), the one that leads
+    on furthest is taken, the rightmost of those alike: SUMO's own choice (MSVehicle's best lanes), checked
+    against its FCD in the tests."""
+    reach = _reach(chain)
+    path = [first]
+    for k, (edge, to) in enumerate(zip(chain, chain[1:])):
+        onward = _next_lanes(edge, path[-1], to)
+        if not onward:
+            break
+        path.append(max(onward, key=lambda i: (reach[k + 1][i], -i)))
+    return path
+
+
+def _reach(chain) -> list[list[int]]:
+    """For each edge and each of its lanes, the index of the last edge a car in it reaches without a lane change."""
+    reach = [[len(chain) - 1] * chain[-1].getLaneNumber()]
+    for k in range(len(chain) - 2, -1, -1):
+        edge, to = chain[k], chain[k + 1]
+        reach.insert(0, [max((reach[0][i] for i in _next_lanes(edge, lane, to)), default=k)
+                         for lane in range(edge.getLaneNumber())])
+    return reach
+
+
+def _next_lanes(edge, lane: int, to) -> list[int]:
+    """The lanes of the next edge ``to`` that lane ``lane`` of ``edge`` connects to."""
+    return sorted({c.getToLane().getIndex() for c in edge.getLanes()[lane].getOutgoing() if c.getTo() == to})
+
+
+def _lanes_beside(chain, path: list[int]) -> int:
+    """How many lanes, from the platoon's up (to its left), lead on along the whole chain beside it, each
+    keeping its offset from the platoon's lane.
+
+    Only these can hold a platoon (and a lane change between them): a car in a lane that ends at a
+    junction (a lane drop) stops there, which is no collision of the followers' doing."""
+    lanes = min(e.getLaneNumber() - p for e, p in zip(chain, path))
+    for k, (edge, to) in enumerate(zip(chain, chain[1:])):
+        lanes = next((j for j in range(lanes) if path[k + 1] + j not in _next_lanes(edge, path[k] + j, to)), lanes)
+    return lanes
+
+
+def _closed_to(chain, path: list[int], offset: int) -> list[tuple[str, str]]:
+    """The vehicle classes some edge of the chain closes the corridor's lane ``offset`` to, each with the
+    first such edge."""
     closed: dict[str, str] = {}
-    for edge in chain:
+    for edge, p in zip(chain, path):
         for vclass in VEHICLE_CLASSES:
-            if vclass not in closed and not edge.getLanes()[lane].allows(vclass):
+            if vclass not in closed and not edge.getLanes()[p + offset].allows(vclass):
                 closed[vclass] = edge.getID()
     return sorted(closed.items())
 
 
-def _even_lanes(net_file: Path, route: list[str], lanes: int) -> bool:
-    """Whether the route's lanes 0 .. lanes - 1, and the junction lanes joining them, are as long as each
-    other (within 1 mm) edge by edge: a car's odometer then reads the same distance in any of them."""
+def _even_lanes(net_file: Path, route: list[str], path: list[int], lanes: int) -> bool:
+    """Whether the corridor's lanes, and the junction lanes joining them, are as long as each other
+    (within 1 mm) edge by edge: a car's odometer then reads the same distance in any of them."""
     import sumolib
 
     net = sumolib.net.readNet(str(net_file), withInternal=True)
-    for edge_id, to_id in zip(route, [*route[1:], None]):
+    for k, (edge_id, to_id) in enumerate(zip(route, [*route[1:], None])):
         edge = net.getEdge(edge_id)
-        lengths = [edge.getLanes()[i].getLength() for i in range(lanes)]
-        if to_id is not None:  # the junction lanes from each lane to the next edge's
-            junction = [sum(net.getLane(c.getViaLaneID()).getLength() for c in edge.getLanes()[i].getOutgoing()
-                            if c.getTo().getID() == to_id and c.getToLane().getIndex() == i and c.getViaLaneID())
-                        for i in range(lanes)]
+        lengths = [edge.getLanes()[path[k] + j].getLength() for j in range(lanes)]
+        if to_id is not None:  # the junction lanes from each lane to its lane of the next edge
+            junction = [sum(net.getLane(c.getViaLaneID()).getLength() for c in edge.getLanes()[path[k] + j].getOutgoing()
+                            if c.getTo().getID() == to_id and c.getToLane().getIndex() == path[k + 1] + j and c.getViaLaneID())
+                        for j in range(lanes)]
             lengths = [a + b for a, b in zip(lengths, junction)]
         if max(lengths) - min(lengths) > 1e-3:
             return False
     return True
 
 
-def _leads_on(edge, lane: int, to) -> bool:
-    """Whether lane ``lane`` of ``edge`` connects to the lane of the same index of the next edge ``to``."""
-    return any(c.getTo() == to and c.getToLane().getIndex() == lane for c in edge.getLanes()[lane].getOutgoing())
-
-
-def _through_lanes(chain) -> int:
-    """How many lanes, from the rightmost (0) up, lead on along the whole chain with the same index.
-
-    Only these can hold a platoon (and a lane change between them): a car in a lane that ends at a
-    junction (a lane drop) stops there, which is no collision of the followers' doing."""
-    lanes = min(e.getLaneNumber() for e in chain)
-    for edge, to in zip(chain, chain[1:]):
-        lanes = next((i for i in range(lanes) if not _leads_on(edge, i, to)), lanes)
-    return lanes
-
-
 def _longest_piece(chain) -> str:
-    """The longest run of the chain's edges whose lane 0 leads on from each to the next, as a route to take."""
-    pieces = [[chain[0]]]
-    for edge, to in zip(chain, chain[1:]):
-        if _leads_on(edge, 0, to):
-            pieces[-1].append(to)
-        else:
-            pieces.append([to])
-    piece = max(pieces, key=lambda p: sum(e.getLength() for e in p))
+    """The longest run of the chain's edges along which some lane leads on, as a route to take."""
+    reach = _reach(chain)
+    best = max(range(len(chain)), key=lambda s: sum(e.getLength() for e in chain[s:max(reach[s]) + 1]))
+    piece = chain[best:max(reach[best]) + 1]
     route = ", ".join(f'"{e.getID()}"' for e in piece)
-    return (f"the longest piece whose lane 0 leads on is {len(piece)} edge{'s' if len(piece) > 1 else ''} "
+    return (f"the longest piece along which a lane leads on is {len(piece)} edge{'s' if len(piece) > 1 else ''} "
             f"({sum(e.getLength() for e in piece):.0f} m, speed limit {min(e.getSpeed() for e in piece):g} m/s): "
             f"scenario.route = [{route}]")
-
-
-def _lane_end(chain) -> str:
-    """The first edge whose lane 0 does not lead on."""
-    return next(edge.getID() for edge, to in zip(chain, chain[1:]) if not _leads_on(edge, 0, to))

@@ -44,6 +44,25 @@ class Road:
     lane_widths_m: tuple[float, ...] = (3.2,)  # SUMO's default
     #: lane index -> {vehicle class: the first edge of the route whose lane of that index it may not use}
     closed_to: tuple[tuple[tuple[str, str], ...], ...] = ()
+    #: the platoon's lane on each edge of the route, as SUMO counts them (0 the rightmost): an on-ramp adds
+    #: a lane on its right and an exit takes one away. A maneuver's lanes, and the fields above, count from
+    #: it (0 the platoon's lane, 1 the one to its left); none: lane 0 all along
+    lane_path: tuple[int, ...] = ()
+
+    @property
+    def platoon_lane(self) -> int:
+        """The platoon's lane on the route's first edge, where every car starts (SUMO's index)."""
+        return self.lane_path[0] if self.lane_path else 0
+
+    @property
+    def platoon_lanes(self) -> dict[str, int] | None:
+        """The platoon's lane on each edge of the route, by edge, where its index changes along it, else None."""
+        return dict(zip(self.route(), self.lane_path)) if self.lane_shifts else None
+
+    @property
+    def lane_shifts(self) -> bool:
+        """Whether the platoon's lane changes its index along the route."""
+        return len(set(self.lane_path)) > 1
 
     @property
     def lane_width_m(self) -> float:
@@ -70,9 +89,10 @@ def default_cache_dir() -> Path:
 
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
-               netconvert: str | None = None, route: tuple[str, ...] = ()) -> Road:
+               netconvert: str | None = None, route: tuple[str, ...] = (), lane: int | None = None) -> Road:
     """Build (or take from the cache) the network of a variant and describe its road (with a ``route``:
-    the road of those edges, which must lead on one to the next)."""
+    the road of those edges, which must lead on one to the next) as the platoon drives it from ``lane``
+    of the first edge (none: the rightmost lane that leads on through the route)."""
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     net_file = cache / f"{source.stem}-{source.digest}.net.xml"
@@ -89,19 +109,46 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
                               "never back to a junction passed before") from None
         if route and info["route_edges"] != list(route):
             raise ConfigError("scenario.route", list(route), f"edges that lead on one to the next (they drive as {info['route_edges']})")
-        _write_atomic(info_file, json.dumps(info))
+        _write_atomic(info_file, json.dumps(_with_earlier_keys(info)))
+    corridor = _corridor(info, source.name, lane)
+    path = tuple(corridor["lane_path"])
     return Road(
         name=source.name,
         net_file=net_file,
         route_edges=tuple(info["route_edges"]),
         length_m=info["length_m"],
-        speed_limit_mps=info["speed_limit_mps"],
-        lanes=info["lanes"],
+        speed_limit_mps=corridor["speed_limit_mps"],
+        lanes=corridor["lanes"],
         first_edge_m=info["first_edge_m"],
-        even_lanes=info["even_lanes"],
-        lane_widths_m=tuple(info["lane_widths_m"]),
-        closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in info["closed_to"]),
+        even_lanes=corridor["even_lanes"],
+        lane_widths_m=tuple(corridor["lane_widths_m"]),
+        closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in corridor["closed_to"]),
+        lane_path=path if any(path) else (),
     )
+
+
+def _corridor(info: dict, name: str, lane: int | None) -> dict:
+    """The platoon's corridor from ``lane`` of the first edge (none: the rightmost that leads on)."""
+    corridors = info["corridors"]
+    if lane is None:
+        return corridors[str(info["platoon_lane"])]
+    if str(lane) not in corridors:
+        through = ", ".join(corridors)
+        raise ConfigError("scenario.lane", lane, f"a lane of {name}'s first edge {info['route_edges'][0]} that leads on "
+                                                 f"through every junction of the route without a lane change: {through} "
+                                                 "(0 the rightmost)")
+    return corridors[str(lane)]
+
+
+def _with_earlier_keys(info: dict) -> dict:
+    """The description with the keys earlier d4sumo versions read (sharing this cache), where they mean
+    what those versions think: a road whose platoon drives lane 0 all along. Of any other road they find
+    none, and describe it again themselves (and refuse it)."""
+    corridor = info["corridors"][str(info["platoon_lane"])]
+    if any(corridor["lane_path"]):
+        return info
+    earlier = {key: corridor[key] for key in ("speed_limit_mps", "lanes", "even_lanes", "lane_widths_m", "closed_to")}
+    return {**info, **earlier, "lane_width_m": corridor["lane_widths_m"][0]}
 
 
 def _build(source: NetworkSource, net_file: Path, netconvert: str | None = None) -> None:
@@ -114,7 +161,7 @@ MAX_COPIES = 64
 
 
 def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None,
-               route: tuple[str, ...] = ()) -> Road:
+               route: tuple[str, ...] = (), lane: int | None = None) -> Road:
     """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
     named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
     rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
@@ -124,7 +171,7 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
-    road = build_road(source, cache_dir=cache_dir, route=route)
+    road = build_road(source, cache_dir=cache_dir, route=route, lane=lane)
     if copies == 1:
         return road
     copies = 1 << (copies - 1).bit_length()
@@ -143,7 +190,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "lane_widths_m" in info else None
+    return info if isinstance(info, dict) and "corridors" in info else None
 
 
 def _write_atomic(path: Path, text: str) -> None:

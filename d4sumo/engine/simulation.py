@@ -37,6 +37,12 @@ __all__ = ["check_road", "check_episode", "simulate", "simulate_batch", "shares_
 def check_road(config: EpisodeConfig, road: Road) -> None:
     """Refuse episodes the road cannot hold: a target speed above the limit, or a road too short."""
     check_road_lanes(config, road.name, road.lanes)
+    if config.maneuver_class.lateral and road.lane_shifts:  # the attacker's lanes are read as SUMO's indices
+        shift = next(e for e, a, b in zip(road.route_edges[1:], road.lane_path, road.lane_path[1:]) if a != b)
+        raise ConfigError("scenario.maneuver", config.maneuver,
+                          f"a road whose platoon lane keeps its index along the route (on {road.name} it is lane "
+                          f"{' then '.join(str(i) for k, i in enumerate(road.lane_path) if k == 0 or road.lane_path[k - 1] != i)}, changing at edge {shift}), "
+                          "or maneuver inlane")
     if config.maneuver_class.lateral and not road.even_lanes:  # who follows whom across lanes compares positions
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road whose lanes are as long as each other ({road.name}'s are not, on a curve or at a junction), "
@@ -95,7 +101,7 @@ def simulate(
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
     plan = checked_plan(config, attack)
-    road = road or build_road(config.network, route=config.route)
+    road = road or build_road(config.network, route=config.route, lane=config.lane)
     types_file = check_episode(config, road)
     with fcd_file(fcd_path) as part:
         with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
@@ -201,7 +207,7 @@ def shares_sumo(config: EpisodeConfig) -> bool:
 
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
-    road = road or build_road(config.network, route=config.route)
+    road = road or build_road(config.network, route=config.route, lane=config.lane)
     check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):
@@ -242,7 +248,7 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     distinct = list({id(c): c for c in configs}.values())
     batched = shares_sumo(config)
     if batched and (road is None or road.copies < len(plans) and not road.copies_unlike):
-        road = batch_road(config.network, len(plans), route=config.route)  # alone where copies differ
+        road = batch_road(config.network, len(plans), route=config.route, lane=config.lane)  # alone where copies differ
     if not batched or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:

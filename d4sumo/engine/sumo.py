@@ -196,7 +196,7 @@ def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1,
         route = f"{ROUTE_ID}{e}" if episodes > 1 else ROUTE_ID
         api.route.add(route, list(road.route(e)))
         for vid, car, type_id in zip(ids, placed[id(configs[e])], type_ids):
-            api.vehicle.add(vid, route, typeID=type_id, depart="0", departLane=str(car.lane),
+            api.vehicle.add(vid, route, typeID=type_id, depart="0", departLane=str(road.platoon_lane + car.lane),
                             departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
     api.simulationStep()  # inserts the cars: this state is t = 0
     present = set(api.vehicle.getIDList())
@@ -271,6 +271,7 @@ class _Lateral:
         self.api = api
         self.attacker = attacker
         self.width = road.lane_width_m
+        self.base = road.platoon_lane  # a maneuver counts lanes from the platoon's (it keeps its index: `check_road`)
         self.target = maneuver.target_lane()
         lanes = maneuver.start_lanes()
         self.fixed = [(lane,) for lane in lanes[1:]]  # only the attacker changes lanes
@@ -281,10 +282,10 @@ class _Lateral:
 
     def change_lane(self) -> None:
         # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds for the episode
-        self.api.vehicle.changeLane(self.attacker, self.target, 1e6)
+        self.api.vehicle.changeLane(self.attacker, self.base + self.target, 1e6)
 
     def sense(self) -> list[tuple[int, ...]]:
-        y = (self.get_lane(self.attacker) + 0.5) * self.width + self.get_lateral(self.attacker)
+        y = (self.get_lane(self.attacker) - self.base + 0.5) * self.width + self.get_lateral(self.attacker)
         self.y.append(y)
         return [occupied_lanes(y, self.width), *self.fixed]
 

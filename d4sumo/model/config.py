@@ -31,6 +31,7 @@ from .maneuvers import MANEUVERS as MANEUVER_CLASSES
 #: attack after (every system then starts from its own steady state).
 START_MODES = ("rest", "steady", "warmup")
 MAX_FOLLOWERS = 10
+MAX_LANE = 15  # the leftmost lane index scenario.lane may name
 #: inlane: the paper's attacker, leading the platoon in its lane; cutin: it changes into the platoon's lane
 #: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car (see `maneuvers`)
 MANEUVERS = tuple(MANEUVER_CLASSES)
@@ -116,6 +117,9 @@ class EpisodeConfig:
 
     network: str = "highway_4lane"  # a folder of sumo_scenarios/, or a path: a folder of node and edge files, a *.net.xml
     route: tuple[str, ...] = ()  # the edges the platoon drives (none: the network's one chain of edges)
+    #: the platoon's lane on the route's first edge (SUMO's index, 0 the rightmost); none: the rightmost
+    #: lane that leads on through every junction of the route. Its index may change along the route
+    lane: int | None = None
     followers: int = 3  # N followers behind the attacker: ids v1..vN
     setpoint_m: float = 7.0  # bumper-to-bumper distance d the ACC keeps
     speed_mps: float = 25.0  # target speed v_d of every car
@@ -156,6 +160,8 @@ class EpisodeConfig:
         if not isinstance(self.route, (list, tuple)) or not all(isinstance(e, str) and e for e in self.route):
             raise ConfigError("scenario.route", self.route, "a list of edge ids, e.g. [\"e1\", \"e2\"]")
         fix("route", tuple(self.route))
+        if self.lane is not None:
+            fix("lane", check_int("scenario.lane", self.lane, 0, MAX_LANE, "(a lane of the route's first edge, 0 the rightmost)"))
         fix("followers", check_int("scenario.followers", self.followers, 1, MAX_FOLLOWERS))
         fix("setpoint_m", check_number("scenario.setpoint_m", self.setpoint_m, 0.0, 200.0, "metres", low_open=True))
         fix("speed_mps", check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True))
@@ -334,6 +340,8 @@ class EpisodeConfig:
                 del scenario[key]
         if "route" in scenario:
             scenario["route"] = list(scenario["route"])
+        if scenario["lane"] is None:  # the road's own choice: earlier campaigns keep their identity
+            del scenario["lane"]
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         vehicle = self.vehicle.to_dict()

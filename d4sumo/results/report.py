@@ -48,7 +48,7 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
     simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd_path)
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
-    return timespace.read_fcd(fcd_path)
+    return timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
 
 
 def collision_of(record: Record) -> dict | None:
@@ -60,6 +60,7 @@ def describe(record: Record) -> str:
     scenario = dict(record.scenario)
     where = (f"{record.network}, " if record.network != "highway_4lane" else "") + (
         f"route [{' '.join(scenario['route'])}], " if scenario.get("route") else "") + (
+        f"lane {scenario['lane']}, " if scenario.get("lane") is not None else "") + (
         f"{record.followers} followers, " if record.followers != 3 else "") + (
         f"duration {scenario['duration_s']:g} s, " if scenario.get("duration_s", 60.0) != 60.0 else "")
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start

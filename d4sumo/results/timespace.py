@@ -5,16 +5,17 @@ along the route."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_path, wrap_title
 
 
-def read_fcd(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
+def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -> dict[str, dict[str, np.ndarray]]:
     """SUMO FCD as {vehicle id: {time, pos, speed, acceleration, lane}}; ``pos`` is the position along
-    the route, ``lane`` the lane the car drives in.
+    the route, ``lane`` the lane the car drives in. ``platoon_lanes``: the platoon's lane on each edge
+    where its index changes along the route (`Road.platoon_lanes`); lanes are then counted from it.
 
     parse_fast_nested matches attributes in the order SUMO writes them (id x y angle type speed pos
     lane slope acceleration odometer); an FCD without lanes reads as all in one lane "". On a route of
@@ -46,18 +47,20 @@ def read_fcd(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
         if many_edges:
             odometer = np.array(odometer)
             pos = pos[0] - odometer[0] + odometer  # every car starts on the route's first edge
-            lane = _lane_indices(lane)
+            lane = _lane_indices(lane, platoon_lanes or {})
         out[vid] = {"time": np.array(time), "pos": pos, "speed": np.array(speed),
                     "acceleration": np.array(accel), "lane": np.array(lane, dtype=str)}
     return out
 
 
-def _lane_indices(lane_ids: Sequence[str]) -> list[str]:
-    """Lane ids as their index across the road; a junction's internal lane as the lane before it."""
+def _lane_indices(lane_ids: Sequence[str], platoon_lanes: Mapping[str, int]) -> list[str]:
+    """Lane ids as their index across the road, counted from the platoon's lane on each edge (an on-ramp
+    shifts the indices, not the lane the platoon drives); a junction's internal lane as the lane before it."""
     out, last = [], ""
     for lane in lane_ids:
         if not lane.startswith(":"):
-            last = lane.rpartition("_")[2]
+            edge, _, index = lane.rpartition("_")
+            last = str(int(index) - platoon_lanes.get(edge, 0)) if index.isdigit() else index
         out.append(last)
     return out
 

@@ -35,7 +35,7 @@ class Evaluator:
         self.spec = campaign.specification()
         config = campaign.config  # what batches' roads are built from: the network, or its route's edges alone
         self.network = network or (network_source(config.network, route=config.route) if config.route else config.network)
-        self.road = road or build_road(self.network)
+        self.road = road or build_road(self.network, lane=config.lane)
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
@@ -65,7 +65,7 @@ class Evaluator:
     def batch_road(self, episodes: int) -> Road:
         """The road with at least this many copies side by side (built once, then grown as needed)."""
         if self._batch_road is None or self._batch_road.copies < episodes and not self._batch_road.copies_unlike:
-            self._batch_road = batch_road(self.network, episodes)
+            self._batch_road = batch_road(self.network, episodes, lane=self.campaign.config.lane)
         return self._batch_road
 
     def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:

@@ -122,9 +122,9 @@ class Sweep:
         """Build every road and check every campaign fits it, and every formula parses: before running."""
         roads = {}
         for c in self.campaigns:
-            key = c.config.network, c.config.route
+            key = c.config.network, c.config.route, c.config.lane
             if key not in roads:
-                roads[key] = build_road(c.config.network, route=c.config.route)
+                roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane)
             check_episode(c.config, roads[key])
         seen = set()
         for c in self.campaigns:

@@ -55,7 +55,7 @@ def _evaluator(chunk: Chunk | Play) -> Evaluator:
     if evaluator is None:
         if len(_EVALUATORS) >= 8 * GANG_SIZE:
             _EVALUATORS.clear()
-        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network), network=chunk.network)
+        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network, lane=chunk.campaign.config.lane), network=chunk.network)
     return evaluator
 
 

@@ -62,20 +62,41 @@ def _road_folder(folder, edges: str, nodes: str = '<node id="a" x="0" y="0"/><no
 
 def test_a_road_of_several_edges_counts_only_the_lanes_that_lead_on_through_every_junction(tmp_path):
     """A lane that ends at a junction would stop the cars in it: a lane drop on the left leaves three
-    lanes for maneuvers, one on the right (the platoon's lane 0) is refused."""
+    lanes for maneuvers; one on the right moves the platoon to the lane that leads on (issue 37)."""
     left = _road_folder(tmp_path / "left", '<edge id="e" from="a" to="c" numLanes="4" speed="40">'
                                            '<split pos="2000" lanes="0 1 2"/></edge>', '<node id="a" x="0" y="0"/><node id="c" x="5000" y="0"/>')
     road = build_road(str(left), cache_dir=tmp_path / "cache")
     assert (road.route_edges, road.lanes, road.first_edge_m) == (("e", "e.2000"), 3, pytest.approx(2000.0, abs=5))
     right = _road_folder(tmp_path / "right", '<edge id="e1" from="a" to="b" numLanes="2" speed="40"/>'
                                              '<edge id="e2" from="b" to="c" numLanes="1" speed="40"/>')
-    with pytest.raises(ConfigError, match="rightmost lane .* leads on through every junction; lane 0 of e1 ends there"):
-        build_road(str(right), cache_dir=tmp_path / "cache")
-    # issue 37: the refusal names the longest piece that does lead on, as a route to take
-    with pytest.raises(ConfigError, match=r'the longest piece whose lane 0 leads on is 1 edge \(29\d\d m, speed limit 40 m/s\): '
-                                          r'scenario.route = \["e2"\]'):
-        build_road(str(right), cache_dir=tmp_path / "cache")
-    assert build_road(str(right), route=("e2",), cache_dir=tmp_path / "cache").route_edges == ("e2",)
+    road = build_road(str(right), cache_dir=tmp_path / "cache")
+    assert (road.lane_path, road.platoon_lane, road.lanes) == ((1, 0), 1, 1)
+
+
+@pytest.mark.sumo
+def test_a_road_on_which_no_lane_leads_on_is_refused_naming_the_longest_piece_that_does(tmp_path):
+    """Lane 0 of e1 joins the lane of e2 that ends at the next junction: no car gets through without a
+    lane change. The refusal names the furthest lane and the route to take instead."""
+    import subprocess
+
+    from d4sumo.sumohome import sumo_binary
+
+    (tmp_path / "r.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="1000" y="0"/>'
+                                        '<node id="c" x="2000" y="0"/><node id="d" x="4000" y="0"/></nodes>')
+    (tmp_path / "r.edg.xml").write_text('<edges><edge id="e1" from="a" to="b" numLanes="1" speed="40"/>'
+                                        '<edge id="e2" from="b" to="c" numLanes="2" speed="40"/>'
+                                        '<edge id="e3" from="c" to="d" numLanes="1" speed="40"/></edges>')
+    (tmp_path / "r.con.xml").write_text('<connections><connection from="e1" to="e2" fromLane="0" toLane="0"/>'
+                                        '<connection from="e2" to="e3" fromLane="1" toLane="0"/></connections>')
+    net = tmp_path / "r.net.xml"
+    subprocess.run([sumo_binary("netconvert"), "-n", str(tmp_path / "r.nod.xml"), "-e", str(tmp_path / "r.edg.xml"),
+                    "-x", str(tmp_path / "r.con.xml"), "-o", str(net)], check=True, capture_output=True)
+    with pytest.raises(ConfigError, match=r"scenario.network: got .*; allowed: a road with a lane that leads on through every "
+                                          r"junction \(none of e1's does: the furthest, lane 0, ends on e2 as lane 0\); the "
+                                          r"longest piece along which a lane leads on is 2 edges \(29\d\d m, speed limit 40 m/s\): "
+                                          r'scenario.route = \["e2", "e3"\]'):
+        build_road(str(net), cache_dir=tmp_path / "cache")
+    assert build_road(str(net), route=("e2", "e3"), cache_dir=tmp_path / "cache").lane_path == (1, 0)
 
 
 @pytest.mark.sumo
@@ -156,8 +177,9 @@ def test_a_route_through_a_network_of_many_ways_is_the_road_alone_and_batches_co
     # regression: a route round a block, and one whose turn leaves lane 0, were said not to lead on
     with pytest.raises(ConfigError, match="scenario.route: got .*; allowed: edges that lead on one to the next, never back to a junction"):
         build_road(str(grid), route=("A0B0", "B0B1", "B1A1", "A1A0"), cache_dir=tmp_path / "cache")
-    with pytest.raises(ConfigError, match="scenario.network: got .*lane 0 of A0B0 ends there"):
-        build_road(str(grid), route=("A0B0", "B0B1"), cache_dir=tmp_path / "cache")
+    # a left turn: the platoon drives the lane that turns (issue 37: it was refused, lane 0 turning right only)
+    turning = build_road(str(grid), route=("A0B0", "B0B1"), cache_dir=tmp_path / "cache")
+    assert turning.platoon_lane == 1 and turning.lanes == 1
 
 
 @pytest.mark.sumo

@@ -1,0 +1,151 @@
+"""The platoon's lane along the route: where an on-ramp adds a lane on its right, or an exit or a lane
+drop takes one away, its index changes as SUMO's connections say (`layout.lane_path`), and SUMO's cars
+drive exactly that way (their FCD lanes), on roads of our own and on SUMO's own Bremen motorway."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import assert_same_episode, random_plans
+from sumolib.xml import parse_fast_nested
+
+from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.simulation import simulate, simulate_batch
+from d4sumo.errors import ConfigError
+from d4sumo.model.config import EpisodeConfig
+from d4sumo.sumohome import sumo_home
+
+pytestmark = pytest.mark.sumo
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "roads"
+#: SUMO's own Bremen motorway (shipped in the eclipse-sumo wheel), its main route: an on-ramp joins on
+#: the right at E0, whose lane 0 (the acceleration lane) then ends
+BREMEN = Path(sumo_home()) / "tools" / "game" / "highway" / "highway.net.xml"
+BREMEN_ROUTE = ("145354574", "189597495", "E0", "191842213")
+NODES = ('<node id="a" x="0" y="0"/><node id="b" x="1000" y="0"/><node id="c" x="2000" y="0"/>'
+         '<node id="d" x="4000" y="0"/>')
+
+
+def _road_folder(folder: Path, lanes: tuple[int, ...]) -> Path:
+    """A straight road of three edges with these numbers of lanes, joined as netconvert guesses."""
+    folder.mkdir()
+    (folder / "road.nod.xml").write_text(f"<nodes>{NODES}</nodes>")
+    edges = "".join(f'<edge id="e{i}" from="{a}" to="{b}" numLanes="{n}" speed="40"/>'
+                    for i, (a, b, n) in enumerate(zip("abc", "bcd", lanes), start=1))
+    (folder / "road.edg.xml").write_text(f"<edges>{edges}</edges>")
+    return folder
+
+
+def fcd_lanes(path: Path) -> dict[str, list[str]]:
+    """Each car's lanes in the order it drove them, junction lanes left out."""
+    seen: dict[str, list[str]] = {}
+    for _, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "lane"]):
+        lanes = seen.setdefault(v.id, [])
+        if not v.lane.startswith(":") and (not lanes or lanes[-1] != v.lane):
+            lanes.append(v.lane)
+    return seen
+
+
+def assert_drives_the_lane_path(fcd: Path, road, offsets: dict[str, int] | None = None) -> None:
+    """Every car drives the road's lane path (plus its maneuver lane, ``offsets``) edge by edge, as far as it got."""
+    path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+    expected = [f"{edge}_{lane}" for edge, lane in zip(road.route_edges, path)]
+    lanes = fcd_lanes(fcd)
+    assert lanes
+    for vid, driven in lanes.items():
+        offset = (offsets or {}).get(vid, 0)
+        assert driven == [f"{e}_{int(i) + offset}" for e, _, i in (x.rpartition("_") for x in expected[:len(driven)])], vid
+    assert max(len(d) for d in lanes.values()) > 1  # the front car got past a junction
+
+
+@pytest.mark.parametrize("lanes, lane, path", [
+    ((1, 2, 1), None, (0, 1, 0)),         # a lane added on the right, then dropped on the right
+    ((2, 4, 2), None, (0, 2, 0)),         # one lane joins three: the one that leads on is taken
+    ((2, 4, 2), 1, (1, 3, 1)),
+    ((2, 4, 4), 1, (1, 1, 1)),            # alike lanes lead on: the rightmost, as SUMO takes it
+    ((2, 1, 1), None, (1, 0, 0)),         # the rightmost lane ends at the first junction
+])
+def test_sumos_cars_drive_the_lane_path_where_lanes_are_added_and_dropped(tmp_path, lanes, lane, path):
+    road_dir = _road_folder(tmp_path / "road", lanes)
+    road = build_road(str(road_dir), cache_dir=tmp_path / "cache", lane=lane)
+    assert (road.lane_path or (road.platoon_lane,) * 3) == path
+    config = EpisodeConfig(network=str(road_dir), lane=lane, speed_mps=35.0, start="steady", duration_s=85.0, followers=2)
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, np.full(config.steps, np.nan), road=road, fcd_path=fcd)
+    assert episode.outcome == "no_crash" and episode.trace["pos_v0"][-1] > 2100.0  # past both junctions
+    assert_drives_the_lane_path(fcd, road)
+
+
+def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path):
+    """Issue 37: every motorway tried was refused at its first ramp. The Bremen motorway's main route
+    (1.9 km) now plays: the platoon is in lane 0, then 1 where the ramp's lane joins, then 0; batches
+    equal episodes alone; and a lane change there is refused in one line."""
+    road = build_road(str(BREMEN), route=BREMEN_ROUTE, cache_dir=tmp_path / "cache")
+    assert road.lane_path == (0, 0, 1, 0) and road.lanes == 3 and 1850 < road.length_m < 1870
+    config = EpisodeConfig(network=str(BREMEN), route=BREMEN_ROUTE, speed_mps=30.0, start="steady", duration_s=40.0,
+                           followers=3)
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, np.full(config.steps, np.nan), road=road, fcd_path=fcd)
+    assert episode.outcome == "no_crash" and episode.trace["pos_v3"][-1] > 1100.0  # the last car is past the ramp
+    assert_drives_the_lane_path(fcd, road)
+    assert min(episode.min_gaps_m().values()) == pytest.approx(config.setpoint_m, abs=1e-6)  # nothing slowed them
+    plans = random_plans(config, 4, seed=3)
+    for batched, plan in zip(simulate_batch(config, plans), plans):
+        assert_same_episode(batched, simulate(config, plan, road=road))
+    with pytest.raises(ConfigError, match=r"scenario.maneuver: got 'cutin'; allowed: a road whose platoon lane keeps its "
+                                          r"index along the route \(on .* it is lane 0 then 1 then 0, changing at edge E0\)"):
+        simulate(dataclasses.replace(config, maneuver="cutin"), np.full(config.steps, np.nan), road=road)
+
+
+def test_a_lane_the_user_names_plays_as_lane_0_does_on_a_road_of_even_lanes(tmp_path, road):
+    """scenario.lane puts the platoon (and a maneuver's lanes, counted from it) in another lane: on lanes
+    alike, every signal is the one lane 0 gives, bit for bit."""
+    for base in (EpisodeConfig(duration_s=20.0), EpisodeConfig(maneuver="cutin", duration_s=20.0, cutin_follower=2)):
+        plan = random_plans(base, 1, seed=5)[0]
+        moved = dataclasses.replace(base, lane=1)
+        fcd = tmp_path / "fcd.xml"
+        there = simulate(moved, plan, fcd_path=fcd)
+        assert_same_episode(there, simulate(base, plan, road=road))
+        lanes = fcd_lanes(fcd)
+        assert lanes["v1"] == ["highway_1"] and lanes["v0"][0] == ("highway_2" if base.maneuver == "cutin" else "highway_1")
+    assert moved.to_dict()["scenario"]["lane"] == 1 and "lane" not in base.to_dict()["scenario"]
+
+
+def test_a_lane_that_does_not_lead_on_is_refused_naming_those_that_do(tmp_path):
+    road_dir = _road_folder(tmp_path / "road", (2, 1, 1))
+    with pytest.raises(ConfigError, match=r"scenario.lane: got 0; allowed: a lane of .*'s first edge e1 that leads on through "
+                                          r"every junction of the route without a lane change: 1 \(0 the rightmost\)"):
+        build_road(str(road_dir), cache_dir=tmp_path / "cache", lane=0)
+    for bad in (-1, 16, 1.5, "1"):
+        with pytest.raises(ConfigError, match="scenario.lane: got"):
+            EpisodeConfig(lane=bad)
+
+
+def test_earlier_versions_sharing_the_cache_find_only_roads_they_drive_as_this_one_does(tmp_path):
+    """Their description's keys are written only where the platoon drives lane 0 all along: of any other
+    road an earlier d4sumo finds no description and describes (and refuses) it itself."""
+    cache = tmp_path / "cache"
+    straight = build_road("highway_4lane", cache_dir=cache)
+    shifted = build_road(str(_road_folder(tmp_path / "road", (1, 2, 1))), cache_dir=cache)
+    straight_info = json.loads(straight.net_file.with_suffix(".json").read_text())
+    shifted_info = json.loads(shifted.net_file.with_suffix(".json").read_text())
+    assert straight_info["lanes"] == 4 and straight_info["lane_widths_m"] == [3.2] and "lane_width_m" in straight_info
+    assert "lane_widths_m" not in shifted_info and "corridors" in shifted_info
+
+
+def test_the_example_acceleration_lane_shifts_the_platoons_lane_and_the_time_space_diagram_keeps_one_panel(tmp_path):
+    from d4sumo.results import timespace
+
+    road = build_road(str(EXAMPLES / "acceleration_lane"), cache_dir=tmp_path / "cache")
+    assert road.lane_path == (0, 1, 0) and road.lanes == 3
+    config = EpisodeConfig(network=str(EXAMPLES / "acceleration_lane"), speed_mps=30.0, start="steady", duration_s=90.0)
+    fcd = tmp_path / "fcd.xml"
+    simulate(config, np.full(config.steps, np.nan), road=road, fcd_path=fcd)
+    assert_drives_the_lane_path(fcd, road)
+    read = timespace.read_fcd(fcd, road.platoon_lanes)
+    assert timespace.lanes(read) == ["0"]  # counted from the platoon's lane: one lane, one panel
+    assert len(timespace.lanes(timespace.read_fcd(fcd))) == 2  # SUMO's indices: 0 and 1
