@@ -26,6 +26,10 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "roads"
 #: the right at E0, whose lane 0 (the acceleration lane) then ends
 BREMEN = Path(sumo_home()) / "tools" / "game" / "highway" / "highway.net.xml"
 BREMEN_ROUTE = ("145354574", "189597495", "E0", "191842213")
+#: SUMO's OSM import of the Berlin A10 motorway interchange (tools/game/A10KW), a 2.7 km motorway route
+#: past two on-ramps, each with its acceleration lane
+A10 = Path(sumo_home()) / "tools" / "game" / "A10KW" / "osm.net.xml"
+A10_ROUTE = ("264306385", "264308375", "264308383", "4054057", "264308376")
 NODES = ('<node id="a" x="0" y="0"/><node id="b" x="1000" y="0"/><node id="c" x="2000" y="0"/>'
          '<node id="d" x="4000" y="0"/>')
 
@@ -99,6 +103,16 @@ def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path
     with pytest.raises(ConfigError, match=r"scenario.maneuver: got 'cutin'; allowed: a road whose platoon lane keeps its "
                                           r"index along the route \(on .* it is lane 0 then 1 then 0, changing at edge E0\)"):
         simulate(dataclasses.replace(config, maneuver="cutin"), np.full(config.steps, np.nan), road=road)
+
+
+def test_sumos_osm_motorway_interchange_plays_a_route_past_two_on_ramps(tmp_path):
+    road = build_road(str(A10), route=A10_ROUTE, cache_dir=tmp_path / "cache")
+    assert road.lane_path == (0, 1, 0, 1, 0) and road.lanes == 3 and road.length_m > 2700
+    config = EpisodeConfig(network=str(A10), route=A10_ROUTE, speed_mps=25.0, start="steady", duration_s=80.0, followers=3)
+    fcd = tmp_path / "fcd.xml"
+    episode = simulate(config, np.full(config.steps, np.nan), road=road, fcd_path=fcd)
+    assert episode.outcome == "no_crash" and episode.trace["pos_v3"][-1] > 2000.0  # the last car is past both ramps
+    assert_drives_the_lane_path(fcd, road)
 
 
 def test_a_lane_the_user_names_plays_as_lane_0_does_on_a_road_of_even_lanes(tmp_path, road):
