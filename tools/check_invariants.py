@@ -5,8 +5,8 @@ speed change, a lane drop, a curve, an acceleration lane, a route through netgen
 Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
-SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in or a cut-out with a random
-target follower, offset, obstacle and lane change duration), each scored and stored exactly as a
+SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in, a cut-out or a swerving
+attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
 campaign stores a sample, and counts the samples where any of these disagree:
 
 - outcome and collision record: no collision <=> no_crash; a collision involving v0 <=> attacker_crash;
@@ -180,7 +180,10 @@ def _as_run_episode(rng: np.random.Generator, setpoint: float, followers: int) -
 
 
 def lane_change(rng: np.random.Generator, followers: int) -> dict:
-    """The settings of a random cut-in or cut-out."""
+    """The settings of a random cut-in, cut-out or swerving attacker."""
+    if rng.random() < 1 / 3:
+        return dict(maneuver="swerve", swerve_knots=int(rng.integers(1, 9)), swerve_lanes=int(rng.integers(2, 4)),
+                    lane_change_s=float(rng.choice([0.0, 1.0, 2.0])))
     if rng.random() < 0.5:
         return dict(maneuver="cutin", cutin_follower=int(rng.integers(1, followers + 1)),
                     cutin_offset_m=float(rng.uniform(-10, 15)), lane_change_s=float(rng.choice([0.0, 1.0, 2.0, 3.5])))

@@ -91,7 +91,8 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         delta = flags.get("attack.delta_s", doc.get("attack", {}).get("delta_s", 6.0))
         name = flags.get("scenario.maneuver", doc.get("scenario", {}).get("maneuver", "inlane"))
         maneuver = MANEUVERS.get(name) if isinstance(name, str) else None  # a bad one is refused with the document
-        count = len(flags["attack.params"]) - (1 if maneuver is not None and maneuver.lateral else 0)  # then t_lc_s
+        scenario = {**doc.get("scenario", {}), **{k.removeprefix("scenario."): v for k, v in flags.items() if k.startswith("scenario.")}}
+        count = len(flags["attack.params"]) - (maneuver.added_parameters(scenario) if maneuver is not None else 0)  # then t_lc_s, lanes
         if isinstance(delta, (int, float)):
             flags["attack.horizon_s"] = delta * (count - 1) or delta
     return with_overrides(doc, flags), flags

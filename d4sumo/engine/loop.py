@@ -60,10 +60,12 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     max_speed = world.attacker_max_speed_mps
     results: list = [None] * m
     recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
-    changes: dict[int, list[int]] = {}
+    changes: dict[int, list[tuple[int, int]]] = {}  # step -> (episode, the lane its attacker changes to)
     for e, plan in enumerate(plans):
         if plan.lane_change_step is not None:
-            changes.setdefault(plan.lane_change_step, []).append(e)
+            changes.setdefault(plan.lane_change_step, []).append((e, maneuver.target_lane()))
+        for k, lane in plan.lane_changes:
+            changes.setdefault(k, []).append((e, lane))
     live = set(range(m))
     solo: list[_Alone] = []  # the episodes commanded one at a time
 
@@ -143,9 +145,9 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     for k in range(steps):
         if arrayed and (len(arrayed) <= detach_at or k == detach_at_step):
             detach(k)
-        for e in changes.get(k, ()):
+        for e, lane in changes.get(k, ()):
             if e in live:
-                world.change_lane(e)
+                world.change_lane(e, lane)
         if arrayed:
             speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
             for e in sorted(batch.failed.keys() & set(arrayed)):  # a user's controller failed: it ends with its error

@@ -54,7 +54,7 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
                           "or maneuver inlane")
     own = dict(config.vehicles)
     for vid, v in zip(config.vehicle_ids, config.car_vehicles):
-        for lane in range(config.maneuver_class.lanes_needed):
+        for lane in range(config.maneuver_class.lanes_for(config)):
             edge = road.closed(lane, v.vclass)
             if edge is not None:
                 raise ConfigError(f"vehicle.{vid}.vclass" if "vclass" in dict(own.get(vid, ())) else "vehicle.vclass", v.vclass,

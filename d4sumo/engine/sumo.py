@@ -272,7 +272,6 @@ class _Lateral:
         self.attacker = attacker
         self.width = road.lane_width_m
         self.base = road.platoon_lane  # a maneuver counts lanes from the platoon's (it keeps its index: `check_road`)
-        self.target = maneuver.target_lane()
         lanes = maneuver.start_lanes()
         self.fixed = [(lane,) for lane in lanes[1:]]  # only the attacker changes lanes
         self.fixed_y = [(lane + 0.5) * self.width for lane in lanes[1:]]
@@ -280,9 +279,9 @@ class _Lateral:
         self.get_lane = api.vehicle.getLaneIndex
         self.get_lateral = api.vehicle.getLateralLanePosition
 
-    def change_lane(self) -> None:
-        # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds for the episode
-        self.api.vehicle.changeLane(self.attacker, self.base + self.target, 1e6)
+    def change_lane(self, lane: int) -> None:
+        # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds until the next
+        self.api.vehicle.changeLane(self.attacker, self.base + lane, 1e6)
 
     def sense(self) -> list[tuple[int, ...]]:
         y = (self.get_lane(self.attacker) - self.base + 0.5) * self.width + self.get_lateral(self.attacker)
@@ -312,8 +311,9 @@ class SumoWorld:
         """The lanes each car of episode ``e`` covers now (lane-changing maneuvers)."""
         return self.laterals[e].sense()
 
-    def change_lane(self, e: int) -> None:
-        self.laterals[e].change_lane()
+    def change_lane(self, e: int, lane: int) -> None:
+        """The attacker of episode ``e`` begins its change to ``lane`` (counted from the platoon's)."""
+        self.laterals[e].change_lane(lane)
 
     def lateral_rows(self, e: int) -> np.ndarray | None:
         """Each car's lateral position at every sample of episode ``e`` (lane-changing maneuvers), else None."""

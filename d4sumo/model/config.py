@@ -23,7 +23,7 @@ from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
 from .plugins import ControllerImportError, NotImported, build_params
 from .vehicle import VehicleParams
-from .maneuvers import MANEUVERS as MANEUVER_CLASSES
+from .maneuvers import MANEUVERS as MANEUVER_CLASSES, SWERVE_KNOTS, SWERVE_LANES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
 #: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);
@@ -33,7 +33,8 @@ START_MODES = ("rest", "steady", "warmup")
 MAX_FOLLOWERS = 10
 MAX_LANE = 15  # the leftmost lane index scenario.lane may name
 #: inlane: the paper's attacker, leading the platoon in its lane; cutin: it changes into the platoon's lane
-#: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car (see `maneuvers`)
+#: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car; swerve: it leads,
+#: its lane over time searched with its pedals (see `maneuvers`)
 MANEUVERS = tuple(MANEUVER_CLASSES)
 
 
@@ -142,6 +143,8 @@ class EpisodeConfig:
     lane_change_s: float = 2.0  # cutin/cutout: how long SUMO takes to move the attacker across (0: in one step)
     obstacle_distance_m: float = 150.0  # cutout: bumper gap from the attacker to the car ahead of it at t = 0
     obstacle_speed_mps: float = 0.0  # cutout: the constant speed of that car (0: stopped)
+    swerve_knots: int = SWERVE_KNOTS  # swerve: how many times over the attack its lane is a parameter
+    swerve_lanes: int = SWERVE_LANES  # swerve: the lanes it may use, the platoon's and those to its left
     #: the attacker cruises (before its attack and between windows) at the target speed plus this; the
     #: authors' parametric scenarios: -5 m/s
     attacker_cruise_offset_mps: float = 0.0
@@ -204,6 +207,8 @@ class EpisodeConfig:
         # SUMO rounds it to whole steps, silently; only a maneuver that changes lanes reads it
         if MANEUVER_CLASSES[self.maneuver].lateral and not _on_grid(self.lane_change_s, self.step_s):
             raise ConfigError("scenario.lane_change_s", self.lane_change_s, f"a whole number of steps of {self.step_s:g} s")
+        fix("swerve_knots", check_int("scenario.swerve_knots", self.swerve_knots, 1, 50))
+        fix("swerve_lanes", check_int("scenario.swerve_lanes", self.swerve_lanes, 2, 6, "(the platoon's lane and those to its left)"))
         fix("obstacle_distance_m", check_number("scenario.obstacle_distance_m", self.obstacle_distance_m, 0.0, 5000.0,
                                                 "metres", low_open=True))
         fix("obstacle_speed_mps", check_number("scenario.obstacle_speed_mps", self.obstacle_speed_mps, 0.0, self.speed_mps,

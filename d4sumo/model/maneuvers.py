@@ -8,9 +8,13 @@
     cutout  the attacker leads the platoon in lane 0 with a slower or stopped car `obstacle` ahead
             (scenario.obstacle_distance_m, obstacle_speed_mps); at t_lc_s it changes to lane 1, revealing
             the obstacle to v1.
+    swerve  the attacker leads the platoon in lane 0 and swerves: the lane it is in (0 .. scenario.swerve_lanes
+            - 1) from each of scenario.swerve_knots times spread over the attack is searched with its pedals,
+            so it may drop back beside a follower and cut in ahead of it, leave and come back.
 
-Lanes are numbered from the right (0). The optimiser picks t_lc_s (seconds from the attack's start), a
-parameter the maneuver adds to the attack family's box; SUMO performs the lane change.
+Lanes are numbered from the platoon's (0; a lane to its left is 1). The optimiser picks t_lc_s (seconds
+from the attack's start), or a swerving attacker's lanes, parameters the maneuver adds to the attack
+family's box; SUMO performs each lane change.
 
 A maneuver says, at each step, which cars follow which: the *pairs* (leader, follower, bumper gap) of
 cars next to each other in a lane. A car changing lanes occupies both lanes from the moment its body
@@ -81,6 +85,10 @@ class EpisodeSettings(Protocol):
     def obstacle_distance_m(self) -> float: ...
     @property
     def obstacle_speed_mps(self) -> float: ...
+    @property
+    def swerve_knots(self) -> int: ...
+    @property
+    def swerve_lanes(self) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -142,6 +150,16 @@ class Maneuver:
     def check(cls, config: EpisodeSettings) -> None:
         """Refuse settings this maneuver cannot play (each value's own range is checked by the config)."""
 
+    @classmethod
+    def lanes_for(cls, config: EpisodeSettings) -> int:
+        """How many lanes, from the platoon's up, the maneuver drives."""
+        return cls.lanes_needed
+
+    @classmethod
+    def added_parameters(cls, scenario: dict) -> int:
+        """How many parameters the maneuver adds after the signal family's, for a [scenario] table."""
+        return 0
+
     def cars(self) -> list[Car]:
         """Every car at t = 0, in the order of ``config.vehicle_ids``."""
         positions, speeds = initial_state(self.config)
@@ -173,6 +191,10 @@ class LaneChange(Maneuver):
 
     def family(self, longitudinal: AttackFamily) -> AttackFamily:
         return LaneChangeAttack(longitudinal, self.config.duration_s)
+
+    @classmethod
+    def added_parameters(cls, scenario: dict) -> int:
+        return 1  # t_lc_s
 
     def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
         if lanes is None:
@@ -240,8 +262,43 @@ class CutOut(LaneChange):
         return 1
 
 
+class Swerve(LaneChange):
+    """The attacker leads the platoon in its lane, as in the paper's maneuver, and swerves: the lane it is
+    in from each of ``swerve_knots`` times spread evenly over the attack (the first at its start) is a
+    parameter, searched with its pedals, among the platoon's lane (0) and the ``swerve_lanes`` - 1 to its
+    left. It may drop back beside a follower and cut in ahead of it, leave the lane and come back."""
+
+    name = "swerve"
+    settings = (*LaneChange.settings, "swerve_knots", "swerve_lanes")
+
+    @classmethod
+    def check(cls, config: EpisodeSettings) -> None:
+        if config.duration_s / config.swerve_knots < config.step_s:
+            raise ConfigError("scenario.swerve_knots", config.swerve_knots,
+                              f"at most {int(config.duration_s / config.step_s)}: one lane knot a step of the "
+                              f"{config.duration_s:g} s attack")
+
+    @classmethod
+    def lanes_for(cls, config: EpisodeSettings) -> int:
+        return config.swerve_lanes
+
+    @classmethod
+    def added_parameters(cls, scenario: dict) -> int:
+        knots = scenario.get("swerve_knots", SWERVE_KNOTS)
+        return knots if isinstance(knots, int) else 0  # a bad one is refused with the configuration
+
+    def family(self, longitudinal: AttackFamily) -> AttackFamily:
+        return SwerveAttack(longitudinal, self.config.duration_s, self.config.swerve_knots, self.config.swerve_lanes)
+
+    def target_lane(self) -> None:  # its lanes are the attack's: `AttackPlan.lane_changes`
+        return None
+
+
 #: every maneuver by name: a new kind of attacker is a new class here
-MANEUVERS: dict[str, type[Maneuver]] = {m.name: m for m in (Maneuver, CutIn, CutOut)}
+MANEUVERS: dict[str, type[Maneuver]] = {m.name: m for m in (Maneuver, CutIn, CutOut, Swerve)}
+#: a swerving attacker's lane knots, and the lanes it may use, unless the scenario says
+SWERVE_KNOTS = 6
+SWERVE_LANES = 2
 
 
 def maneuver_of(config: EpisodeSettings) -> Maneuver:
@@ -281,13 +338,56 @@ class LaneChangeAttack(AttackFamily):
         return d
 
 
+class SwerveAttack(AttackFamily):
+    """A longitudinal attack family plus a swerving attacker's lanes: ``lane_1`` .. ``lane_K``, the lane it
+    is in from each of K times spread evenly over the attack window on (``lane_j`` from (j - 1) x window / K
+    s), each a number in [0, lanes] read as its whole part (``lanes`` reads as the leftmost, lanes - 1).
+    Its name and options stay the longitudinal family's."""
+
+    def __init__(self, longitudinal: AttackFamily, window_s: float, knots: int, lanes: int):
+        self.longitudinal = longitudinal
+        self.name = longitudinal.name
+        self.options = longitudinal.options
+        self.knots, self.lanes = knots, lanes
+        self.knot_times_s = [j * float(window_s) / knots for j in range(knots)]
+        self.parameters = (*longitudinal.parameters,
+                           *(Parameter(f"lane_{j}", 0.0, float(lanes), "lane") for j in range(1, knots + 1)))
+        self._first_lane = len(longitudinal.parameters)
+
+    @property
+    def signals(self) -> tuple[int, ...]:  # the lanes over time: one signal after the longitudinal ones
+        return (*self.longitudinal.signals, self.knots)
+
+    def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return self.longitudinal._signal(x[:self._first_lane], t)
+
+    def lane_schedule(self, params) -> list[tuple[float, int]]:
+        """The attacker's lane changes: (seconds from the attack's start, the lane it changes to), one where
+        a knot's lane differs from the one before (the platoon's lane, 0, before the first)."""
+        x = self.check(params)
+        changes, lane = [], 0
+        for t_s, value in zip(self.knot_times_s, x[self._first_lane:]):
+            wanted = min(int(math.floor(value)), self.lanes - 1)
+            if wanted != lane:
+                changes.append((t_s, wanted))
+                lane = wanted
+        return changes
+
+    def describe(self) -> dict:
+        d = self.longitudinal.describe()
+        d["parameters"] = [p.__dict__ for p in self.parameters]
+        return d
+
+
 @dataclass(frozen=True)
 class AttackPlan:
-    """What the attacker does in an episode: its command at each step's start (NaN: it cruises) and
-    the step at whose start it begins its lane change (None: it keeps its lane)."""
+    """What the attacker does in an episode: its command at each step's start (NaN: it cruises), the
+    step at whose start it begins its lane change (None: it keeps its lane), and a swerving attacker's
+    lane changes: (step at whose start it begins, the lane it changes to), in time order."""
 
     u: np.ndarray
     lane_change_step: int | None = None
+    lane_changes: tuple[tuple[int, int], ...] = ()
 
 
 def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) -> AttackPlan:
@@ -296,6 +396,10 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
     from .attacks import attack_signal
 
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+    if isinstance(family, SwerveAttack):
+        steps = [(config.attack_start_step + lane_change_steps(t_s, config.step_s), lane)
+                 for t_s, lane in family.lane_schedule(params)]
+        return AttackPlan(u, lane_changes=tuple((k, lane) for k, lane in steps if k < config.steps))
     t_lc_s = family.lane_change_s(params) if family is not None else None
     if t_lc_s is None:
         return AttackPlan(u)
@@ -318,7 +422,8 @@ def inert_parameters(family: AttackFamily, config: EpisodeSettings, draws: int =
                 y = x.copy()
                 y[i] = value
                 other = attack_plan(family, y, config)
-                if not np.array_equal(plan.u, other.u, equal_nan=True) or plan.lane_change_step != other.lane_change_step:
+                if (not np.array_equal(plan.u, other.u, equal_nan=True) or plan.lane_change_step != other.lane_change_step
+                        or plan.lane_changes != other.lane_changes):
                     moved = True
                     break
             if moved:
@@ -339,7 +444,9 @@ def lane_change_steps(t_lc_s: float, step_s: float) -> int:
 
 
 def check_road_lanes(config: EpisodeSettings, road_name: str, lanes: int) -> None:
-    maneuver = config.maneuver_class
-    if lanes < maneuver.lanes_needed:
-        raise ConfigError("scenario.maneuver", config.maneuver,
-                          f"a road with at least {maneuver.lanes_needed} lanes ({road_name} has {lanes}), or maneuver inlane")
+    needed = config.maneuver_class.lanes_for(config)
+    if lanes < needed:
+        field, given = (("scenario.swerve_lanes", needed) if config.maneuver == "swerve"
+                        else ("scenario.maneuver", config.maneuver))
+        raise ConfigError(field, given, f"a road with at least {needed} lanes ({road_name} has {lanes} that lead on "
+                                        "with the platoon's), or maneuver inlane")

@@ -8,7 +8,7 @@ import pytest
 from d4sumo.errors import ConfigError
 from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import EpisodeConfig
-from d4sumo.model.maneuvers import (CAR_WIDTH_M, FREE_ROAD_GAP_M, CutIn, CutOut, Maneuver, attack_plan, maneuver_of,
+from d4sumo.model.maneuvers import (CAR_WIDTH_M, FREE_ROAD_GAP_M, CutIn, CutOut, Maneuver, attack_plan, inert_parameters, maneuver_of,
                                     occupied_lanes)
 from d4sumo.model.platoon import Platoon, collisions_at
 from d4sumo.model.trace import Episode
@@ -108,7 +108,10 @@ def test_the_lane_change_time_joins_the_attack_box_and_becomes_a_step():
 
 
 def test_maneuver_settings_are_checked_and_only_the_ones_in_use_are_part_of_the_campaign():
-    for kwargs, field in (({"maneuver": "swerve"}, "scenario.maneuver"),
+    for kwargs, field in (({"maneuver": "weave"}, "scenario.maneuver"),
+                          ({"maneuver": "swerve", "swerve_knots": 0}, "scenario.swerve_knots"),
+                          ({"maneuver": "swerve", "swerve_lanes": 1}, "scenario.swerve_lanes"),
+                          ({"maneuver": "swerve", "duration_s": 1.0, "swerve_knots": 30}, "scenario.swerve_knots"),
                           ({"maneuver": "cutin", "cutin_follower": 4}, "scenario.cutin_follower"),
                           # regression: SUMO reads a negative start position from the road's end
                           ({"maneuver": "cutin", "cutin_follower": 3, "cutin_offset_m": -45.0}, "scenario.cutin_offset_m"),
@@ -127,7 +130,10 @@ def test_maneuver_settings_are_checked_and_only_the_ones_in_use_are_part_of_the_
     assert EpisodeConfig(followers=1, cutin_follower=2).followers == 1  # no cut-in: its follower is not checked
     cutin = EpisodeConfig(maneuver="cutin").to_dict()["scenario"]
     assert {"maneuver", "cutin_follower", "cutin_offset_m", "lane_change_s"} <= set(cutin)
-    assert "obstacle_speed_mps" not in cutin
+    assert "obstacle_speed_mps" not in cutin and "swerve_knots" not in cutin
+    swerve = EpisodeConfig(maneuver="swerve", swerve_lanes=3).to_dict()["scenario"]
+    assert {"maneuver", "lane_change_s", "swerve_knots", "swerve_lanes"} <= set(swerve) and "cutin_follower" not in swerve
+    assert EpisodeConfig.from_dict(EpisodeConfig(maneuver="swerve", swerve_lanes=3).to_dict()).swerve_lanes == 3
     assert EpisodeConfig.from_dict(EpisodeConfig(maneuver="cutout", obstacle_speed_mps=3.0).to_dict()).obstacle_speed_mps == 3.0
 
 
@@ -178,3 +184,24 @@ def test_a_cut_ins_benign_lead_and_a_cut_outs_obstacle_have_their_own_vehicles()
     cutout = EpisodeConfig(maneuver="cutout", obstacle_distance_m=60.0, vehicles={"obstacle": {"length_m": 16.0}})
     cars = {car.id: car for car in maneuver_of(cutout).cars()}
     assert cars["obstacle"].position_m - 16.0 - cars["v0"].position_m == pytest.approx(60.0)
+
+
+def test_a_swerving_attackers_lanes_are_parameters_read_as_their_whole_part_at_knots_spread_over_the_attack():
+    """Issue 37: the attacker's lane over time is searched with its pedals. Each lane knot holds from its
+    time on; a change is planned only where the lane differs, at the step nearest its time after the
+    warm-up; the box's last value reads as the leftmost lane."""
+    config = EpisodeConfig(maneuver="swerve", start="warmup", warmup_s=5.0, duration_s=40.0, swerve_knots=4, swerve_lanes=3)
+    family = maneuver_of(config).family(make_attack("knots"))
+    assert family.names[-4:] == ("lane_1", "lane_2", "lane_3", "lane_4") and family.signals == (9, 4)
+    assert list(family.upper[-4:]) == [3.0] * 4 and list(family.lower[-4:]) == [0.0] * 4
+    assert family.knot_times_s == [0.0, 10.0, 20.0, 30.0]
+    x = np.zeros(13)
+    x[9:] = [0.99, 2.5, 3.0, 1.0]  # lane 0 (no change), 2, 2 (the box's end: the leftmost), 1
+    plan = attack_plan(family, x, config)
+    assert family.lane_schedule(x) == [(10.0, 2), (30.0, 1)]
+    assert plan.lane_changes == ((100 + 200, 2), (100 + 600, 1)) and plan.lane_change_step is None
+    assert attack_plan(family, np.zeros(13), config).lane_changes == ()  # it never leaves the platoon's lane
+    assert maneuver_of(config).cars()[0].lane == 0 and maneuver_of(config).lanes_for(config) == 3
+    # the lanes are parameters like the pedals': a knot that changes nothing is said to be inert
+    late = EpisodeConfig(maneuver="swerve", duration_s=40.0, swerve_knots=4)
+    assert inert_parameters(maneuver_of(late).family(make_attack("constant")), late) == []

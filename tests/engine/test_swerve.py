@@ -1,0 +1,49 @@
+"""The swerving attacker (issue 37), for real in SUMO: its lanes over time are the plan's, it can cut in
+between followers that the in-lane attack cannot crash, and batches equal episodes alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_same_episode, random_plans
+
+from d4sumo.engine.simulation import simulate, simulate_batch
+from d4sumo.model.attacks import make_attack
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
+
+pytestmark = pytest.mark.sumo
+
+#: against the time-gap controller, which the paper's in-lane attack does not crash: from steady state the
+#: attacker leaves the lane at once, comes back at 6.65 s, leaves and comes back twice more
+TIMEGAP = EpisodeConfig(maneuver="swerve", start="steady", controller=ControllerConfig("timegap"), duration_s=40.0)
+CUT_IN_PARAMS = [0.733, -0.491, -0.25, -0.045, -0.905, -0.962, 0.138, 0.0, 0.259,  # the knots
+                 1.757, 0.277, 1.792, 0.419, 1.845, 0.317]  # lane_1 .. lane_6: 1, 0, 1, 0, 1, 0
+
+
+def test_a_swerving_attacker_cuts_in_between_followers_that_the_in_lane_attack_cannot_crash(tmp_path):
+    family = maneuver_of(TIMEGAP).family(make_attack("knots"))
+    plan = attack_plan(family, CUT_IN_PARAMS, TIMEGAP)
+    assert plan.lane_changes == ((0, 1), (133, 0), (267, 1), (400, 0), (533, 1), (667, 0))
+    episode = simulate(TIMEGAP, plan)
+    assert episode.outcome == "success"
+    first = episode.first_collision
+    assert (first.leader, first.follower) == ("v2", "v3") and 13.0 < first.time_s < 13.1
+    # the attacker's lane at every sample is the plan's, the change taking scenario.lane_change_s (2 s)
+    y = episode.trace["y_v0"]
+    lanes = [occupied_lanes(v, 3.2) for v in y]
+    t = episode.trace.times_s
+    assert lanes[0] == (0,) and all(lane == (1,) for lane, ts in zip(lanes, t) if 2.1 < ts < 6.6)
+    assert all(lane == (0,) for lane, ts in zip(lanes, t) if 8.75 < ts < 13.3)  # back in, before the crash
+    # the paper's in-lane attack, with the same pedals, crashes the attacker itself: v1 hits it
+    inlane = EpisodeConfig(start="steady", controller=ControllerConfig("timegap"), duration_s=40.0)
+    assert simulate(inlane, attack_plan(make_attack("knots"), CUT_IN_PARAMS[:9], inlane)).outcome == "attacker_crash"
+
+
+@pytest.mark.parametrize("episodes", [3, 9])  # played alone, and by the batch's arrays
+def test_swerving_episodes_in_a_batch_equal_them_alone(road, episodes):
+    config = EpisodeConfig(maneuver="swerve", start="steady", duration_s=30.0, swerve_lanes=3, followers=4)
+    plans = random_plans(config, episodes, seed=11)
+    assert sum(len(p.lane_changes) for p in plans) >= episodes
+    for batched, plan in zip(simulate_batch(config, plans), plans):
+        assert_same_episode(batched, simulate(config, plan, road=road))
