@@ -2,13 +2,15 @@
 
 A document is the tables of a config file:
 
-    [scenario]   network, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s, maneuver
-                 (lead, cutin, cutout) and its settings (cutin_follower, cutin_offset_m, lane_change_s,
-                 obstacle_distance_m, obstacle_speed_mps)
+    [scenario]   network, route, lane, followers, setpoint_m, speed_mps, start, step_s, duration_s, warmup_s,
+                 maneuver (inlane, cutin, cutout, swerve) and its settings (cutin_follower, cutin_offset_m,
+                 lane_change_s, obstacle_distance_m, obstacle_speed_mps, swerve_knots, swerve_lanes)
     [vehicle]    length_m, max_accel_mps2, max_decel_mps2, actuator_lag_s, coast_decel_mps2, vclass, shape;
                  [vehicle.v2] (any car: v0 the attacker, vI a follower, lead, obstacle): what differs for it
     [controller] class = "switching", "timegap", "sumo:MODEL" or "package.module:ClassName", and its
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
+    [radar]      range_m, gap_noise_m, speed_noise_mps, latency_s, seed: what the followers' controllers
+                 measure of the car ahead (none: the truth)
     [attack]     family, params (simulate only), and the families' options (knots: delta_s, horizon_s)
     [spec]       d_safe_m, formula
     [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
@@ -29,16 +31,19 @@ import numpy as np
 from .errors import ConfigError, is_number
 from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from .model.config import EpisodeConfig, VehicleParams, read_toml
+from .model.sensing import RadarParams
 from .model.maneuvers import maneuver_of
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
 
-SECTIONS = ("scenario", "vehicle", "controller", "attack", "spec", "search")
-SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in ("vehicle", "vehicles", "controller"))
+SECTIONS = ("scenario", "vehicle", "controller", "radar", "attack", "spec", "search")
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig)
+                      if f.name not in ("vehicle", "vehicles", "controller", "radar"))
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "scenario": SCENARIO_KEYS,
     "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
+    "radar": tuple(f.name for f in dataclasses.fields(RadarParams)),
     "attack": ("family", "params", *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),

@@ -5,7 +5,8 @@ speed change, a lane drop, a curve, an acceleration lane, a route through netgen
 Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
-SUMO's models, a quarter of the platoons mixed; one episode in four a cut-in, a cut-out or a swerving
+SUMO's models, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
+and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
 campaign stores a sample, and counts the samples where any of these disagree:
 
@@ -52,6 +53,7 @@ from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
+from d4sumo.model.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
 from d4sumo.search.spec import psi_robustness
@@ -145,6 +147,11 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         controller=systems if rng.random() < 0.25 else systems[0],
         **maneuver,
     )
+    if rng.random() < 0.15 and not all(c.sumo_model for c in config.controllers):  # a radar with range, noise, latency
+        config = dataclasses.replace(config, radar=RadarParams(
+            range_m=float(rng.choice([np.inf, 60.0, 150.0])), gap_noise_m=float(rng.choice([0.0, 0.2, 1.0])),
+            speed_noise_mps=float(rng.choice([0.0, 0.1, 0.5])), latency_s=float(rng.choice([0.0, 0.1, 0.3])),
+            seed=int(rng.integers(0, 1000))))
     if rng.random() < 0.25:  # a platoon of different vehicles: a truck, a bus or a small car among the cars
         cars = rng.choice(config.vehicle_ids, size=int(rng.integers(1, min(3, len(config.vehicle_ids)) + 1)), replace=False)
         config = dataclasses.replace(config, vehicles={str(car): vehicle_table(rng) for car in cars})

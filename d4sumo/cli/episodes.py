@@ -160,7 +160,10 @@ def _print_summary(s: dict, road_name: str) -> None:
     attack = s["attack"]
     what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
     maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
-    print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, start {sc['start']}{maneuver}; {what}")
+    radar = s["config"].get("radar")
+    sensing = ", radar " + ", ".join(f"{k}={v:g}" for k, v in radar.items()) if radar else ""
+    print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, "
+          f"start {sc['start']}{maneuver}{sensing}; {what}")
     c = s["first_collision"]
     if c is None:
         print(f"outcome: {s['outcome']} in {s['simulated_s']:.2f} s")

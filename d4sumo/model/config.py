@@ -22,6 +22,7 @@ from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
 from .plugins import ControllerImportError, NotImported, build_params
+from .sensing import RadarParams
 from .vehicle import VehicleParams
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES, SWERVE_KNOTS, SWERVE_LANES
 
@@ -134,6 +135,8 @@ class EpisodeConfig:
     vehicles: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
     #: one controller for every follower, or one per follower (v1 first): a mixed platoon
     controller: ControllerConfig | tuple[ControllerConfig, ...] = field(default_factory=ControllerConfig)
+    #: the Python-commanded followers' radar, the [radar] table (`sensing`); none: they sense the truth
+    radar: RadarParams | None = None
     #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
     #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
     attacker_declared_decel_mps2: float | None = None
@@ -194,6 +197,18 @@ class EpisodeConfig:
             period = dict(c.params).get("control_period_s") if not c.sumo_model else None
             if period and not (period >= self.step_s and _on_grid(period, self.step_s)):
                 raise ConfigError(f"{c.where}.control_period_s", period, f"0, or a whole number of steps of {self.step_s:g} s")
+        if isinstance(self.radar, Mapping):
+            fix("radar", RadarParams.from_table(self.radar))
+        if self.radar is not None:
+            if not isinstance(self.radar, RadarParams):
+                raise ConfigError("radar", self.radar, "a [radar] table")
+            if self.radar.perfect:  # the truth, as without one: the same episodes, the same campaign
+                fix("radar", None)
+            elif all(c.sumo_model for c in controllers):
+                raise ConfigError("radar", self.radar.to_dict(), "a platoon with a follower a Python controller commands "
+                                                                 "(SUMO's models sense on their own)")
+            elif not _on_grid(self.radar.latency_s, self.step_s):
+                raise ConfigError("radar.latency_s", self.radar.latency_s, f"a whole number of steps of {self.step_s:g} s")
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
         fix("vehicles", self._checked_vehicles())
@@ -254,7 +269,7 @@ class EpisodeConfig:
     def batch_arrays(self) -> bool:
         """Whether a batch's arrays may play its platoons: they play the model as printed, one vehicle for
         every car (otherwise its platoons are commanded one by one, side by side in one SUMO all the same)."""
-        return not self.as_run and not self.vehicles
+        return not self.as_run and not self.vehicles and self.radar is None
 
     @functools.cached_property
     def car_vehicles(self) -> tuple[VehicleParams, ...]:
@@ -316,6 +331,8 @@ class EpisodeConfig:
                  else " / ".join(c.label for c in self.controller))
         for car, differs in self.vehicles:
             label += f"; {car}: " + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in differs)
+        if self.radar is not None:
+            label += "; radar: " + ", ".join(f"{k}={v:g}" for k, v in self.radar.to_dict().items())
         return label
 
     @property
@@ -351,7 +368,10 @@ class EpisodeConfig:
                       else [c.to_dict() for c in self.controller])
         vehicle = self.vehicle.to_dict()
         vehicle.update({car: dict(differs) for car, differs in self.vehicles})  # [vehicle.vI]: where a car differs
-        return {"scenario": scenario, "vehicle": vehicle, "controller": controller}
+        out = {"scenario": scenario, "vehicle": vehicle, "controller": controller}
+        if self.radar is not None:  # stored where there is one: earlier campaigns keep their identity
+            out["radar"] = self.radar.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
@@ -373,8 +393,9 @@ class EpisodeConfig:
             controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
         else:
             controller = ControllerConfig.from_table(_table(doc, "controller"))
+        radar = RadarParams.from_table(doc["radar"]) if doc.get("radar") is not None else None
         return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), vehicles=tuple(cars.items()),
-                   controller=controller)
+                   controller=controller, radar=radar)
 
 
 def read_toml(path: str | Path, field: str = "--config") -> dict:
@@ -410,7 +431,7 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
-_TABLES = ("vehicle", "vehicles", "controller")
+_TABLES = ("vehicle", "vehicles", "controller", "radar")
 
 
 def _short_table(table: Any) -> Any:

@@ -186,7 +186,9 @@ class FollowerController(Protocol):
 
     Constructed as ``cls(params, setpoint_m=..., target_speed_mps=..., vehicle=..., step_s=...)`` where
     ``params`` is an instance of ``cls.Params`` (a dataclass built from the config's controller table).
-    ``mode`` (optional) is recorded in the trace each step.
+    ``mode`` (optional) is recorded in the trace each step. A controller may instead answer
+    ``observe(observation)`` (`sensing.Observation`), called in place of ``command`` where it has one.
+    Either is given what the follower's radar measured (`sensing`).
     """
 
     Params: type

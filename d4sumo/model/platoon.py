@@ -21,6 +21,7 @@ from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .control import CruiseControl, SwitchingController, SwitchingParams, user_module
 from .vehicle import Actuator, acceleration_to_command
+from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 
@@ -86,7 +87,12 @@ class PythonFollower:
                 raise
             raise ControllerError(f"the controller of v{car} ({config.cls}) could not be made: {type(exc).__name__}: {exc}") from exc
         self.actuator = Actuator(self.vehicle, episode.step_s, float("inf"))
-        self.command = _named_errors(self.controller.command, car, config.cls) if users else self.controller.command
+        command, observe = self.controller.command, getattr(self.controller, "observe", None)
+        if users:
+            command = _named_errors(command, car, config.cls)
+            observe = observe and _named_errors(observe, car, config.cls)
+        #: what it does with the truth (gap, own speed, speed ahead): through its radar, to its controller
+        self.command = sensed_command(command, observe, episode.radar, episode.step_s, car)
         self.has_mode = hasattr(self.controller, "mode")
 
 
