@@ -14,6 +14,8 @@ from pathlib import Path
 from ..errors import ConfigError
 from ..model.vehicle import VEHICLE_CLASSES
 
+#: the version of a road's description: a cached one of another is described again
+LAYOUT = 2
 OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles (one given: it does not lead on)
 
 
@@ -52,6 +54,7 @@ def describe(net_file: Path, name: str) -> dict:
                           f"{_longest_piece(chain)}")
     corridors = {str(path[0]): _corridor(net_file, chain, path) for path in through}
     return {
+        "layout": LAYOUT,
         "route_edges": [e.getID() for e in chain],
         "length_m": sum(e.getLength() for e in chain),
         "first_edge_m": chain[0].getLength(),
@@ -62,14 +65,16 @@ def describe(net_file: Path, name: str) -> dict:
 
 def _corridor(net_file: Path, chain, path: list[int]) -> dict:
     """The platoon's corridor from the first edge's lane ``path[0]``: its lane on each edge, the lanes
-    (as offsets from it, 0 the platoon's, 1 the one to its left, ..) that lead on beside it, their
-    lowest speed limit, whether they are even, their widths, and the classes each closes to."""
+    (as offsets from it, 0 the platoon's, 1 the one to its left, ..) that lead on beside it, the route's
+    lowest speed limit, whether the lanes are even, their widths, and the classes each closes to."""
     lanes = _lanes_beside(chain, path)
     in_corridor = [e.getLanes()[p + j] for e, p in zip(chain, path) for j in range(lanes)]
     return {
         "lane_path": path,
         "lanes": lanes,
-        "speed_limit_mps": min(lane.getSpeed() for lane in in_corridor),
+        # each edge's limit (its fastest lane's, as SUMO's edge speed), lowest along the route: what the
+        # attacker is clamped to and the target speed is checked against, as for every stored campaign
+        "speed_limit_mps": min(e.getSpeed() for e in chain),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], path, lanes),
         "lane_widths_m": sorted({lane.getWidth() for lane in in_corridor}),
         "closed_to": [_closed_to(chain, path, j) for j in range(lanes)],

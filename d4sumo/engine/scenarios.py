@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..errors import ConfigError
 from .copies import copies_alike, copy_prefix, side_by_side
-from .layout import OR_ROUTE, describe
+from .layout import LAYOUT, OR_ROUTE, describe
 from .netconvert import build_net
 from .networks import NetworkSource, network_source
 
@@ -190,7 +190,7 @@ def _read_info(path: Path) -> dict | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return info if isinstance(info, dict) and "corridors" in info else None
+    return info if isinstance(info, dict) and info.get("layout") == LAYOUT else None
 
 
 def _write_atomic(path: Path, text: str) -> None:
