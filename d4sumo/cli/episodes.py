@@ -49,9 +49,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
     road = build_road(config.network, route=config.route, lane=config.lane)
-    episode = simulate(config, episode_plan(family, params, config), road=road, fcd_path=fcd, gui=args.gui)
+    plan = episode_plan(family, params, config)
+    episode = simulate(config, plan, road=road, fcd_path=fcd, gui=args.gui)
     robustness = spec.robustness(episode.trace) if spec else None
-    summary = episode_summary(config, family, params, episode, robustness, d_safe, fcd)
+    summary = episode_summary(config, family, params, plan, episode, robustness, d_safe, fcd)
     summary["formula"] = formula
     _report(summary, road.name, args.json)
     return 0
@@ -72,9 +73,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
     evaluator = Evaluator(campaign)
-    episode = simulate(campaign.config, evaluator.plan(row.params), road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    plan = evaluator.plan(row.params)
+    episode = simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)
     rho = evaluator.spec.robustness(episode.trace)
-    summary = episode_summary(campaign.config, evaluator.family, row.params, episode, rho, campaign.d_safe_m, fcd)
+    summary = episode_summary(campaign.config, evaluator.family, row.params, plan, episode, rho, campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives
     replayed = {"robustness": rho, "outcome": episode.outcome,
                 "collision": episode.first_collision_record(),
@@ -111,11 +113,17 @@ def episode_plan(family, params, config: EpisodeConfig):
     return attack_plan(family, params, config)
 
 
-def episode_summary(config, family, params, episode, robustness, d_safe, fcd) -> dict:
+def episode_summary(config, family, params, plan, episode, robustness, d_safe, fcd) -> dict:
+    from ..model.maneuvers import lane_changes, maneuver_of
+
+    played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
     return {
         "d4sumo": __version__,
         "config": config.to_dict(),
         "attack": None if family is None else {**family.describe(), "values": [float(v) for v in params]},
+        # the attacker's lane changes as played: when each began [s], the lane (0 the platoon's, 1 to its left)
+        "lane_changes": [{"time_s": k * config.step_s, "lane": lane}
+                         for k, lane in lane_changes(plan, maneuver_of(config)) if k < played],
         "outcome": episode.outcome,
         "first_collision": episode.first_collision_record(),
         "collisions": [c.to_dict() for c in episode.collisions],
@@ -164,6 +172,8 @@ def _print_summary(s: dict, road_name: str) -> None:
     sensing = ", radar " + ", ".join(f"{k}={v:g}" for k, v in radar.items()) if radar else ""
     print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, "
           f"start {sc['start']}{maneuver}{sensing}; {what}")
+    if s["lane_changes"]:
+        print("attacker's lane changes: " + ", ".join(f"to lane {c['lane']} at {c['time_s']:.2f} s" for c in s["lane_changes"]))
     c = s["first_collision"]
     if c is None:
         print(f"outcome: {s['outcome']} in {s['simulated_s']:.2f} s")

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import WarmupCollision
 from ..model.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import AttackPlan, maneuver_of
+from ..model.maneuvers import AttackPlan, lane_changes, maneuver_of
 from ..model.platoon import Platoon, collisions_at
 from ..model.trace import Episode
 
@@ -62,9 +62,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     recorded: list[list] = [[] for _ in range(m)]  # lane-changing maneuvers: each sample's pairs
     changes: dict[int, list[tuple[int, int]]] = {}  # step -> (episode, the lane its attacker changes to)
     for e, plan in enumerate(plans):
-        if plan.lane_change_step is not None:
-            changes.setdefault(plan.lane_change_step, []).append((e, maneuver.target_lane()))
-        for k, lane in plan.lane_changes:
+        for k, lane in lane_changes(plan, maneuver):
             changes.setdefault(k, []).append((e, lane))
     live = set(range(m))
     solo: list[_Alone] = []  # the episodes commanded one at a time

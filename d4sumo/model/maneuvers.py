@@ -390,6 +390,13 @@ class AttackPlan:
     lane_changes: tuple[tuple[int, int], ...] = ()
 
 
+def lane_changes(plan: AttackPlan, maneuver: Maneuver) -> list[tuple[int, int]]:
+    """Every lane change of the attacker's plan: (step at whose start it begins, the lane it changes to,
+    counted from the platoon's), in time order."""
+    once = [(plan.lane_change_step, maneuver.target_lane())] if plan.lane_change_step is not None else []
+    return [*once, *plan.lane_changes]
+
+
 def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) -> AttackPlan:
     """The plan of an attack that begins after the warm-up (if any): the longitudinal signal, and the
     lane change at the step nearest to t_lc_s after the attack's start."""

@@ -47,3 +47,18 @@ def test_swerving_episodes_in_a_batch_equal_them_alone(road, episodes):
     assert sum(len(p.lane_changes) for p in plans) >= episodes
     for batched, plan in zip(simulate_batch(config, plans), plans):
         assert_same_episode(batched, simulate(config, plan, road=road))
+
+
+def test_simulate_says_the_lane_changes_the_attacker_made_before_the_episode_ended(capsys):
+    import json
+
+    from d4sumo.cli import main
+
+    argv = ["simulate", "--maneuver", "swerve", "--start", "steady", "--duration", "40", "--controller", "timegap",
+            "--knots=" + ",".join(map(str, CUT_IN_PARAMS))]
+    assert main([*argv, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    # the third change (to lane 1 at 13.35 s) was planned after the crash at 13.05 s: not played
+    assert summary["lane_changes"] == [{"time_s": 0.0, "lane": 1}, {"time_s": pytest.approx(6.65), "lane": 0}]
+    assert main(argv) == 0
+    assert "attacker's lane changes: to lane 1 at 0.00 s, to lane 0 at 6.65 s\n" in capsys.readouterr().out
