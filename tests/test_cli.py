@@ -261,7 +261,7 @@ def test_a_cut_in_campaign_is_stored_exported_replayed_and_plotted_by_lane(tmp_p
     [
         (["--samples", "0"], "--samples (search.samples): got 0"),
         (["--maneuver", "cutin", "--network", "highway_1lane"],
-         "--maneuver (scenario.maneuver): got 'cutin'; allowed: a road with at least 2 lanes (highway_1lane has 1 that lead on with the platoon's)"),
+         "--maneuver (scenario.maneuver): got 'cutin'; allowed: a road with at least 2 lanes that lead on, the platoon's and those to its left (highway_1lane has 1)"),
         (["--maneuver", "cutin", "--set", "scenario.cutin_follower=5"], "scenario.cutin_follower: got 5"),
         (["--maneuver", "cutin", "--formula", "eventually(gap_1 <= 0)"], "unknown: gap_1"),
         (["--formula", "eventually(foo < 1)"], "unknown: foo"),

@@ -92,7 +92,12 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         name = flags.get("scenario.maneuver", doc.get("scenario", {}).get("maneuver", "inlane"))
         maneuver = MANEUVERS.get(name) if isinstance(name, str) else None  # a bad one is refused with the document
         scenario = {**doc.get("scenario", {}), **{k.removeprefix("scenario."): v for k, v in flags.items() if k.startswith("scenario.")}}
-        count = len(flags["attack.params"]) - (maneuver.added_parameters(scenario) if maneuver is not None else 0)  # then t_lc_s, lanes
+        added = maneuver.added_parameters(scenario) if maneuver is not None else 0  # then t_lc_s, or the lanes
+        count = len(flags["attack.params"]) - added
+        if count < 1:
+            then = "t_lc_s" if added == 1 else f"lane_1 .. lane_{added}"
+            raise ConfigError("--knots", knots, f"the knots, then {then} for maneuver {name} ({len(flags['attack.params'])} "
+                                                f"value{'s' if len(flags['attack.params']) != 1 else ''} given)")
         if isinstance(delta, (int, float)):
             flags["attack.horizon_s"] = delta * (count - 1) or delta
     return with_overrides(doc, flags), flags

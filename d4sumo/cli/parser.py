@@ -40,7 +40,8 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--maneuver", choices=MANEUVERS,
                    help="inlane: the attacker leads the platoon in its lane (the paper); cutin: it changes into the "
                         "platoon's lane in front of a follower; cutout: it leads, then leaves the lane to reveal a "
-                        "slower car (multi-lane roads; the optimiser picks the lane change time t_lc_s) [inlane]")
+                        "slower car (multi-lane roads; the optimiser picks the lane change time t_lc_s); swerve: it "
+                        "leads, its lane at scenario.swerve_knots times searched with its pedals [inlane]")
     g.add_argument("--warmup", type=float, help="seconds driven from rest before the attack with --start warmup [15]")
     g.add_argument("--step", type=float, help="simulation step in s [0.05]")
     g.add_argument("--duration", type=float, help="seconds from the attack's start to the episode's end [60]")
@@ -88,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_episode_options(p)
     g = p.add_argument_group("attack (with none, the attacker cruises at the target speed)")
     g.add_argument("--knots", help="knot values in [-1, 1], comma-separated, joined by PCHIP (one every --delta s); "
-                        "with a cut-in or cut-out, then the lane change time t_lc_s")
+                        "with a cut-in or cut-out, then the lane change time t_lc_s; with a swerve, then its lanes "
+                        "lane_1 .. lane_K (each in [0, swerve_lanes], its whole part the lane)")
     g.add_argument("--constant", type=float, help="a constant attacker command in [-1, 1] from the attack's start")
     g.add_argument("--attack", choices=FAMILIES, help="attack family (with --params)")
     g.add_argument("--params", help="comma-separated parameter values of the family, e.g. --attack sine --params 0.5,0.2,0")

@@ -89,6 +89,8 @@ class EpisodeSettings(Protocol):
     def swerve_knots(self) -> int: ...
     @property
     def swerve_lanes(self) -> int: ...
+    @property
+    def lane(self) -> int | None: ...
 
 
 @dataclass(frozen=True)
@@ -273,10 +275,20 @@ class Swerve(LaneChange):
 
     @classmethod
     def check(cls, config: EpisodeSettings) -> None:
-        if config.duration_s / config.swerve_knots < config.step_s:
+        # SUMO starts a change only once the one before is done: knots closer than a change takes would
+        # play another plan than the one searched (measured: with knots as far apart as a change takes,
+        # SUMO played the first change alone)
+        needed = lane_change_steps(config.lane_change_s, config.step_s) + 1
+
+        def fits(knots: int) -> bool:
+            steps = [lane_change_steps(t, config.step_s) for t in swerve_knot_times(config.duration_s, knots)]
+            return all(b - a >= needed for a, b in zip(steps, steps[1:]))
+
+        if not fits(config.swerve_knots):
+            most = max(k for k in range(1, config.swerve_knots) if fits(k))
             raise ConfigError("scenario.swerve_knots", config.swerve_knots,
-                              f"at most {int(config.duration_s / config.step_s)}: one lane knot a step of the "
-                              f"{config.duration_s:g} s attack")
+                              f"at most {most} over the {config.duration_s:g} s attack: lane knots at least a lane change "
+                              f"(scenario.lane_change_s, {config.lane_change_s:g} s) and a step apart")
 
     @classmethod
     def lanes_for(cls, config: EpisodeSettings) -> int:
@@ -338,6 +350,11 @@ class LaneChangeAttack(AttackFamily):
         return d
 
 
+def swerve_knot_times(window_s: float, knots: int) -> list[float]:
+    """When a swerving attacker's lane knots take hold, from the attack's start [s]: evenly, the first at once."""
+    return [j * float(window_s) / knots for j in range(knots)]
+
+
 class SwerveAttack(AttackFamily):
     """A longitudinal attack family plus a swerving attacker's lanes: ``lane_1`` .. ``lane_K``, the lane it
     is in from each of K times spread evenly over the attack window on (``lane_j`` from (j - 1) x window / K
@@ -349,9 +366,10 @@ class SwerveAttack(AttackFamily):
         self.name = longitudinal.name
         self.options = longitudinal.options
         self.knots, self.lanes = knots, lanes
-        self.knot_times_s = [j * float(window_s) / knots for j in range(knots)]
+        self.knot_times_s = swerve_knot_times(window_s, knots)
         self.parameters = (*longitudinal.parameters,
-                           *(Parameter(f"lane_{j}", 0.0, float(lanes), "lane") for j in range(1, knots + 1)))
+                           *(Parameter(f"lane_{j}", 0.0, float(lanes), "(its whole part the lane: 0 the platoon's)")
+                             for j in range(1, knots + 1)))
         self._first_lane = len(longitudinal.parameters)
 
     @property
@@ -455,5 +473,6 @@ def check_road_lanes(config: EpisodeSettings, road_name: str, lanes: int) -> Non
     if lanes < needed:
         field, given = (("scenario.swerve_lanes", needed) if config.maneuver == "swerve"
                         else ("scenario.maneuver", config.maneuver))
-        raise ConfigError(field, given, f"a road with at least {needed} lanes ({road_name} has {lanes} that lead on "
-                                        "with the platoon's), or maneuver inlane")
+        lower = f" from its lane {config.lane}: a lower scenario.lane" if config.lane else ""
+        raise ConfigError(field, given, f"a road with at least {needed} lanes that lead on, the platoon's and those to its "
+                                        f"left ({road_name} has {lanes}{lower}), or maneuver inlane")

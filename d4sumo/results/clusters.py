@@ -146,10 +146,10 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
 
     wins = [r for r in records if r.outcome == "success" and r.attack in KNOT_FAMILIES
             and r.time_from_attack_start_s is not None and r.time_from_attack_start_s > 0]  # else no knot mattered
-    if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s, r.maneuver == "inlane") for r in wins}) != 1:
+    if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s, len(r.signal_params)) for r in wins}) != 1:
         return None
-    # the knots only: a lane-changing attack's last parameter is its lane change time, not a knot
-    X = np.array([r.params if r.maneuver == "inlane" else r.params[:-1] for r in wins], dtype=float)
+    # the knots only: what a maneuver adds (a lane change time, a swerving attacker's lanes) is no knot
+    X = np.array([r.signal_params for r in wins], dtype=float)
     delta_s = wins[0].delta_s  # knots every delta_s; the coded knots where their family puts them
     knot_times_s = (np.arange(X.shape[1]) * delta_s if delta_s
                     else np.asarray(make_attack(wins[0].attack).knot_times_s, dtype=float))

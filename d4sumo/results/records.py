@@ -13,7 +13,7 @@ from typing import Any, Sequence
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.plugins import names_only
-from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, lane_change_steps
+from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
 #: Every other key a campaign stores (network, route, duration, step, warm-up, followers, the maneuver and
@@ -50,6 +50,10 @@ class Record:
     step_s: float = 0.05
     end_s: float = 60.0  # when the episode ends without a collision (warm-up included)
     param_names: tuple[str, ...] = ()  # the attack parameters' names, as the family (and maneuver) name them
+    #: how many of them are the signal family's (the knots), before what the maneuver adds (t_lc_s, lanes); 0: all
+    signal_parameters: int = 0
+    #: a swerving attacker's lane changes as planned, when each begins in simulation time (`lane_changes_at_s`)
+    swerve_changes_s: tuple[float, ...] = ()
     #: the campaign's scenario: its [scenario] keys as stored (a key without effect is not), but GRID_KEYS;
     #: campaigns of different scenarios are never pooled (`analysis.scenario_labels`)
     scenario: tuple[tuple[str, Any], ...] = ()
@@ -68,6 +72,20 @@ class Record:
         t_lc_s = self.params[self.param_names.index(LANE_CHANGE_PARAMETER)]
         at = self.attack_start_s + lane_change_steps(t_lc_s, self.step_s) * self.step_s  # as played
         return None if at >= (self.end_s if self.time_s is None else self.time_s) else at
+
+    @property
+    def lane_changes_at_s(self) -> tuple[float, ...]:
+        """When the attacker began each of its lane changes, in simulation time, those the episode played."""
+        once = self.lane_change_at_s
+        if once is not None:
+            return (once,)
+        end = self.end_s if self.time_s is None else self.time_s
+        return tuple(t for t in self.swerve_changes_s if t < end)
+
+    @property
+    def signal_params(self) -> tuple[float, ...]:
+        """The signal family's parameters (the knots), without what the maneuver adds."""
+        return self.params[:self.signal_parameters] if self.signal_parameters else self.params
 
     @property
     def configuration(self) -> tuple:
@@ -95,15 +113,32 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
             campaigns = {c.id: Campaign.from_definition(c.definition, where=f"{path}: campaign {c.id}")
                          for c in store.campaigns()}
             settings = {cid: _campaign_settings(c) for cid, c in campaigns.items()}
+            families = {cid: c.family() for cid, c in campaigns.items()}
             for s in store.iter_samples():
+                c = campaigns[s.campaign_id]
                 records.append(Record(
                     db=str(path), sample_id=s.id, campaign_id=s.campaign_id, params=s.params, robustness=s.robustness,
                     outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
-                    speed_diff_kmh=s.speed_diff_kmh, **settings[s.campaign_id],
+                    speed_diff_kmh=s.speed_diff_kmh, swerve_changes_s=_swerve_changes(families[s.campaign_id], s.params, c),
+                    **settings[s.campaign_id],
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
     return records
+
+
+def _swerve_changes(family, params, campaign) -> tuple[float, ...]:
+    """When a swerving attacker's planned lane changes begin, in simulation time (none for other maneuvers,
+    or parameters the family refuses: a damaged row is said where it is replayed)."""
+    if not isinstance(family, SwerveAttack):
+        return ()
+    try:
+        schedule = family.lane_schedule(params)
+    except ConfigError:
+        return ()
+    cfg = campaign.config
+    start = cfg.attack_start_step
+    return tuple((start + lane_change_steps(t_s, cfg.step_s)) * cfg.step_s for t_s, _ in schedule)
 
 
 def _campaign_settings(campaign) -> dict[str, Any]:
@@ -115,6 +150,7 @@ def _campaign_settings(campaign) -> dict[str, Any]:
         attack=campaign.attack, optimizer=campaign.optimizer, seed=campaign.seed,
         delta_s=dict(campaign.attack_options).get("delta_s"), attack_start_s=start_s, system=cfg.system_label,
         maneuver=cfg.maneuver, step_s=cfg.step_s, end_s=start_s + cfg.duration_s, param_names=campaign.family().names,
+        signal_parameters=len(getattr(campaign.family(), "longitudinal", campaign.family()).parameters),
         scenario=scenario_of(cfg),
     )
 

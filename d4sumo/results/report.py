@@ -76,7 +76,7 @@ def describe(record: Record) -> str:
 
 def _sample_figure(record: Record, kind: str, fcd: dict, out: Path, speed_max_mps: float | None = None) -> Path:
     title = describe(record)
-    moments = dict(attack_start_s=record.attack_start_s, lane_change_s=record.lane_change_at_s)
+    moments = dict(attack_start_s=record.attack_start_s, lane_change_s=record.lane_changes_at_s)
     if kind == "time-space":
         return timespace.time_space(fcd, title, out, collision_of(record), speed_max_mps=speed_max_mps, **moments)
     return timespace.accelerations(fcd, title, out, collision_of(record), **moments)

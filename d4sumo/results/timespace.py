@@ -162,13 +162,15 @@ def _collision_lane(fcd: dict, collision: dict, lane_ids: list[str]) -> str:
     return lane_ids[0]
 
 
-def _mark_moments(ax, attack_start_s: float, lane_change_s: float | None) -> None:
-    """The attack's start after a warm-up, and the moment the attacker began its lane change."""
+def _mark_moments(ax, attack_start_s: float, lane_change_s: float | Sequence[float] | None) -> None:
+    """The attack's start after a warm-up, and the moments the attacker began its lane changes (one, or a
+    swerving attacker's several)."""
     if attack_start_s > 0:
         ax.axvline(attack_start_s, color="0.3", linestyle=":", linewidth=1, label=f"attack starts at {attack_start_s:g} s")
-    if lane_change_s is not None:
-        ax.axvline(lane_change_s, color="0.1", linestyle="-.", linewidth=1,
-                   label=f"attacker changes lane at {lane_change_s:.2f} s")
+    times = [] if lane_change_s is None else [lane_change_s] if isinstance(lane_change_s, (int, float)) else list(lane_change_s)
+    for i, t in enumerate(times):
+        label = (f"attacker changes lane at {', '.join(f'{x:.2f}' for x in times)} s" if i == 0 else None)
+        ax.axvline(t, color="0.1", linestyle="-.", linewidth=1, label=label)
 
 
 def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, speed_max_mps: float | None = None,

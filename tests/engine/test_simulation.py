@@ -366,7 +366,7 @@ def test_a_one_lane_road_has_no_room_for_a_lane_change():
     from d4sumo.engine.scenarios import build_road
     from d4sumo.engine.simulation import check_episode
 
-    with pytest.raises(ConfigError, match="at least 2 lanes .highway_1lane has 1") as e:
+    with pytest.raises(ConfigError, match="at least 2 lanes that lead on, the platoon's and those to its left .highway_1lane has 1.") as e:
         check_episode(EpisodeConfig(maneuver="cutin", network="highway_1lane"), build_road("highway_1lane"))
     assert e.value.field == "scenario.maneuver"
 

@@ -62,3 +62,21 @@ def test_simulate_says_the_lane_changes_the_attacker_made_before_the_episode_end
     assert summary["lane_changes"] == [{"time_s": 0.0, "lane": 1}, {"time_s": pytest.approx(6.65), "lane": 0}]
     assert main(argv) == 0
     assert "attacker's lane changes: to lane 1 at 0.00 s, to lane 0 at 6.65 s\n" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("lane_change_s, knots, most", [(2.0, 19, True), (1.0, 38, True), (0.0, 40, False)])
+def test_every_planned_lane_change_begins_at_its_step_and_knots_closer_than_a_change_are_refused(lane_change_s, knots, most):
+    """Regression: with lane knots as far apart as a change takes (2 s), SUMO played the first change alone,
+    not the plan searched. Knots a change and a step apart play as planned; closer ones are refused."""
+    from d4sumo.errors import ConfigError
+
+    config = EpisodeConfig(maneuver="swerve", start="steady", duration_s=40.0, swerve_knots=knots, lane_change_s=lane_change_s)
+    family = maneuver_of(config).family(make_attack("constant"))
+    x = [0.0] + [1.5 if j % 2 == 0 else 0.5 for j in range(knots)]  # lane 1, 0, 1, 0, ..
+    plan = attack_plan(family, x, config)
+    y = simulate(config, plan).trace["y_v0"]
+    began = [k for k in range(1, len(y)) if y[k] != y[k - 1] and (k == 1 or y[k - 1] == y[k - 2])]
+    assert began == [k + 1 for k, _ in plan.lane_changes] and len(began) == knots  # it moves in the step after
+    if most:  # one knot more is refused, naming the most that fit
+        with pytest.raises(ConfigError, match=rf"scenario.swerve_knots: got {knots + 1}; allowed: at most {knots} over the 40 s"):
+            EpisodeConfig(maneuver="swerve", duration_s=40.0, swerve_knots=knots + 1, lane_change_s=lane_change_s)

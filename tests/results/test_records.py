@@ -42,6 +42,25 @@ def test_the_lane_change_is_marked_only_when_it_began_before_the_episode_ended()
     assert _record([0] * 9, time_s=30.0).lane_change_at_s is None  # the paper's maneuver changes no lane
 
 
+def test_a_swerving_attackers_lane_changes_and_knots_are_read_apart_from_its_lanes(tmp_path):
+    """Regression: the cluster figure read a swerving attacker's lanes as knots after the last one; its
+    lane changes were never marked. Its records know which parameters are the knots, and when each lane
+    change began, those before the episode ended."""
+    from d4sumo.search.campaign import Campaign, open_store
+
+    config = EpisodeConfig(maneuver="swerve", start="warmup", warmup_s=5.0, duration_s=40.0, swerve_knots=4)
+    with open_store(tmp_path / "r.sqlite") as store:
+        cid = store.open_campaign(Campaign(config=config).definition(), 2)
+        lanes = (1.5, 0.5, 0.5, 1.2)  # lane 1 at 0 s, back to 0 at 10 s, out again at 30 s
+        store.add_sample(cid, 0, (0.1,) * 9 + lanes, 0.5, "success", {"pair": "v1-v2", "time_s": 25.0, "position_m": 300.0,
+                                                                       "speed_diff_kmh": 20.0}, {"v1-v2": -0.1}, 0.1, None)
+        store.add_sample(cid, 1, (0.1,) * 9 + lanes, -1.0, "no_crash", None, {"v1-v2": 5.0}, 0.1, None)
+    crashed, survived = load_records([tmp_path / "r.sqlite"])
+    assert crashed.signal_params == (0.1,) * 9 and crashed.swerve_changes_s == (5.0, 15.0, 35.0)
+    assert crashed.lane_changes_at_s == (5.0, 15.0) and survived.lane_changes_at_s == (5.0, 15.0, 35.0)
+    assert _record([0] * 10, maneuver="cutout").signal_params == (0,) * 10  # built by hand: every parameter
+
+
 def test_the_system_under_test_is_named_without_importing_a_users_controller():
     assert system_label({"controller": [{"class": "sumo:ACC", "tau": 0.5}, {"class": "switching"}, "sumo:IDM"]}) \
         == "sumo:ACC(tau=0.5) / switching / sumo:IDM"
