@@ -87,6 +87,9 @@ def test_a_sweep_grid_ranges_over_the_cut_in_target_follower_and_offset(tmp_path
         ("[grid\n", "valid TOML"),
         (TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC", {class = "sumo:ACC", tau = 0}]\n'), "Must be greater than 0"),
         (TINY.replace("[grid]\n", '[grid]\ncontroller = [["sumo:ACC", "switching"]]\n'), "one [[controller]] table per follower"),
+        # a table every campaign shares that one grid point cannot take: the point is named
+        (TINY.replace("[grid]\n", '[grid]\ncontroller = ["switching", "sumo:ACC"]\n') + "\n[radar]\ngap_noise_m = 0.5\n",
+         "grid point {'controller': 'sumo:ACC'"),
     ],
 )
 def test_a_bad_sweep_file_is_refused_before_anything_runs(tmp_path, text, message, capsys):

@@ -95,8 +95,12 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    attack = f"{campaign.config.maneuver}, {campaign.attack}" if campaign.config.maneuver_class.lateral else campaign.attack
-    print(f"campaign {summary.campaign_id} ({attack}, {campaign.optimizer}, seed {campaign.seed}) in {args.db}: {len(summary.samples)} samples")
+    config = campaign.config
+    attack = f"{config.maneuver}, {campaign.attack}" if config.maneuver_class.lateral else campaign.attack
+    where = f"lane {config.lane}, " if config.lane is not None else ""
+    sensing = "radar " + ", ".join(f"{k}={v:g}" for k, v in config.radar.to_dict().items()) + ", " if config.radar else ""
+    print(f"campaign {summary.campaign_id} ({attack}, {where}{sensing}{campaign.optimizer}, seed {campaign.seed}) in {args.db}: "
+          f"{len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     if top is not None:
         print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}")

@@ -102,7 +102,10 @@ class Sweep:
         campaigns, points, merged = [], {}, []
         for values in itertools.product(*grid.values()):
             point = {GRID_TO_KEY[k]: v for k, v in zip(grid, values)}
-            campaign = campaign_of(with_overrides(base, point))
+            try:
+                campaign = campaign_of(with_overrides(base, point))
+            except ConfigError as exc:  # one grid point's: say which
+                raise ConfigError(f"{source}: grid point {point}: {exc.field}", exc.given, exc.allowed) from None
             key = campaign_key(campaign.definition())
             if key in points:
                 if _unused_settings_only(points[key], point, campaign):  # inlane x cutin_offset_m: one inlane campaign
