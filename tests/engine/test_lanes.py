@@ -163,3 +163,16 @@ def test_the_example_acceleration_lane_shifts_the_platoons_lane_and_the_time_spa
     read = timespace.read_fcd(fcd, road.platoon_lanes)
     assert timespace.lanes(read) == ["0"]  # counted from the platoon's lane: one lane, one panel
     assert len(timespace.lanes(timespace.read_fcd(fcd))) == 2  # SUMO's indices: 0 and 1
+
+
+def test_a_roads_speed_limit_stays_what_stored_campaigns_were_played_with(tmp_path):
+    """Each edge's limit is its fastest lane's (SUMO's edge speed), the lowest along the route: what the
+    attacker was clamped to in every earlier version, whatever the lanes' own limits."""
+    folder = tmp_path / "road"
+    folder.mkdir()
+    (folder / "road.nod.xml").write_text(f"<nodes>{NODES}</nodes>")
+    (folder / "road.edg.xml").write_text(
+        '<edges><edge id="e1" from="a" to="b" numLanes="2" speed="40"><lane index="0" speed="30"/></edge>'
+        '<edge id="e2" from="b" to="c" numLanes="2" speed="38"/><edge id="e3" from="c" to="d" numLanes="2" speed="40"/></edges>')
+    road = build_road(str(folder), cache_dir=tmp_path / "cache")
+    assert road.speed_limit_mps == 38.0 and road.lane_path == ()
