@@ -95,7 +95,7 @@ def document(args: argparse.Namespace) -> tuple[dict, dict]:
         added = maneuver.added_parameters(scenario) if maneuver is not None else 0  # then t_lc_s, or the lanes
         count = len(flags["attack.params"]) - added
         if count < 1:
-            then = "t_lc_s" if added == 1 else f"lane_1 .. lane_{added}"
+            then = "t_lc_s" if name in ("cutin", "cutout") else f"lane_1 .. lane_{added}"
             raise ConfigError("--knots", knots, f"the knots, then {then} for maneuver {name} ({len(flags['attack.params'])} "
                                                 f"value{'s' if len(flags['attack.params']) != 1 else ''} given)")
         if isinstance(delta, (int, float)):

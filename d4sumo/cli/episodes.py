@@ -9,6 +9,7 @@ import sys
 from .. import __version__
 from ..errors import ConfigError, check_number
 from ..model.config import EpisodeConfig
+from ..model.sensing import RadarParams
 from .common import EXIT_DIFFERS, check_display, check_output_file, document, note_unused_flags
 
 
@@ -169,7 +170,7 @@ def _print_summary(s: dict, road_name: str) -> None:
     what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
     maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
     radar = s["config"].get("radar")
-    sensing = ", radar " + ", ".join(f"{k}={v:g}" for k, v in radar.items()) if radar else ""
+    sensing = f", radar {RadarParams.from_table(radar).label}" if radar else ""
     print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, "
           f"start {sc['start']}{maneuver}{sensing}; {what}")
     if s["lane_changes"]:

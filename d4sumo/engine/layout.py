@@ -15,7 +15,7 @@ from ..errors import ConfigError
 from ..model.vehicle import VEHICLE_CLASSES
 
 #: the version of a road's description: a cached one of another is described again
-LAYOUT = 2
+LAYOUT = 3
 OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles (one given: it does not lead on)
 
 
@@ -72,8 +72,12 @@ def _corridor(net_file: Path, chain, path: list[int]) -> dict:
     return {
         "lane_path": path,
         "lanes": lanes,
-        # each edge's limit (its fastest lane's, as SUMO's edge speed), lowest along the route: what the
-        # attacker is clamped to and the target speed is checked against, as for every stored campaign
+        # a junction where the platoon's lane joins several of the next edge's: SUMO picks one looking ahead a
+        # limited distance, which may not be the one that leads on (the episode then checks where it drives)
+        "forks": any(len(_next_lanes(e, p, to)) > 1 for e, p, to in zip(chain, path, chain[1:])),
+        "platoon_lane_width_m": min(e.getLanes()[p].getWidth() for e, p in zip(chain, path)),
+        # each edge's limit as sumolib reads it (its last lane's, the leftmost), lowest along the route:
+        # what the attacker is clamped to and the target speed is checked against, as for every stored campaign
         "speed_limit_mps": min(e.getSpeed() for e in chain),
         "even_lanes": _even_lanes(net_file, [e.getID() for e in chain], path, lanes),
         "lane_widths_m": sorted({lane.getWidth() for lane in in_corridor}),
@@ -86,8 +90,9 @@ def lane_path(chain, first: int) -> list[int]:
     connections without a lane change; shorter than the chain where that lane ends (a lane drop, an exit).
 
     Where a lane connects to several lanes of the next edge (a lane added beside it), the one that leads
-    on furthest is taken, the rightmost of those alike: SUMO's own choice (MSVehicle's best lanes), checked
-    against its FCD in the tests."""
+    on furthest is taken, the rightmost of those alike: SUMO's own choice (MSVehicle's best lanes) as far
+    as SUMO looks ahead, checked against its FCD in the tests. SUMO looks ahead a limited distance: where
+    it takes another lane, the episode says so (`sumo.SumoWorld`), never a verdict."""
     reach = _reach(chain)
     path = [first]
     for k, (edge, to) in enumerate(zip(chain, chain[1:])):

@@ -48,6 +48,9 @@ class Road:
     #: a lane on its right and an exit takes one away. A maneuver's lanes, and the fields above, count from
     #: it (0 the platoon's lane, 1 the one to its left); none: lane 0 all along
     lane_path: tuple[int, ...] = ()
+    #: whether the platoon's lane joins several lanes of the next edge at some junction: SUMO's cars may
+    #: then take another than the lane path, and each episode checks that they do not
+    forks: bool = False
 
     @property
     def platoon_lane(self) -> int:
@@ -124,6 +127,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lane_widths_m=tuple(corridor["lane_widths_m"]),
         closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in corridor["closed_to"]),
         lane_path=path if any(path) else (),
+        forks=corridor["forks"],
     )
 
 
@@ -148,7 +152,7 @@ def _with_earlier_keys(info: dict) -> dict:
     if any(corridor["lane_path"]):
         return info
     earlier = {key: corridor[key] for key in ("speed_limit_mps", "lanes", "even_lanes", "lane_widths_m", "closed_to")}
-    return {**info, **earlier, "lane_width_m": corridor["lane_widths_m"][0]}
+    return {**info, **earlier, "lane_width_m": corridor["platoon_lane_width_m"]}
 
 
 def _build(source: NetworkSource, net_file: Path, netconvert: str | None = None) -> None:

@@ -292,6 +292,39 @@ class _Lateral:
         return np.column_stack([self.y, *(np.full(len(self.y), y) for y in self.fixed_y)])
 
 
+class _LanePathCheck:
+    """That every car that keeps its lane drives the road's lane path (`Road.lane_path`), edge by edge.
+
+    Where the platoon's lane joins several lanes of the next edge, d4sumo takes the one that leads on
+    through the route; SUMO takes the one that leads on furthest within the distance it looks ahead, which
+    on a long enough route may be a lane that ends later on. A car there would stop at its end: a
+    collision of SUMO's doing, no verdict. The episode ends with a SumoError naming the car and the lanes."""
+
+    def __init__(self, api, config: EpisodeConfig, road: Road, platoons: list[tuple[str, ...]], maneuver):
+        path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+        offsets = [car.lane for car in maneuver.cars()]
+        keeping = [i for i in range(len(config.vehicle_ids)) if not (maneuver.lateral and i == 0)]  # the attacker changes
+        self.cars = [(vid, {edge: lane + offsets[i] for edge, lane in zip(road.route(e), path)}, e)
+                     for e, ids in enumerate(platoons) for i, vid in enumerate(ids) if i in keeping]
+        self.get_lane = vehicle_call(api, "getLaneID")
+        self.removed: set[int] = set()
+        self.name = road.name
+
+    def __call__(self) -> None:
+        for vid, expected, e in self.cars:
+            if e in self.removed:
+                continue
+            lane = self.get_lane(vid)
+            if lane.startswith(":"):  # a junction's lane
+                continue
+            edge, _, index = lane.rpartition("_")
+            if expected.get(edge, int(index)) != int(index):
+                raise SumoError(
+                    f"SUMO drove {vid.rpartition('.')[2]} into lane {lane} of {self.name}, not lane {expected[edge]} that "
+                    f"leads on through the route: where its lane joins several lanes of the next edge, SUMO looks ahead "
+                    f"a limited distance; name a shorter scenario.route, or a scenario.lane without such a junction")
+
+
 class SumoWorld:
     """Platoons in one running SUMO, as the step loop sees them: each episode's vehicle ids (``platoons``),
     fast bound calls to sense and command them, a step, and the removal of an ended episode's cars.
@@ -303,9 +336,16 @@ class SumoWorld:
         self.attacker_max_speed_mps = road.speed_limit_mps
         self.get_speed, self.set_speed = (vehicle_call(api, f) for f in ("getSpeed", "setSpeed"))
         self.get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
-        self.step = simulation_step(api)
         maneuver = maneuver_of(config)
         self.laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
+        step = simulation_step(api)
+        if road.forks:  # SUMO may take another lane than the path at a fork: each step checks it did not
+            check = _LanePathCheck(api, config, road, platoons, maneuver)
+            self.removed = check.removed
+            self.step = lambda: (step(), check())
+        else:
+            self.removed = set()
+            self.step = step
 
     def lanes(self, e: int) -> list[tuple[int, ...]]:
         """The lanes each car of episode ``e`` covers now (lane-changing maneuvers)."""
@@ -321,6 +361,7 @@ class SumoWorld:
 
     def remove(self, e: int) -> None:
         """An ended episode's cars leave: they cost SUMO nothing more."""
+        self.removed.add(e)
         for vid in self.platoons[e]:
             self.api.vehicle.remove(vid)
 

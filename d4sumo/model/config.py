@@ -332,7 +332,7 @@ class EpisodeConfig:
         for car, differs in self.vehicles:
             label += f"; {car}: " + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in differs)
         if self.radar is not None:
-            label += "; radar: " + ", ".join(f"{k}={v:g}" for k, v in self.radar.to_dict().items())
+            label += "; radar: " + self.radar.label
         return label
 
     @property

@@ -275,10 +275,10 @@ class Swerve(LaneChange):
 
     @classmethod
     def check(cls, config: EpisodeSettings) -> None:
-        # SUMO starts a change only once the one before is done: knots closer than a change takes would
-        # play another plan than the one searched (measured: with knots as far apart as a change takes,
-        # SUMO played the first change alone)
-        needed = lane_change_steps(config.lane_change_s, config.step_s) + 1
+        # SUMO starts a change only once the one before is done, and moves one lane a change: knots closer
+        # than the widest move takes would play another plan than the one searched (measured: with knots
+        # as far apart as a change takes, SUMO played the first change alone)
+        needed = (lane_change_steps(config.lane_change_s, config.step_s) + 1) * (config.swerve_lanes - 1)
 
         def fits(knots: int) -> bool:
             steps = [lane_change_steps(t, config.step_s) for t in swerve_knot_times(config.duration_s, knots)]
@@ -286,9 +286,10 @@ class Swerve(LaneChange):
 
         if not fits(config.swerve_knots):
             most = max(k for k in range(1, config.swerve_knots) if fits(k))
+            widest = f"{config.swerve_lanes - 1} lane changes" if config.swerve_lanes > 2 else "a lane change"
             raise ConfigError("scenario.swerve_knots", config.swerve_knots,
-                              f"at most {most} over the {config.duration_s:g} s attack: lane knots at least a lane change "
-                              f"(scenario.lane_change_s, {config.lane_change_s:g} s) and a step apart")
+                              f"at most {most} over the {config.duration_s:g} s attack: lane knots at least {widest} "
+                              f"(scenario.lane_change_s, {config.lane_change_s:g} s each) and a step apart")
 
     @classmethod
     def lanes_for(cls, config: EpisodeSettings) -> int:
@@ -297,7 +298,7 @@ class Swerve(LaneChange):
     @classmethod
     def added_parameters(cls, scenario: dict) -> int:
         knots = scenario.get("swerve_knots", SWERVE_KNOTS)
-        return knots if isinstance(knots, int) else 0  # a bad one is refused with the configuration
+        return knots if isinstance(knots, int) and 1 <= knots <= 50 else 0  # a bad one is refused with the configuration
 
     def family(self, longitudinal: AttackFamily) -> AttackFamily:
         return SwerveAttack(longitudinal, self.config.duration_s, self.config.swerve_knots, self.config.swerve_lanes)
@@ -322,32 +323,41 @@ def maneuver_of(config: EpisodeSettings) -> Maneuver:
 LANE_CHANGE_PARAMETER = "t_lc_s"
 
 
-class LaneChangeAttack(AttackFamily):
-    """A longitudinal attack family plus the time of the attacker's lane change, `LANE_CHANGE_PARAMETER`
-    (found in the box by its name). Its name and options stay the longitudinal family's."""
+class ManeuverAttack(AttackFamily):
+    """A longitudinal attack family plus the parameters a maneuver adds after its own (``added``, laid out
+    in time as ``added_signals``). Its name and options stay the longitudinal family's; its signal is
+    the longitudinal family's, of the first parameters."""
 
-    def __init__(self, longitudinal: AttackFamily, window_s: float):
+    def __init__(self, longitudinal: AttackFamily, added: tuple[Parameter, ...], added_signals: tuple[int, ...]):
         self.longitudinal = longitudinal
         self.name = longitudinal.name
         self.options = longitudinal.options
-        self.parameters = (*longitudinal.parameters, Parameter(LANE_CHANGE_PARAMETER, 0.0, float(window_s), "s"))
-        self._lane_change = self.names.index(LANE_CHANGE_PARAMETER)
-        self._signal_index = [i for i in range(self.dimension) if i != self._lane_change]
+        self.parameters = (*longitudinal.parameters, *added)
+        self._first_added = len(longitudinal.parameters)
+        self._added_signals = added_signals
 
     @property
-    def signals(self) -> tuple[int, ...]:  # the lane change's time is a scalar after the longitudinal ones
-        return (*self.longitudinal.signals, 1)
+    def signals(self) -> tuple[int, ...]:
+        return (*self.longitudinal.signals, *self._added_signals)
 
     def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return self.longitudinal._signal(x[self._signal_index], t)
-
-    def lane_change_s(self, params) -> float:
-        return float(self.check(params)[self._lane_change])
+        return self.longitudinal._signal(x[:self._first_added], t)
 
     def describe(self) -> dict:
         d = self.longitudinal.describe()
         d["parameters"] = [p.__dict__ for p in self.parameters]
         return d
+
+
+class LaneChangeAttack(ManeuverAttack):
+    """A longitudinal attack family plus the time of the attacker's lane change, `LANE_CHANGE_PARAMETER`:
+    a scalar after the longitudinal ones."""
+
+    def __init__(self, longitudinal: AttackFamily, window_s: float):
+        super().__init__(longitudinal, (Parameter(LANE_CHANGE_PARAMETER, 0.0, float(window_s), "s"),), (1,))
+
+    def lane_change_s(self, params) -> float:
+        return float(self.check(params)[self._first_added])
 
 
 def swerve_knot_times(window_s: float, knots: int) -> list[float]:
@@ -355,46 +365,37 @@ def swerve_knot_times(window_s: float, knots: int) -> list[float]:
     return [j * float(window_s) / knots for j in range(knots)]
 
 
-class SwerveAttack(AttackFamily):
+class SwerveAttack(ManeuverAttack):
     """A longitudinal attack family plus a swerving attacker's lanes: ``lane_1`` .. ``lane_K``, the lane it
     is in from each of K times spread evenly over the attack window on (``lane_j`` from (j - 1) x window / K
-    s), each a number in [0, lanes] read as its whole part (``lanes`` reads as the leftmost, lanes - 1).
-    Its name and options stay the longitudinal family's."""
+    s), each a number in [0, lanes] read as its whole part (``lanes`` reads as the leftmost, lanes - 1):
+    one signal after the longitudinal ones."""
 
     def __init__(self, longitudinal: AttackFamily, window_s: float, knots: int, lanes: int):
-        self.longitudinal = longitudinal
-        self.name = longitudinal.name
-        self.options = longitudinal.options
+        added = tuple(Parameter(f"lane_{j}", 0.0, float(lanes), "(its whole part the lane: 0 the platoon's)")
+                      for j in range(1, knots + 1))
+        super().__init__(longitudinal, added, (knots,))
         self.knots, self.lanes = knots, lanes
         self.knot_times_s = swerve_knot_times(window_s, knots)
-        self.parameters = (*longitudinal.parameters,
-                           *(Parameter(f"lane_{j}", 0.0, float(lanes), "(its whole part the lane: 0 the platoon's)")
-                             for j in range(1, knots + 1)))
-        self._first_lane = len(longitudinal.parameters)
-
-    @property
-    def signals(self) -> tuple[int, ...]:  # the lanes over time: one signal after the longitudinal ones
-        return (*self.longitudinal.signals, self.knots)
-
-    def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return self.longitudinal._signal(x[:self._first_lane], t)
 
     def lane_schedule(self, params) -> list[tuple[float, int]]:
         """The attacker's lane changes: (seconds from the attack's start, the lane it changes to), one where
         a knot's lane differs from the one before (the platoon's lane, 0, before the first)."""
         x = self.check(params)
         changes, lane = [], 0
-        for t_s, value in zip(self.knot_times_s, x[self._first_lane:]):
+        for t_s, value in zip(self.knot_times_s, x[self._first_added:]):
             wanted = min(int(math.floor(value)), self.lanes - 1)
             if wanted != lane:
                 changes.append((t_s, wanted))
                 lane = wanted
         return changes
 
-    def describe(self) -> dict:
-        d = self.longitudinal.describe()
-        d["parameters"] = [p.__dict__ for p in self.parameters]
-        return d
+    def change_steps(self, params, config: EpisodeSettings) -> list[tuple[int, int]]:
+        """The lane changes as steps of an episode: (the step at whose start each begins, its lane), those
+        that begin before the episode's last step."""
+        start = config.attack_start_step
+        steps = [(start + lane_change_steps(t_s, config.step_s), lane) for t_s, lane in self.lane_schedule(params)]
+        return [(k, lane) for k, lane in steps if k < config.steps]
 
 
 @dataclass(frozen=True)
@@ -422,9 +423,7 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
 
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
     if isinstance(family, SwerveAttack):
-        steps = [(config.attack_start_step + lane_change_steps(t_s, config.step_s), lane)
-                 for t_s, lane in family.lane_schedule(params)]
-        return AttackPlan(u, lane_changes=tuple((k, lane) for k, lane in steps if k < config.steps))
+        return AttackPlan(u, lane_changes=tuple(family.change_steps(params, config)))
     t_lc_s = family.lane_change_s(params) if family is not None else None
     if t_lc_s is None:
         return AttackPlan(u)

@@ -6,8 +6,9 @@ radar does:
 - a range: a car ahead beyond it is not seen (a free road: `maneuvers.FREE_ROAD_GAP_M`, and the car's
   own speed for the speed ahead, as with nobody ahead);
 - noise: Gaussian, on the gap and on the speed of the car ahead, drawn from a generator seeded by the
-  [radar] table's seed and the car, so every episode of a configuration meets the same noise and a
-  replay reproduces it;
+  [radar] table's seed and the car: the same sequence of draws in every episode of a configuration, one
+  pair for each reading of a car in range (the noise at a step depends on how many readings came before), so
+  a replay reproduces it;
 - latency: the controller gets the reading of ``latency_s`` ago (a whole number of steps; the first
   reading until there is one that old); its own speed it knows at once.
 
@@ -64,6 +65,11 @@ class RadarParams:
         defaults = RadarParams()
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                 if getattr(self, f.name) != getattr(defaults, f.name)}
+
+    @property
+    def label(self) -> str:
+        """What differs from the perfect radar, in a few words: ``gap_noise_m=0.5, latency_s=0.2``."""
+        return ", ".join(f"{k}={v:g}" for k, v in self.to_dict().items())
 
     @property
     def perfect(self) -> bool:

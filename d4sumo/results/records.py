@@ -52,8 +52,8 @@ class Record:
     param_names: tuple[str, ...] = ()  # the attack parameters' names, as the family (and maneuver) name them
     #: how many of them are the signal family's (the knots), before what the maneuver adds (t_lc_s, lanes); 0: all
     signal_parameters: int = 0
-    #: a swerving attacker's lane changes as planned, when each begins in simulation time (`lane_changes_at_s`)
-    swerve_changes_s: tuple[float, ...] = ()
+    #: a swerving attacker's lane changes as planned: the step at whose start each begins (`lane_changes_at_s`)
+    swerve_change_steps: tuple[int, ...] = ()
     #: the campaign's scenario: its [scenario] keys as stored (a key without effect is not), but GRID_KEYS;
     #: campaigns of different scenarios are never pooled (`analysis.scenario_labels`)
     scenario: tuple[tuple[str, Any], ...] = ()
@@ -79,8 +79,8 @@ class Record:
         once = self.lane_change_at_s
         if once is not None:
             return (once,)
-        end = self.end_s if self.time_s is None else self.time_s
-        return tuple(t for t in self.swerve_changes_s if t < end)
+        played = round((self.end_s if self.time_s is None else self.time_s) / self.step_s)  # steps, as the episode counts
+        return tuple(k * self.step_s for k in self.swerve_change_steps if k < played)
 
     @property
     def signal_params(self) -> tuple[float, ...]:
@@ -119,7 +119,8 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                 records.append(Record(
                     db=str(path), sample_id=s.id, campaign_id=s.campaign_id, params=s.params, robustness=s.robustness,
                     outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
-                    speed_diff_kmh=s.speed_diff_kmh, swerve_changes_s=_swerve_changes(families[s.campaign_id], s.params, c),
+                    speed_diff_kmh=s.speed_diff_kmh,
+                    swerve_change_steps=_swerve_change_steps(families[s.campaign_id], s.params, c.config),
                     **settings[s.campaign_id],
                 ))
     if not records:
@@ -127,18 +128,15 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
     return records
 
 
-def _swerve_changes(family, params, campaign) -> tuple[float, ...]:
-    """When a swerving attacker's planned lane changes begin, in simulation time (none for other maneuvers,
-    or parameters the family refuses: a damaged row is said where it is replayed)."""
+def _swerve_change_steps(family, params, config) -> tuple[int, ...]:
+    """The steps at which a swerving attacker's planned lane changes begin (none for other maneuvers, or
+    parameters the family refuses: a damaged row is said where it is replayed)."""
     if not isinstance(family, SwerveAttack):
         return ()
     try:
-        schedule = family.lane_schedule(params)
+        return tuple(k for k, _ in family.change_steps(params, config))
     except ConfigError:
         return ()
-    cfg = campaign.config
-    start = cfg.attack_start_step
-    return tuple((start + lane_change_steps(t_s, cfg.step_s)) * cfg.step_s for t_s, _ in schedule)
 
 
 def _campaign_settings(campaign) -> dict[str, Any]:

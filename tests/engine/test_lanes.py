@@ -176,3 +176,30 @@ def test_a_roads_speed_limit_stays_what_stored_campaigns_were_played_with(tmp_pa
         '<edge id="e2" from="b" to="c" numLanes="2" speed="38"/><edge id="e3" from="c" to="d" numLanes="2" speed="40"/></edges>')
     road = build_road(str(folder), cache_dir=tmp_path / "cache")
     assert road.speed_limit_mps == 38.0 and road.lane_path == ()
+
+
+def test_where_sumo_looks_ahead_less_far_than_the_route_the_episode_stops_with_one_line_never_a_verdict(tmp_path):
+    """Regression: one lane joins two, of which the right one ends 3 km on. d4sumo's lane path takes the
+    left one, which leads on; SUMO, looking ahead less far, put the cars in the right one, and they hit
+    its end: 'attacker_crash' with no attack at all. Now the first car off the path ends the episode
+    with a SumoError naming it and both lanes."""
+    from d4sumo.errors import SumoError
+
+    folder = tmp_path / "far"
+    folder.mkdir()
+    nodes = "".join(f'<node id="n{i}" x="{300 * i}" y="0"/>' for i in range(13))
+    edges = "".join(f'<edge id="e{i}" from="n{i}" to="n{i + 1}" numLanes="{1 if i in (0, 11) else 2}" speed="40"/>'
+                    for i in range(12))
+    (folder / "road.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
+    (folder / "road.edg.xml").write_text(f"<edges>{edges}</edges>")
+    road = build_road(str(folder), cache_dir=tmp_path / "cache")
+    assert road.lane_path == (0,) + (1,) * 10 + (0,) and road.forks
+    config = EpisodeConfig(network=str(folder), speed_mps=38.0, start="steady", duration_s=80.0, followers=2)
+    with pytest.raises(SumoError, match=r"SUMO drove v\d into lane e1_0 of .*far, not lane 1 that leads on through the "
+                                        r"route: .*name a shorter scenario.route"):
+        simulate(config, np.full(config.steps, np.nan), road=road)
+    plans = random_plans(config, 2, seed=0)
+    with pytest.raises(SumoError, match="into lane c\\d_e1_0"):  # in a batch too, on its copy of the road
+        simulate_batch(config, plans)
+    # the roads SUMO drives as d4sumo reads them are checked too, and play (the forks above: a lane added)
+    assert build_road(str(_road_folder(tmp_path / "widen", (2, 4, 2))), cache_dir=tmp_path / "cache").forks

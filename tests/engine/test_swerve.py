@@ -80,3 +80,20 @@ def test_every_planned_lane_change_begins_at_its_step_and_knots_closer_than_a_ch
     if most:  # one knot more is refused, naming the most that fit
         with pytest.raises(ConfigError, match=rf"scenario.swerve_knots: got {knots + 1}; allowed: at most {knots} over the 40 s"):
             EpisodeConfig(maneuver="swerve", duration_s=40.0, swerve_knots=knots + 1, lane_change_s=lane_change_s)
+
+
+def test_a_jump_of_two_lanes_is_two_changes_and_its_knots_are_spaced_for_both():
+    """Regression: knots one change apart were accepted with three lanes, and a plan 0, 2, 0, 2 played as
+    1, 2, 1, 2: SUMO moves one lane a change. Knots must now be two changes apart, and such a plan plays."""
+    from d4sumo.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"scenario.swerve_knots: got 9; allowed: at most 4 over the 20 s attack: "
+                                          r"lane knots at least 2 lane changes"):
+        EpisodeConfig(maneuver="swerve", swerve_lanes=3, swerve_knots=9, duration_s=20.0)
+    config = EpisodeConfig(maneuver="swerve", start="steady", swerve_lanes=3, swerve_knots=4, duration_s=20.0)
+    family = maneuver_of(config).family(make_attack("constant"))
+    plan = attack_plan(family, [0.0, 2.5, 0.5, 2.5, 0.5], config)
+    assert plan.lane_changes == ((0, 2), (100, 0), (200, 2), (300, 0))
+    y = simulate(config, plan).trace["y_v0"]
+    lanes = [occupied_lanes(v, 3.2) for v in y]
+    assert [lanes[k] for k in (99, 199, 299, 399)] == [(2,), (0,), (2,), (0,)]  # each jump done before the next knot

@@ -56,7 +56,7 @@ def test_a_swerving_attackers_lane_changes_and_knots_are_read_apart_from_its_lan
                                                                        "speed_diff_kmh": 20.0}, {"v1-v2": -0.1}, 0.1, None)
         store.add_sample(cid, 1, (0.1,) * 9 + lanes, -1.0, "no_crash", None, {"v1-v2": 5.0}, 0.1, None)
     crashed, survived = load_records([tmp_path / "r.sqlite"])
-    assert crashed.signal_params == (0.1,) * 9 and crashed.swerve_changes_s == (5.0, 15.0, 35.0)
+    assert crashed.signal_params == (0.1,) * 9 and crashed.swerve_change_steps == (100, 300, 700)
     assert crashed.lane_changes_at_s == (5.0, 15.0) and survived.lane_changes_at_s == (5.0, 15.0, 35.0)
     assert _record([0] * 10, maneuver="cutout").signal_params == (0,) * 10  # built by hand: every parameter
 
