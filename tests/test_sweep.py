@@ -685,6 +685,15 @@ def test_a_local_dask_worker_ignores_ctrl_c_and_the_interrupted_sync_error_is_dr
         assert dask_cluster._interrupted_sync(record(exc)) is False
     assert dask_cluster._interrupted_sync(record(NameError("another"))) is True
     assert dask_cluster._interrupted_sync(logging.LogRecord("x", logging.ERROR, __file__, 1, "m", None, None)) is True
+    # regression: after kill -9 of the sweep, a worker of a loaded machine logged the heartbeat it could not
+    # send to the scheduler (the sweep's process), with its traceback
+    lost = logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1,
+                             "Failed to communicate with scheduler during heartbeat.", None, None)
+    assert dask_cluster._scheduler_lost(lost) is False
+    assert dask_cluster._scheduler_lost(logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, "m", None, None))
+    worker_log = logging.getLogger("distributed.worker")
+    assert dask_cluster._scheduler_lost in worker_log.filters
+    worker_log.removeFilter(dask_cluster._scheduler_lost)
 
 
 _INTERRUPTED = """

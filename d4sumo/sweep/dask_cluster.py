@@ -76,9 +76,17 @@ def _dask_client(address: str, timeout_s: float, workers: int):
 def dask_setup(worker) -> None:
     """Run by each worker of a local cluster as it starts (its ``preload``): it ignores Ctrl-C. The terminal
     sends Ctrl-C to the whole process group, the workers with it; the sweep takes it and closes them in
-    order, where each worker's own KeyboardInterrupt printed pages of tracebacks."""
+    order, where each worker's own KeyboardInterrupt printed pages of tracebacks. And it does not log the
+    scheduler it lost: a local cluster's scheduler is the sweep's process, which a kill -9 ends before its
+    workers (on a loaded machine one lived to print the heartbeat it could not send, with its traceback)."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(_scheduler_lost)
+
+
+def _scheduler_lost(record: logging.LogRecord) -> bool:
+    """False for a local worker's log of the scheduler it can no longer reach."""
+    return "communicate with scheduler" not in record.getMessage()
 
 
 def _run_dask(todo: list[_Active], store_results, client) -> None:
