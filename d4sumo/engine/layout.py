@@ -43,7 +43,8 @@ def describe(net_file: Path, name: str) -> dict:
         if not 0 < lane.getSpeed() < math.inf:
             raise ConfigError("scenario.network", name,
                               f"speed limits that are positive numbers of m/s (lane {lane.getID()}: {lane.getSpeed()})")
-    paths = [lane_path(chain, i) for i in range(chain[0].getLaneNumber())]
+    reach = _reach(chain)
+    paths = [lane_path(chain, i, reach) for i in range(chain[0].getLaneNumber())]
     through = [path for path in paths if len(path) == len(chain)]
     if not through:
         furthest = max(range(len(paths)), key=lambda i: (len(paths[i]), -i))
@@ -51,7 +52,7 @@ def describe(net_file: Path, name: str) -> dict:
         raise ConfigError("scenario.network", name,
                           f"a road with a lane that leads on through every junction (none of {chain[0].getID()}'s does: the "
                           f"furthest, lane {furthest}, ends on {end.getID()} as lane {paths[furthest][-1]}); "
-                          f"{_longest_piece(chain)}")
+                          f"{_longest_piece(chain, reach)}")
     corridors = {str(path[0]): _corridor(net_file, chain, path) for path in through}
     return {
         "layout": LAYOUT,
@@ -85,15 +86,14 @@ def _corridor(net_file: Path, chain, path: list[int]) -> dict:
     }
 
 
-def lane_path(chain, first: int) -> list[int]:
+def lane_path(chain, first: int, reach: list[list[int]]) -> list[int]:
     """The lane a car in lane ``first`` of the chain's first edge is in on each edge, following SUMO's
     connections without a lane change; shorter than the chain where that lane ends (a lane drop, an exit).
 
     Where a lane connects to several lanes of the next edge (a lane added beside it), the one that leads
     on furthest is taken, the rightmost of those alike: SUMO's own choice (MSVehicle's best lanes) as far
     as SUMO looks ahead, checked against its FCD in the tests. SUMO looks ahead a limited distance: where
-    it takes another lane, the episode says so (`sumo.SumoWorld`), never a verdict."""
-    reach = _reach(chain)
+    it takes another lane, the episode says so (`sumo.SumoWorld`), never a verdict. ``reach``: `_reach`'s."""
     path = [first]
     for k, (edge, to) in enumerate(zip(chain, chain[1:])):
         onward = _next_lanes(edge, path[-1], to)
@@ -160,9 +160,8 @@ def _even_lanes(net_file: Path, route: list[str], path: list[int], lanes: int) -
     return True
 
 
-def _longest_piece(chain) -> str:
-    """The longest run of the chain's edges along which some lane leads on, as a route to take."""
-    reach = _reach(chain)
+def _longest_piece(chain, reach: list[list[int]]) -> str:
+    """The longest run of the chain's edges along which some lane leads on (``reach``: `_reach`'s), as a route to take."""
     best = max(range(len(chain)), key=lambda s: sum(e.getLength() for e in chain[s:max(reach[s]) + 1]))
     piece = chain[best:max(reach[best]) + 1]
     route = ", ".join(f'"{e.getID()}"' for e in piece)
