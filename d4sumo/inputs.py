@@ -96,6 +96,11 @@ def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict
                 raise ConfigError("controller", _short(value), "a controller name, a table, or a list of them (one per follower)")
             out["controller"] = {"class": value} if isinstance(value, str) else copy.deepcopy(value)
             continue
+        if dotted == "radar":  # a whole [radar] table (a sweep's grid.radar point; {} the perfect one)
+            if not isinstance(value, Mapping):
+                raise ConfigError("radar", _short(value), "a [radar] table, e.g. {gap_noise_m = 0.5, latency_s = 0.2}")
+            out["radar"] = copy.deepcopy(dict(value))
+            continue
         if len(parts) < 2 or parts[0] not in SECTIONS or not all(parts):
             raise ConfigError(dotted, _short(value), f"a key as TABLE.KEY with TABLE one of {', '.join(SECTIONS)}")
         if parts[0] == "controller" and isinstance(out.get("controller"), list):

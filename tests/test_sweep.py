@@ -71,6 +71,15 @@ def test_a_sweep_grid_ranges_over_the_cut_in_target_follower_and_offset(tmp_path
         Sweep.load(write(tmp_path, TINY.replace("[grid]\n", "[grid]\ncutin_follower = [1, 2]\n", 1)))
 
 
+def test_a_sweep_grid_ranges_over_radars_each_a_whole_table_the_empty_one_perfect(tmp_path):
+    grid = '[grid]\nradar = [{}, {gap_noise_m = 0.5, latency_s = 0.2}]\n'
+    sweep = Sweep.load(write(tmp_path, TINY.replace("[grid]\n", grid, 1)))
+    radars = [c.config.radar for c in sweep.campaigns]
+    assert len(radars) == 8 and radars.count(None) == 4
+    assert {r.label for r in radars if r is not None} == {"gap_noise_m=0.5, latency_s=0.2"}
+    assert all("radar" not in c.definition()["config"] for c in sweep.campaigns if c.config.radar is None)
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
@@ -90,6 +99,10 @@ def test_a_sweep_grid_ranges_over_the_cut_in_target_follower_and_offset(tmp_path
         # a table every campaign shares that one grid point cannot take: the point is named
         (TINY.replace("[grid]\n", '[grid]\ncontroller = ["switching", "sumo:ACC"]\n') + "\n[radar]\ngap_noise_m = 0.5\n",
          "grid point {'controller': 'sumo:ACC'"),
+        (TINY.replace("[grid]\n", '[grid]\nradar = [{gap_noise_m = 0.5}]\n') + "\n[radar]\nlatency_s = 0.1\n",
+         "no [radar] table beside grid.radar"),
+        (TINY.replace("[grid]\n", '[grid]\nradar = [5]\n'), "radar: got 5; allowed: a [radar] table"),
+        (TINY.replace("[grid]\n", '[grid]\nradar = [{noise = 1}]\n'), "radar.noise: got 1"),
     ],
 )
 def test_a_bad_sweep_file_is_refused_before_anything_runs(tmp_path, text, message, capsys):
