@@ -218,7 +218,7 @@ def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool) -> tuple[np.ndarr
 def fcd_lanes_differ(config: EpisodeConfig, road, lanes: dict[str, list[str]]) -> bool:
     """Whether a car that keeps its lane (every car in-lane; the followers in a lane change) drove other
     lanes than the road's lane path (`Road.lane_path`) edge by edge."""
-    path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+    path = road.platoon_path
     expected = [f"{edge}_{lane}" for edge, lane in zip(road.route_edges, path)]
     keeping = config.vehicle_ids[1:config.followers + 1] if config.maneuver_class.lateral else config.vehicle_ids
     return any(lanes[vid] != expected[:len(lanes[vid])] for vid in keeping)

@@ -58,6 +58,11 @@ class Road:
         return self.lane_path[0] if self.lane_path else 0
 
     @property
+    def platoon_path(self) -> tuple[int, ...]:
+        """The platoon's lane on every edge of the route (SUMO's index), whether or not it changes."""
+        return self.lane_path or (self.platoon_lane,) * len(self.route_edges)
+
+    @property
     def platoon_lanes(self) -> dict[str, int] | None:
         """The platoon's lane on each edge of the route, by edge, where its index changes along it, else None."""
         return dict(zip(self.route(), self.lane_path)) if self.lane_shifts else None

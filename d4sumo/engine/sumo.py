@@ -301,7 +301,7 @@ class _LanePathCheck:
     collision of SUMO's doing, no verdict. The episode ends with a SumoError naming the car and the lanes."""
 
     def __init__(self, api, config: EpisodeConfig, road: Road, platoons: list[tuple[str, ...]], maneuver):
-        path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+        path = road.platoon_path
         offsets = [car.lane for car in maneuver.cars()]
         keeping = [i for i in range(len(config.vehicle_ids)) if not (maneuver.lateral and i == 0)]  # the attacker changes
         self.cars = [(vid, {edge: lane + offsets[i] for edge, lane in zip(road.route(e), path)}, e)

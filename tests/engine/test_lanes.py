@@ -56,7 +56,7 @@ def fcd_lanes(path: Path) -> dict[str, list[str]]:
 
 def assert_drives_the_lane_path(fcd: Path, road, offsets: dict[str, int] | None = None) -> None:
     """Every car drives the road's lane path (plus its maneuver lane, ``offsets``) edge by edge, as far as it got."""
-    path = road.lane_path or (road.platoon_lane,) * len(road.route_edges)
+    path = road.platoon_path
     expected = [f"{edge}_{lane}" for edge, lane in zip(road.route_edges, path)]
     lanes = fcd_lanes(fcd)
     assert lanes
@@ -76,7 +76,7 @@ def assert_drives_the_lane_path(fcd: Path, road, offsets: dict[str, int] | None 
 def test_sumos_cars_drive_the_lane_path_where_lanes_are_added_and_dropped(tmp_path, lanes, lane, path):
     road_dir = _road_folder(tmp_path / "road", lanes)
     road = build_road(str(road_dir), cache_dir=tmp_path / "cache", lane=lane)
-    assert (road.lane_path or (road.platoon_lane,) * 3) == path
+    assert road.platoon_path == path
     config = EpisodeConfig(network=str(road_dir), lane=lane, speed_mps=35.0, start="steady", duration_s=85.0, followers=2)
     fcd = tmp_path / "fcd.xml"
     episode = simulate(config, np.full(config.steps, np.nan), road=road, fcd_path=fcd)
