@@ -11,6 +11,8 @@ A document is the tables of a config file:
                  parameters; [[controller]] tables (one per follower, v1 first) for a mixed platoon
     [radar]      range_m, gap_noise_m, speed_noise_mps, latency_s, seed: what the followers' controllers
                  measure of the car ahead (none: the truth)
+    [traffic]    vehicles_per_hour, warmup_s, clear_m, seed, [traffic.types.NAME] (share and SUMO <vType>
+                 attributes): SUMO's traffic around the platoon (none: it drives alone)
     [attack]     family, params (simulate only), and the families' options (knots: delta_s, horizon_s)
     [spec]       d_safe_m, formula
     [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
@@ -30,20 +32,21 @@ import numpy as np
 
 from .errors import ConfigError, is_number
 from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from .model.config import EpisodeConfig, VehicleParams, read_toml
+from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
 from .model.sensing import RadarParams
+from .model.traffic import TrafficParams
 from .model.maneuvers import maneuver_of
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
 
-SECTIONS = ("scenario", "vehicle", "controller", "radar", "attack", "spec", "search")
-SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig)
-                      if f.name not in ("vehicle", "vehicles", "controller", "radar"))
+SECTIONS = ("scenario", "vehicle", "controller", "radar", "traffic", "attack", "spec", "search")
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in TABLES)
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "scenario": SCENARIO_KEYS,
     "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
     "radar": tuple(f.name for f in dataclasses.fields(RadarParams)),
+    "traffic": tuple(f.name for f in dataclasses.fields(TrafficParams)),
     "attack": ("family", "params", *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
@@ -100,6 +103,14 @@ def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict
             if not isinstance(value, Mapping):
                 raise ConfigError("radar", _short(value), "a [radar] table, e.g. {gap_noise_m = 0.5, latency_s = 0.2}")
             out["radar"] = copy.deepcopy(dict(value))
+            continue
+        if dotted == "traffic":  # a whole [traffic] table (a sweep's grid.traffic point; {} none: the platoon alone)
+            if not isinstance(value, Mapping):
+                raise ConfigError("traffic", _short(value), "a [traffic] table, e.g. {vehicles_per_hour = 1200}")
+            if value:
+                out["traffic"] = copy.deepcopy(dict(value))
+            else:
+                out.pop("traffic", None)
             continue
         if len(parts) < 2 or parts[0] not in SECTIONS or not all(parts):
             raise ConfigError(dotted, _short(value), f"a key as TABLE.KEY with TABLE one of {', '.join(SECTIONS)}")

@@ -2,7 +2,10 @@
 
 Plays N random episodes (on the shipped 4-lane highway, in lane 0, 1 or 2, and on roads of several edges: a
 speed change, a lane drop, a curve, an acceleration lane, a route through netgenerate's grid, SUMO's own
-Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
+Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in seven in-lane
+episodes among SUMO's traffic on the 4-lane highway (densities, warm-ups, clearances, seeds and mixes of
+car-following models and trucks drawn: who follows whom from the FCD is then the nearest car in the lane, a
+traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
@@ -29,7 +32,7 @@ campaign stores a sample, and counts the samples where any of these disagree:
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-Usage: python tools/check_invariants.py [N] [--seed S] [--batch K]. Prints the counts; exits 1 if any is
+Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P]. Prints the counts; exits 1 if any is
 non-zero.
 """
 
@@ -117,6 +120,10 @@ SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), Controlle
            ControllerConfig("sumo:CACC")]
 
 
+#: the share of in-lane episodes played among traffic (--traffic)
+TRAFFIC_SHARE = [0.15]
+
+
 def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     while True:  # a draw the config refuses (an obstacle the warm-up would reach) is drawn again
         try:
@@ -152,6 +159,9 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
             range_m=float(rng.choice([np.inf, 60.0, 150.0])), gap_noise_m=float(rng.choice([0.0, 0.2, 1.0])),
             speed_noise_mps=float(rng.choice([0.0, 0.1, 0.5])), latency_s=float(rng.choice([0.0, 0.1, 0.3])),
             seed=int(rng.integers(0, 1000))))
+    if not maneuver and rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
+        config = dataclasses.replace(config, network="highway_4lane", route=(), duration_s=60.0, start="steady",
+                                     traffic=traffic_table(rng))
     if rng.random() < 0.25:  # a platoon of different vehicles: a truck, a bus or a small car among the cars
         cars = rng.choice(config.vehicle_ids, size=int(rng.integers(1, min(3, len(config.vehicle_ids)) + 1)), replace=False)
         config = dataclasses.replace(config, vehicles={str(car): vehicle_table(rng) for car in cars})
@@ -161,6 +171,20 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
+
+
+#: the traffic's vehicle types drawn from, and their lengths [m] (SUMO's passenger car is 5 m)
+TRAFFIC_TYPES = {"car": {"share": 0.8, "speedDev": 0.1}, "truck": {"share": 0.2, "vClass": "truck", "length": 12.0, "maxSpeed": 25.0},
+                 "idm": {"share": 0.5, "carFollowModel": "IDM", "tau": 1.2}}
+TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0}
+
+
+def traffic_table(rng: np.random.Generator) -> dict:
+    """A [traffic] table: a density, a warm-up, how much is cleared, a seed and a mix of types."""
+    names = [str(n) for n in rng.choice(list(TRAFFIC_TYPES), size=int(rng.integers(1, 3)), replace=False)]
+    return {"vehicles_per_hour": float(rng.choice([600.0, 1000.0, 1400.0])), "warmup_s": float(rng.choice([20.0, 40.0])),
+            "clear_m": float(rng.choice([10.0, 50.0])), "seed": int(rng.integers(0, 1000)),
+            "types": {n: TRAFFIC_TYPES[n] for n in names}}
 
 
 def vehicle_table(rng: np.random.Generator) -> dict:
@@ -198,21 +222,53 @@ def lane_change(rng: np.random.Generator, followers: int) -> dict:
                 obstacle_speed_mps=float(rng.choice([0.0, 5.0, 12.5])), lane_change_s=float(rng.choice([0.0, 2.0])))
 
 
-def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool) -> tuple[np.ndarray, np.ndarray, dict[str, list[str]]]:
+def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool,
+             traffic: list | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, list[str]]]:
     """Positions along the route and lateral coordinates, samples x cars, and each car's lanes in the
     order it drove them (junction lanes left out). On a route of many edges a position is the car's first
     lane position (every car starts on the first edge) plus SUMO's odometer, not the lane position, which
-    starts again at 0 on each edge."""
+    starts again at 0 on each edge. ``traffic``: a list to which each sample's traffic cars are appended,
+    {id: (lane, front position, length)} (roads of one edge)."""
     rows: dict[float, dict[str, tuple[float, float, float]]] = {}
     lanes: dict[str, list[str]] = {}
-    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "pos", "lane", "odometer"]):
+    others: dict[float, dict] = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "type", "pos", "lane", "odometer"]):
+        if v.id not in ids:
+            others.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), TRAFFIC_LENGTHS[v.type])
+            continue
         rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y), float(v.odometer))
         driven = lanes.setdefault(v.id, [])
         if not v.lane.startswith(":") and (not driven or driven[-1] != v.lane):
             driven.append(v.lane)
     table = np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
     positions = table[:, :, 0] if one_edge else table[0, :, 0] + table[:, :, 2]
+    if traffic is not None:
+        traffic += [others.get(t, {}) for t in sorted(rows)]
     return positions, table[:, :, 1], lanes
+
+
+def fcd_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, lanes: list[str],
+                      traffic: list[dict]) -> list[list[tuple]]:
+    """Who follows whom at each FCD sample with traffic, from the FCD alone: each platoon car's nearest car
+    ahead in its lane, and the nearest car behind each platoon car where it is traffic (a traffic car is
+    index N + 1, as the stored pairs count it)."""
+    n, lengths = len(config.vehicle_ids), [v.length_m for v in config.car_vehicles]
+    out = []
+    for xs, cars in zip(positions, traffic):
+        sample = []
+        for b in range(n):
+            ahead = [(xs[a] - lengths[a] - xs[b], a) for a in range(n) if a != b and xs[a] > xs[b]]
+            ahead += [(p - length - xs[b], n) for lane, p, length in cars.values() if lane == lanes[b] and p > xs[b]]
+            if ahead:
+                gap, a = min(ahead)
+                if gap < 1000.0 or a < n:
+                    sample.append((a, b, gap))
+            behind = [(xs[b] - lengths[b] - xs[c], c) for c in range(n) if c != b and xs[c] < xs[b]]
+            behind += [(xs[b] - lengths[b] - p, n) for lane, p, _ in cars.values() if lane == lanes[b] and p < xs[b]]
+            if behind and min(behind)[1] == n and min(behind)[0] < 1000.0:
+                sample.append((b, n, min(behind)[0]))
+        out.append(sample)
+    return out
 
 
 def fcd_lanes_differ(config: EpisodeConfig, road, lanes: dict[str, list[str]]) -> bool:
@@ -265,11 +321,12 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
     episode = simulate(config, evaluator.plan(row.params), road=evaluator.road)
-    if (config.followers >= 2 and config.maneuver == "inlane"
+    if (config.followers >= 2 and config.maneuver == "inlane" and config.traffic is None  # the paper's psi is the default
             and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step), campaign.d_safe_m) - row.robustness) > 1e-9):
         broken.append("rtamt/numpy psi")
     road = evaluator.road
-    positions, y, lanes = read_fcd(fcd, config.vehicle_ids, road.one_edge)
+    traffic: list[dict] = []
+    positions, y, lanes = read_fcd(fcd, config.vehicle_ids, road.one_edge, traffic)
     if fcd_lanes_differ(config, road, lanes):
         broken.append("FCD/platoon lane")
     trace_positions = np.column_stack([episode.trace[f"pos_{vid}"] for vid in config.vehicle_ids])
@@ -277,11 +334,14 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > rounding:
         broken.append("FCD/trace positions")
         return broken
-    pairs = fcd_pairs(config, positions, y, road.lane_width_m)
+    if config.traffic is not None:
+        pairs = fcd_traffic_pairs(config, positions, [lanes[vid][0] for vid in config.vehicle_ids], traffic)
+    else:
+        pairs = fcd_pairs(config, positions, y, road.lane_width_m)
     if any(g < crash - FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
         broken.append("FCD collision before the end")
     if config.maneuver == "inlane":  # the minimum gaps from the attack's start, as the FCD shows them
-        ids, seen = config.vehicle_ids, {}
+        ids, seen = (*config.vehicle_ids, "traffic"), {}
         for sample in pairs[config.attack_start_step:]:
             for a, b, g in sample:
                 seen[f"{ids[a]}-{ids[b]}"] = min(seen.get(f"{ids[a]}-{ids[b]}", g), g)
@@ -290,9 +350,10 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     if c is not None:
         if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
             broken.append("collision time/end of episode")
-        ids = config.vehicle_ids
+        ids = (*config.vehicle_ids, "traffic")
         last = {f"{ids[a]}-{ids[b]}": g for a, b, g in pairs[-1]}
-        if last.get(c["pair"], np.inf) > crash + FCD_TOLERANCE_M or row.min_gaps[c["pair"]] >= crash:
+        pair = "-".join(car if car in ids else "traffic" for car in c["pair"].split("-"))  # any traffic car as one
+        if last.get(pair, np.inf) > crash + FCD_TOLERANCE_M or row.min_gaps[pair] >= crash:
             broken.append("collision pair/gap")
     elif len(episode.trace) != config.steps + 1:
         x = episode.trace["pos_v0"]  # only the end distance may end it early: the attacker there, not before
@@ -350,8 +411,13 @@ def main(argv=None) -> int:
     parser.add_argument("--batch", type=int, default=8,
                         help="play each episode also in a batch of K (more than engine.loop.DETACH_AT, so that the "
                              "arrays command it) [8]; 0: not")
+    parser.add_argument("--traffic", type=float, default=TRAFFIC_SHARE[0],
+                        help=f"the share of in-lane episodes played among SUMO's traffic [{TRAFFIC_SHARE[0]}]")
     args = parser.parse_args(argv)
     parser.check_counts({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0, MAX_COPIES)})
+    if not 0.0 <= args.traffic <= 1.0:
+        parser.error(f"--traffic: got {args.traffic}; allowed: a share in [0, 1]")
+    TRAFFIC_SHARE[0] = args.traffic
     rng = np.random.default_rng(args.seed)
     ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
     roads = {(name, lane): build_road(name, route=ROUTES.get(name, ()), lane=lane)

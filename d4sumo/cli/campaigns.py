@@ -99,6 +99,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     attack = f"{config.maneuver}, {campaign.attack}" if config.maneuver_class.lateral else campaign.attack
     where = f"lane {config.lane}, " if config.lane is not None else ""
     sensing = f"radar {config.radar.label}, " if config.radar else ""
+    sensing += f"{config.world_label}, " if config.traffic else ""
     print(f"campaign {summary.campaign_id} ({attack}, {where}{sensing}{campaign.optimizer}, seed {campaign.seed}) in {args.db}: "
           f"{len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))

@@ -10,6 +10,7 @@ from .. import __version__
 from ..errors import ConfigError, check_number
 from ..model.config import EpisodeConfig
 from ..model.sensing import RadarParams
+from ..model.traffic import TrafficParams
 from .common import EXIT_DIFFERS, check_display, check_output_file, document, note_unused_flags
 
 
@@ -43,13 +44,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     d_safe = check_number("spec.d_safe_m", spec_table.get("d_safe_m", 0.0), -1e3, 1e3, "m")
     formula = spec_table.get("formula")
     spec = None
-    if formula is not None or config.followers >= 2 or config.maneuver_class.lateral:
+    if formula is not None or config.followers >= 2 or config.maneuver_class.lateral or config.traffic is not None:
         spec = Specification(followers=config.followers, step_s=config.step_s, formula=formula, d_safe_m=d_safe,
                              duration_s=config.duration_s, start_step=config.attack_start_step,
-                             maneuver=config.maneuver)  # as a campaign scores
+                             maneuver=config.maneuver, traffic=config.traffic is not None)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
-    road = build_road(config.network, route=config.route, lane=config.lane)
+    road = build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
     plan = episode_plan(family, params, config)
     episode = simulate(config, plan, road=road, fcd_path=fcd, gui=args.gui)
     robustness = spec.robustness(episode.trace) if spec else None
@@ -171,6 +172,8 @@ def _print_summary(s: dict, road_name: str) -> None:
     maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
     radar = s["config"].get("radar")
     sensing = f", radar {RadarParams.from_table(radar).label}" if radar else ""
+    traffic = s["config"].get("traffic")
+    sensing += f", traffic {TrafficParams.from_table(traffic).label}" if traffic else ""
     print(f"{road_name}: {sc['followers']} followers, setpoint {sc['setpoint_m']:g} m, {sc['speed_mps']:g} m/s, "
           f"start {sc['start']}{maneuver}{sensing}; {what}")
     if s["lane_changes"]:

@@ -19,26 +19,14 @@ LAYOUT = 3
 OR_ROUTE = ", or a scenario.route"  # the end of a refusal that a route settles (one given: it does not lead on)
 
 
-def describe(net_file: Path, name: str) -> dict:
-    """The straight chain of edges from the road's start, its length, and the corridor from each lane of
-    its first edge that leads on through it (refusals name the network ``name``)."""
+def describe(net_file: Path, name: str, route: tuple[str, ...] = ()) -> dict:
+    """The straight chain of edges from the road's start (or the ``route``'s edges through a network of
+    many ways, kept whole for the traffic on them), its length, and the corridor from each lane of its
+    first edge that leads on through it (refusals name the network ``name``)."""
     import sumolib
 
     net = sumolib.net.readNet(str(net_file))
-    edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
-    starts = [e for e in edges if not e.getIncoming()]
-    if len(starts) != 1:
-        raise ConfigError("scenario.network", name,
-                          f"a network with exactly one road start (a straight one-way chain of edges){OR_ROUTE}")
-    chain = [starts[0]]
-    while True:
-        nxt = list(chain[-1].getOutgoing())
-        if not nxt:
-            break
-        if len(nxt) > 1 or nxt[0] in chain:
-            raise ConfigError("scenario.network", name,
-                              f"a straight chain of edges without branches{OR_ROUTE}")
-        chain.append(nxt[0])
+    chain = _route_chain(net, route) if route else _one_chain(net, name)
     for lane in (lane for e in chain for lane in e.getLanes()):  # netconvert keeps "nan" and "inf"; SUMO refuses them
         if not 0 < lane.getSpeed() < math.inf:
             raise ConfigError("scenario.network", name,
@@ -62,6 +50,39 @@ def describe(net_file: Path, name: str) -> dict:
         "platoon_lane": through[0][0],  # the rightmost lane that leads on: the platoon's unless scenario.lane says
         "corridors": corridors,
     }
+
+
+def _one_chain(net, name: str) -> list:
+    """The network's one straight chain of edges from its one start."""
+    edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
+    starts = [e for e in edges if not e.getIncoming()]
+    if len(starts) != 1:
+        raise ConfigError("scenario.network", name,
+                          f"a network with exactly one road start (a straight one-way chain of edges){OR_ROUTE}")
+    chain = [starts[0]]
+    while True:
+        nxt = list(chain[-1].getOutgoing())
+        if not nxt:
+            break
+        if len(nxt) > 1 or nxt[0] in chain:
+            raise ConfigError("scenario.network", name,
+                              f"a straight chain of edges without branches{OR_ROUTE}")
+        chain.append(nxt[0])
+    return chain
+
+
+def _route_chain(net, route: tuple[str, ...]) -> list:
+    """The route's edges in a network of many ways, each leading on to the next."""
+    chain = []
+    for edge_id in route:
+        if not net.hasEdge(edge_id):
+            raise ConfigError("scenario.route", list(route), f"edges of the network (it has no edge {edge_id!r})")
+        edge = net.getEdge(edge_id)
+        if chain and edge not in chain[-1].getOutgoing():
+            raise ConfigError("scenario.route", list(route), f"edges that lead on one to the next ({chain[-1].getID()} "
+                                                             f"does not lead on to {edge_id})")
+        chain.append(edge)
+    return chain
 
 
 def _corridor(net_file: Path, chain, path: list[int]) -> dict:

@@ -31,13 +31,16 @@ DETACH_AT = 4
 class _Alone:
     """An episode commanded on its own: its platoon, and its samples as lists from ``start`` on."""
 
-    __slots__ = ("e", "platoon", "ids", "commanded", "start", "xs", "vs", "x", "v", "pairs")
+    __slots__ = ("e", "platoon", "ids", "commanded", "start", "xs", "vs", "x", "v", "pairs", "sensed")
 
-    def __init__(self, e: int, platoon: Platoon, ids: tuple[str, ...], start: int, x: list, v: list, pairs: list):
+    def __init__(self, e: int, platoon: Platoon, ids: tuple[str, ...], start: int, x: list, v: list, pairs: list,
+                 sensed: tuple | None = None):
         self.e, self.platoon, self.ids, self.start = e, platoon, ids, start
         self.commanded = [ids[i] for i in platoon.commanded]  # SUMO moves its own followers
         self.xs, self.vs = [x], [v]
         self.x, self.v, self.pairs = x, v, pairs
+        #: with traffic: the ids, positions and speeds the pairs index, the traffic cars in them included
+        self.sensed = sensed
 
 
 def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *,
@@ -73,6 +76,13 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             recorded[e].append(pairs)
         return pairs
 
+    traffic = getattr(world, "traffic", None) is not None  # who is ahead is SUMO's leader, a traffic car included
+
+    def sense_traffic(e: int, x: list, v: list) -> tuple[list, tuple]:
+        pairs, ids_, x_, v_ = world.sense(e, x, v)
+        recorded[e].append([(min(a, n), min(b, n), gap) for a, b, gap in pairs])  # any traffic car as one: index n
+        return pairs, (ids_, x_, v_)
+
     batch = None
     end_m = config.end_distance_m  # an episode also ends once its attacker is this far from its start
     crash_m = config.collision_gap_m  # the same in every episode of a batch (`batch.batch_key`)
@@ -92,7 +102,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         arrayed = []
         for e, (c, plan, ids) in enumerate(zip(configs, plans, platoons)):
             x, v = [get_position(vid) for vid in ids], [get_speed(vid) for vid in ids]
-            solo.append(_Alone(e, Platoon(c, plan.u, max_speed), ids, 0, x, v, sense_pairs(e, x)))
+            pairs, sensed = sense_traffic(e, x, v) if traffic else (sense_pairs(e, x), None)
+            solo.append(_Alone(e, Platoon(c, plan.u, max_speed), ids, 0, x, v, pairs, sensed))
 
     def end(e: int, steps_done: int, collisions: tuple, error: Exception | None = None) -> None:
         nonlocal solo, sensed
@@ -156,7 +167,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
                     set_speed(vid, s)
         for alone in solo:
             try:
-                out = alone.platoon.advance(k, alone.x, alone.v, alone.pairs)
+                out = alone.platoon.advance(k, alone.x, alone.sensed[2] if traffic else alone.v, alone.pairs)
             except Exception as exc:  # a user's controller: as alone, the episode ends with its error
                 end(alone.e, k, (), exc)
                 continue
@@ -172,8 +183,12 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             alone.xs.append(x)
             alone.vs.append(v)
             alone.x, alone.v = x, v
-            alone.pairs = pairs = sense_pairs(alone.e, x) if lateral else pairs_at(x)
-            collisions = collisions_at(time_s, pairs, x, v, names, crash_m)
+            if traffic:
+                alone.pairs, alone.sensed = pairs, (ids_, x_, v_) = sense_traffic(alone.e, x, v)
+                collisions = collisions_at(time_s, pairs, x_, v_, ids_, crash_m)
+            else:
+                alone.pairs = pairs = sense_pairs(alone.e, x) if lateral else pairs_at(x)
+                collisions = collisions_at(time_s, pairs, x, v, names, crash_m)
             if collisions:
                 end(alone.e, k + 1, collisions)
             elif end_m and x[0] - alone.xs[0][0] >= end_m:

@@ -9,6 +9,7 @@ road's XML, so editing a variant rebuilds it; its description is cached beside i
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import tempfile
@@ -51,6 +52,9 @@ class Road:
     #: whether the platoon's lane joins several lanes of the next edge at some junction: SUMO's cars may
     #: then take another than the lane path, and each episode checks that they do not
     forks: bool = False
+    #: the lanes of the first edge that lead on through the route without a lane change (SUMO's indices):
+    #: where traffic enters
+    through_lanes: tuple[int, ...] = (0,)
 
     @property
     def platoon_lane(self) -> int:
@@ -97,19 +101,25 @@ def default_cache_dir() -> Path:
 
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
-               netconvert: str | None = None, route: tuple[str, ...] = (), lane: int | None = None) -> Road:
+               netconvert: str | None = None, route: tuple[str, ...] = (), lane: int | None = None,
+               whole: bool = False) -> Road:
     """Build (or take from the cache) the network of a variant and describe its road (with a ``route``:
     the road of those edges, which must lead on one to the next) as the platoon drives it from ``lane``
-    of the first edge (none: the rightmost lane that leads on through the route)."""
-    source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
+    of the first edge (none: the rightmost lane that leads on through the route). ``whole``: the network
+    is built whole, every way of it, the route's edges the road through it (traffic of a user's demand
+    drives the other ways too); else it is the route's edges alone."""
+    whole = whole and bool(route)
+    source = name if isinstance(name, NetworkSource) else network_source(name, root, () if whole else route)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     net_file = cache / f"{source.stem}-{source.digest}.net.xml"
-    info_file = net_file.with_suffix(".json")
+    info_file = (net_file.with_suffix(f".{hashlib.sha256(' '.join(route).encode()).hexdigest()[:12]}.json") if whole
+                 else net_file.with_suffix(".json"))
     info = _read_info(info_file) if net_file.is_file() else None
     if info is None:
-        _build(source, net_file, netconvert)
+        if not net_file.is_file() or not whole:
+            _build(source, net_file, netconvert)
         try:
-            info = describe(net_file, source.name)
+            info = describe(net_file, source.name, route if whole else ())
         except ConfigError as exc:
             if not route or not exc.allowed.endswith(OR_ROUTE):  # a road's own fault (a lane 0 that ends): said as is
                 raise
@@ -133,6 +143,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         closed_to=tuple(tuple(tuple(pair) for pair in lane) for lane in corridor["closed_to"]),
         lane_path=path if any(path) else (),
         forks=corridor["forks"],
+        through_lanes=tuple(sorted(int(lane) for lane in info["corridors"])),
     )
 
 

@@ -27,7 +27,7 @@ from ..model.platoon import followers_of, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, build_road
-from .sumo import followers_file, load_platoon, open_world, sumo_command
+from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_file
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +86,7 @@ def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
     """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters.
     Returns the followers' checked vehicle-type file (None when no follower is SUMO-driven)."""
     check_road(config, road)
+    traffic_file(config, road)  # a demand SUMO refuses is refused before any episode runs
     return followers_file(config, road)
 
 
@@ -101,7 +102,7 @@ def simulate(
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
     plan = checked_plan(config, attack)
-    road = road or build_road(config.network, route=config.route, lane=config.lane)
+    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
     types_file = check_episode(config, road)
     with fcd_file(fcd_path) as part:
         with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
@@ -201,13 +202,14 @@ def _ends_whole(fcd: Path) -> bool:
 # --- a batch: many episodes side by side in one SUMO ---------------------------------------------
 
 def shares_sumo(config: EpisodeConfig) -> bool:
-    """Whether the configuration's platoons may share one SUMO (see `simulate_batch`)."""
-    return all(f.shares_sumo for f in followers_of(config))
+    """Whether the configuration's platoons may share one SUMO (see `simulate_batch`): not with traffic,
+    whose every episode meets its own warm-up on the road alone."""
+    return config.traffic is None and all(f.shares_sumo for f in followers_of(config))
 
 
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
-    road = road or build_road(config.network, route=config.route, lane=config.lane)
+    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
     check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):

@@ -23,8 +23,9 @@ import numpy as np
 
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
+from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, maneuver_of, occupied_lanes
 from ..model.platoon import SumoFollower, followers_of
+from ..model.traffic import demand_xml
 from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary
 from .scenarios import Road, default_cache_dir
@@ -79,25 +80,41 @@ def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
     text = followers_xml(config, road)
     if text is None:
         return None
+    return _checked_file(text, "vtypes", "vehicle types", ".add.xml", lambda sumo, tmp: _check_types(config, road, sumo, tmp))
+
+
+def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
+    """The traffic's demand (`traffic.demand_xml`), checked by loading it in SUMO once (cached like the
+    followers' types): a vehicle type SUMO refuses is a ConfigError naming its table, a demand file SUMO
+    refuses (routes over edges the network lacks, say) one naming the file. None without traffic."""
+    if config.traffic is None:
+        return None
+    text = demand_xml(config.traffic, road.route(0), road.through_lanes, config.traffic.warmup_s + config.total_s + 1.0)
+    return _checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: _check_demand(config, road, sumo, tmp))
+
+
+def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[[str, str], None]) -> Path:
+    """A file SUMO reads, written under d4sumo's cache and named by its content and SUMO's build once
+    ``check(sumo, path)`` passed on it; later calls with the same text return it at once."""
     if text in _CHECKED and _CHECKED[text].is_file():
         return _CHECKED[text]
     sumo = sumo_binary("sumo")
     build = f"{sumo}:{os.stat(sumo).st_mtime_ns}"  # another SUMO checks again
-    folder = Path(default_cache_dir()).parent / "vtypes"
-    path = folder / f"{hashlib.sha256((build + text).encode()).hexdigest()[:16]}.add.xml"
+    folder = Path(default_cache_dir()).parent / kind
+    path = folder / f"{hashlib.sha256((build + text).encode()).hexdigest()[:16]}{suffix}"
     if not path.is_file():
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=folder, suffix=".add.xml")
+            fd, tmp = tempfile.mkstemp(dir=folder, suffix=suffix)
         except OSError as exc:
-            raise SumoError(f"cannot write SUMO's vehicle types under {folder}: {exc.strerror or exc}") from None
+            raise SumoError(f"cannot write SUMO's {what} under {folder}: {exc.strerror or exc}") from None
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(text)
-            _check_types(config, road, sumo, tmp)
+            check(sumo, tmp)
             os.replace(tmp, path)
         except OSError as exc:
-            raise SumoError(f"cannot write SUMO's vehicle types under {folder}: {exc.strerror or exc}") from None
+            raise SumoError(f"cannot write SUMO's {what} under {folder}: {exc.strerror or exc}") from None
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
@@ -105,17 +122,42 @@ def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
     return path
 
 
-def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) -> None:
-    cmd = [sumo, "--net-file", str(road.net_file), "--additional-files", types_file, "--step-length",
-           repr(config.step_s), "--end", "0", "--no-step-log", "true", "--duration-log.disable", "true"]
+def _sumo_errors(cmd: list[str], what: str) -> str | None:
+    """SUMO's first error loading ``cmd`` (None: it loaded)."""
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     except subprocess.TimeoutExpired:
-        raise SumoError("SUMO did not load the followers' vehicle types within 120 s") from None
+        raise SumoError(f"SUMO did not load {what} within 120 s") from None
     if done.returncode == 0:
-        return
+        return None
     errors = [ln.removeprefix("Error: ") for ln in done.stderr.splitlines() if ln.startswith("Error:")]
-    message = errors[0] if errors else done.stderr.strip() or f"exit {done.returncode}"
+    return errors[0] if errors else done.stderr.strip() or f"exit {done.returncode}"
+
+
+def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: str) -> None:
+    cmd = [sumo, "--net-file", str(road.net_file), "--route-files", demand, "--step-length", repr(config.step_s),
+           "--end", "1", "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+    message = _sumo_errors(cmd, "the traffic's demand")
+    if message is None:
+        return
+    named = re.search(r"[Aa]ttribute '?(\w+)'?", message)
+    attribute = (named.group(1) if named else "carFollowModel" if "car following model" in message
+                 else "laneChangeModel" if "lane change model" in message else None)
+    for name, attributes in config.traffic.types:
+        if attribute in dict(attributes):
+            field = f"traffic.types.{name}.{attribute}"
+            raise ConfigError(field, dict(attributes)[attribute], f"a value SUMO's <vType> accepts (SUMO: {message})")
+    if config.traffic.demand:
+        raise ConfigError("traffic.demand", list(config.traffic.demand), f"demand SUMO plays on {road.name} (SUMO: {message})")
+    raise ConfigError("traffic", config.traffic.label, f"traffic SUMO can insert on {road.name} (SUMO: {message})")
+
+
+def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) -> None:
+    cmd = [sumo, "--net-file", str(road.net_file), "--additional-files", types_file, "--step-length",
+           repr(config.step_s), "--end", "0", "--no-step-log", "true", "--duration-log.disable", "true"]
+    message = _sumo_errors(cmd, "the followers' vehicle types")
+    if message is None:
+        return
     # Name the attribute SUMO refused, in the table of the first follower that sets it.
     named = re.search(r"Attribute '?(\w+)'?", message)
     field = "controller"
@@ -128,9 +170,9 @@ def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) 
 
 
 def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo", *,
-                 types_file: Path | None = None) -> list[str]:
+                 types_file: Path | None = None, demand_file: Path | None = None) -> list[str]:
     """The SUMO command line, as one explicit list; ``types_file``: the followers' vehicle types, as
-    `check_episode` returns them."""
+    `check_episode` returns them; ``demand_file``: the traffic's (`traffic_file`)."""
     cmd = [
         binary,
         "--net-file", str(road.net_file),
@@ -141,7 +183,7 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         "--collision.mingap-factor", "0",
         "--collision.check-junctions", "false",
         "--insertion-checks", "none",
-        "--seed", "0",
+        "--seed", str(config.traffic.seed if config.traffic else 0),
         "--no-step-log", "true",
         "--no-warnings", "true",
         "--duration-log.disable", "true",
@@ -152,11 +194,16 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     ]
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
+    if demand_file is not None:
+        # eager: a traffic car queued to enter (its place taken) must not hold the platoon back in the queue
+        cmd += ["--route-files", str(demand_file), "--eager-insert", "true"]
     if config.maneuver_class.lateral and config.lane_change_s > 0:  # the attacker moves across over this time
         cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
         cmd += ["--fcd-output", str(fcd_path), "--fcd-output.attributes", FCD_ATTRIBUTES,
                 "--fcd-output.acceleration", "true"]
+        if config.traffic is not None:  # from the platoon's insertion on, not the traffic's warm-up
+            cmd += ["--device.fcd.begin", repr(config.traffic.warmup_s)]
     if binary != "sumo":  # sumo-gui: start at once and leave the window open at the end
         cmd += ["--start", "true", "--quit-on-end", "false", "--delay", "50"]
     return cmd
@@ -192,11 +239,12 @@ def load_platoon(api, config: EpisodeConfig, road: Road, episodes: int = 1,
     placed = {id(c): maneuver_of(c).cars() for c in configs}
     platoons = [config.vehicle_ids if episodes == 1 else tuple(f"{e}.{vid}" for vid in config.vehicle_ids)
                 for e in range(episodes)]
+    depart = "now" if config.traffic is not None else "0"  # after the traffic's warm-up, else at SUMO's start
     for e, ids in enumerate(platoons):
         route = f"{ROUTE_ID}{e}" if episodes > 1 else ROUTE_ID
         api.route.add(route, list(road.route(e)))
         for vid, car, type_id in zip(ids, placed[id(configs[e])], type_ids):
-            api.vehicle.add(vid, route, typeID=type_id, depart="0", departLane=str(road.platoon_lane + car.lane),
+            api.vehicle.add(vid, route, typeID=type_id, depart=depart, departLane=str(road.platoon_lane + car.lane),
                             departPos=repr(car.position_m), departSpeed=repr(car.speed_mps))
     api.simulationStep()  # inserts the cars: this state is t = 0
     present = set(api.vehicle.getIDList())
@@ -325,6 +373,112 @@ class _LanePathCheck:
                     f"a limited distance; name a shorter scenario.route, or a scenario.lane without such a junction")
 
 
+def warm_up_traffic(api, config: EpisodeConfig, road: Road) -> int:
+    """Play the traffic alone for its warm-up (`traffic.TrafficParams`), then clear the platoon's places:
+    every traffic car whose body is in a lane of the platoon's on the first edge, from ``clear_m`` behind
+    its rear bumper to ``clear_m`` ahead of its front car, leaves. Returns how many left. A density SUMO
+    cannot insert (more than two vehicles per lane, and a tenth of the demand, still waiting to enter at the
+    warm-up's end) and a collision among the traffic are refused: neither is the platoon's doing."""
+    traffic = config.traffic
+    step = simulation_step(api)
+    departed = 0
+    for _ in range(int(round(traffic.warmup_s / config.step_s))):
+        step()
+        departed += api.simulation.getDepartedNumber()
+        if api.simulation.getCollidingVehiclesNumber():
+            crashed = api.simulation.getCollidingVehiclesIDList()
+            raise ConfigError("traffic", traffic.label, f"traffic that does not crash on its own on {road.name} ({', '.join(crashed[:2])} "
+                                                        f"collided at {api.simulation.getTime():g} s of its warm-up, before the platoon joined)")
+    # Poisson arrivals queue for a moment now and then; a density beyond what the road takes queues for good
+    waiting = len(api.simulation.getPendingVehicles())
+    if waiting > 2 * len(road.through_lanes) and waiting > 0.1 * (departed + waiting):
+        raise ConfigError("traffic.vehicles_per_hour", traffic.vehicles_per_hour,
+                          f"a density SUMO can insert on {road.name}: {waiting} of {departed + waiting} vehicles still waited "
+                          f"to enter after the {traffic.warmup_s:g} s warm-up")
+    for vid in api.simulation.getPendingVehicles():  # queued at the road's start, they would enter before the platoon
+        api.vehicle.remove(vid)
+    cars = maneuver_of(config).cars()
+    lanes = {f"{road.route_edges[0]}_{road.platoon_lane + car.lane}" for car in cars}
+    lengths = dict(zip(config.vehicle_ids, config.car_vehicles))
+    rear = min(car.position_m - lengths[car.id].length_m for car in cars) - traffic.clear_m
+    front = max(car.position_m for car in cars) + traffic.clear_m
+    removed = 0
+    for lane in sorted(lanes):
+        for vid in api.lane.getLastStepVehicleIDs(lane):
+            position = api.vehicle.getLanePosition(vid)
+            if position > rear and position - api.vehicle.getLength(vid) < front:
+                api.vehicle.remove(vid)
+                removed += 1
+    return removed
+
+
+class _TrafficSense:
+    """Who is ahead of each car of one platoon in its lane, a traffic car included, as SUMO's leader says,
+    and who follows its rear car: the pairs of the step (`maneuvers.Pair`), with the traffic cars in them.
+
+    Between two platoon cars next to each other it is their pair, its gap from their positions (the
+    arithmetic of the platoon alone, bit for bit); where a traffic car is between them, or ahead of the
+    attacker, or behind the rear car, the pair is with it, its gap SUMO's (bumper to bumper: SUMO's leader
+    gap leaves out the follower's minGap, which is added back). A traffic car is index ``n + j`` of the
+    step's extended ids, positions and speeds (j in order of appearance); pairs of two traffic cars are
+    not the platoon's and are left out."""
+
+    def __init__(self, api, config: EpisodeConfig, ids: tuple[str, ...]):
+        self.ids = ids
+        self.names = config.vehicle_ids
+        self.lengths = [v.length_m for v in config.car_vehicles]
+        self.min_gaps = [api.vehicle.getMinGap(vid) for vid in ids]
+        self.get_leader, self.get_follower = vehicle_call(api, "getLeader"), vehicle_call(api, "getFollower")
+        self.get_speed, self.get_length = vehicle_call(api, "getSpeed"), vehicle_call(api, "getLength")
+        self.get_min_gap = vehicle_call(api, "getMinGap")
+        self.last_traffic: list[str] = []  # the traffic cars of the last step's pairs, by SUMO id
+
+    def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
+        """The step's pairs, and the extended ids (each traffic car by its SUMO id), positions (a traffic
+        car's front bumper, from its gap) and speeds they index."""
+        ids, n, look = self.ids, len(self.ids), FREE_ROAD_GAP_M
+        names, xs, vs = list(self.names), list(x), list(v)
+        traffic: dict[str, int] = {}
+        pairs: list[Pair] = []
+
+        def other(vid: str, front_m: float) -> int:
+            if vid not in traffic:
+                traffic[vid] = len(names)
+                names.append(vid)
+                xs.append(front_m)
+                vs.append(self.get_speed(vid))
+            return traffic[vid]
+
+        for b in range(n):
+            hit = self.get_leader(ids[b], look)
+            if b and (not hit or hit[0] == ids[b - 1]):  # the car ahead in the column
+                pairs.append((b - 1, b, x[b - 1] - self.lengths[b - 1] - x[b]))
+                continue
+            if not hit or not hit[0]:
+                continue  # nobody ahead of the attacker
+            gap = hit[1] + self.min_gaps[b]
+            if gap >= look:
+                continue
+            t = other(hit[0], x[b] + gap + self.get_length(hit[0]))
+            pairs.append((t, b, gap))
+            for _ in range(64) if b else ():  # traffic between two platoon cars: the first of it follows the car ahead
+                ahead = self.get_leader(names[t], look)
+                if not ahead or not ahead[0] or (ahead[0] in ids and ahead[0] != ids[b - 1]):
+                    break
+                gap = ahead[1] + self.get_min_gap(names[t])
+                if ahead[0] == ids[b - 1]:
+                    pairs.append((b - 1, t, gap))
+                    break
+                t = other(ahead[0], xs[t] + gap + self.get_length(ahead[0]))
+        behind = self.get_follower(ids[-1], look)
+        if behind and behind[0] and behind[0] not in ids:
+            gap = behind[1] + self.get_min_gap(behind[0])
+            if gap < look:
+                pairs.append((n - 1, other(behind[0], x[-1] - self.lengths[-1] - gap), gap))
+        self.last_traffic = names[n:]
+        return pairs, names, xs, vs
+
+
 class SumoWorld:
     """Platoons in one running SUMO, as the step loop sees them: each episode's vehicle ids (``platoons``),
     fast bound calls to sense and command them, a step, and the removal of an ended episode's cars.
@@ -338,6 +492,8 @@ class SumoWorld:
         self.get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
         maneuver = maneuver_of(config)
         self.laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
+        #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`); None: the maneuver's pairs
+        self.traffic = [_TrafficSense(api, config, ids) for ids in platoons] if config.traffic is not None else None
         step = simulation_step(api)
         if road.forks:  # SUMO may take another lane than the path at a fork: each step checks it did not
             check = _LanePathCheck(api, config, road, platoons, maneuver)
@@ -354,6 +510,11 @@ class SumoWorld:
     def change_lane(self, e: int, lane: int) -> None:
         """The attacker of episode ``e`` begins its change to ``lane`` (counted from the platoon's)."""
         self.laterals[e].change_lane(lane)
+
+    def sense(self, e: int, x: list[float], v: list[float]) -> tuple[list, list[str], list[float], list[float]]:
+        """With traffic: the pairs of episode ``e`` at this step and the ids, positions and speeds they index
+        (`_TrafficSense`)."""
+        return self.traffic[e](x, v)
 
     def lateral_rows(self, e: int) -> np.ndarray | None:
         """Each car's lateral position at every sample of episode ``e`` (lane-changing maneuvers), else None."""
@@ -376,11 +537,12 @@ class open_world:
         if gui:
             import traci as api  # libsumo has no window; traci drives sumo-gui with the same API
 
-            cmd = sumo_command(config, road, fcd_path, binary=sumo_binary("sumo-gui"), types_file=types_file)
+            binary = sumo_binary("sumo-gui")
         else:
             import libsumo as api
 
-            cmd = sumo_command(config, road, fcd_path, types_file=types_file)
+            binary = "sumo"
+        cmd = sumo_command(config, road, fcd_path, binary=binary, types_file=types_file, demand_file=traffic_file(config, road))
         self.api, self.cmd, self.config, self.road, self.configs = api, cmd, config, road, list(configs)
 
     def __enter__(self) -> SumoWorld:
@@ -389,6 +551,8 @@ class open_world:
         except Exception as exc:  # libsumo/traci raise their own types, or FatalTraCIError
             raise SumoError(f"SUMO did not start: {exc}") from None
         try:
+            if self.config.traffic is not None:
+                warm_up_traffic(self.api, self.config, self.road)
             platoons = load_platoon(self.api, self.config, self.road, len(self.configs), self.configs)
             return SumoWorld(self.api, self.config, self.road, platoons)
         except BaseException as exc:

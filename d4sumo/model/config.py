@@ -23,6 +23,7 @@ from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
 from .plugins import ControllerImportError, NotImported, build_params
 from .sensing import RadarParams
+from .traffic import TrafficParams
 from .vehicle import VehicleParams
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES, SWERVE_KNOTS, SWERVE_LANES
 
@@ -137,6 +138,8 @@ class EpisodeConfig:
     controller: ControllerConfig | tuple[ControllerConfig, ...] = field(default_factory=ControllerConfig)
     #: the Python-commanded followers' radar, the [radar] table (`sensing`); none: they sense the truth
     radar: RadarParams | None = None
+    #: SUMO's traffic around the platoon, the [traffic] table (`traffic`); none: the platoon drives alone
+    traffic: TrafficParams | None = None
     #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
     #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
     attacker_declared_decel_mps2: float | None = None
@@ -211,6 +214,17 @@ class EpisodeConfig:
                 raise ConfigError("radar.latency_s", self.radar.latency_s, f"a whole number of steps of {self.step_s:g} s")
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
+        if isinstance(self.traffic, Mapping):
+            fix("traffic", TrafficParams.from_table(self.traffic))
+        if self.traffic is not None:
+            if not isinstance(self.traffic, TrafficParams):
+                raise ConfigError("traffic", self.traffic, "a [traffic] table")
+            if self.maneuver != "inlane":  # who follows whom is SUMO's leader in the platoon's lane
+                raise ConfigError("scenario.maneuver", self.maneuver, "inlane with [traffic] (the attacker in the platoon's lane)")
+            if self.start != "steady":  # a platoon standing on a road with traffic at speed is a crash of its own
+                raise ConfigError("scenario.start", self.start, "steady with [traffic] (the platoon joins the traffic at its speed)")
+            if not _on_grid(self.traffic.warmup_s, self.step_s):
+                raise ConfigError("traffic.warmup_s", self.traffic.warmup_s, f"a whole number of steps of {self.step_s:g} s")
         fix("vehicles", self._checked_vehicles())
         declared = self.vehicle_of(0).max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
@@ -269,7 +283,7 @@ class EpisodeConfig:
     def batch_arrays(self) -> bool:
         """Whether a batch's arrays may play its platoons: they play the model as printed, one vehicle for
         every car (otherwise its platoons are commanded one by one, side by side in one SUMO all the same)."""
-        return not self.as_run and not self.vehicles and self.radar is None
+        return not self.as_run and not self.vehicles and self.radar is None and self.traffic is None
 
     @functools.cached_property
     def car_vehicles(self) -> tuple[VehicleParams, ...]:
@@ -336,6 +350,17 @@ class EpisodeConfig:
         return label
 
     @property
+    def whole_network(self) -> bool:
+        """Whether the road is the route through the network built whole (`scenarios.build_road`): a user's
+        traffic demand drives its other ways too. Else a route's edges alone are the road."""
+        return bool(self.route) and self.traffic is not None and bool(self.traffic.demand)
+
+    @property
+    def world_label(self) -> str:
+        """What is around the platoon, in a few words: its traffic, or "" when it drives alone."""
+        return f"traffic {self.traffic.label}" if self.traffic is not None else ""
+
+    @property
     def vehicle_ids(self) -> tuple[str, ...]:
         """The attacker v0, the followers v1..vN, then the maneuver's other car (lead or obstacle), if any."""
         other = self.maneuver_class.other_car
@@ -349,7 +374,7 @@ class EpisodeConfig:
     # --- TOML/JSON round trip -----------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in _TABLES}
+        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in TABLES}
         # Keys without effect are not part of what identifies the episode.
         if self.start != "warmup":
             del scenario["warmup_s"]
@@ -371,6 +396,8 @@ class EpisodeConfig:
         out = {"scenario": scenario, "vehicle": vehicle, "controller": controller}
         if self.radar is not None:  # stored where there is one: earlier campaigns keep their identity
             out["radar"] = self.radar.to_dict()
+        if self.traffic is not None:
+            out["traffic"] = self.traffic.to_dict()
         return out
 
     @classmethod
@@ -378,7 +405,7 @@ class EpisodeConfig:
         """Build from the [scenario], [vehicle] and [controller] tables of a document; [controller] may
         be a list of tables (TOML's [[controller]]) or names, one per follower."""
         tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
-        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in _TABLES]
+        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in TABLES]
         _check_keys("scenario", tables["scenario"], scenario_keys)
         if tables["scenario"].get("route", None) in ([], ()):  # left out, the network's one chain; given, edges
             raise ConfigError("scenario.route", [], "a list of one edge id or more, e.g. [\"e1\", \"e2\"] (leave it out "
@@ -394,8 +421,9 @@ class EpisodeConfig:
         else:
             controller = ControllerConfig.from_table(_table(doc, "controller"))
         radar = RadarParams.from_table(doc["radar"]) if doc.get("radar") is not None else None
+        traffic = TrafficParams.from_table(doc["traffic"]) if doc.get("traffic") is not None else None
         return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), vehicles=tuple(cars.items()),
-                   controller=controller, radar=radar)
+                   controller=controller, radar=radar, traffic=traffic)
 
 
 def read_toml(path: str | Path, field: str = "--config") -> dict:
@@ -431,7 +459,7 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
-_TABLES = ("vehicle", "vehicles", "controller", "radar")
+TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic")
 
 
 def _short_table(table: Any) -> Any:

@@ -18,7 +18,7 @@ from typing import Protocol
 
 from ..errors import ConfigError, check_number
 from .plugins import import_controller
-from .vehicle import VehicleParams
+from .vehicle import VehicleParams, acceleration_to_command
 
 #: Mode values recorded in traces (signal ``mode_vI``).
 MODE_CC = 0.0
@@ -360,6 +360,26 @@ class TimeGapController(SwitchingController):
 
     def desired_gap_m(self, speed_mps: float) -> float:
         return self.setpoint_m + self.time_gap_s * speed_mps
+
+
+class CautiousDriver:
+    """A careful driver among traffic (the attacker where it does not attack): cruise control at its speed,
+    never faster than the time-gap spacing law on the car ahead allows. Its acceleration is the smaller of
+    the two, as production ACCs arbitrate speed and spacing control, with no mode to get stuck in: the
+    paper's switching rule keeps cruising above v_d however close the car ahead (Eq. 1's hysteresis band),
+    which no driver does. Spacing: a = Kp (gap - s0 - h v) + Kv (v_lead - v) with the paper's gains."""
+
+    def __init__(self, params: SwitchingParams, *, setpoint_m: float, time_gap_s: float, target_speed_mps: float,
+                 vehicle: VehicleParams, step_s: float):
+        self.cruise = CruiseControl(params, target_speed_mps, step_s)
+        self.setpoint_m, self.time_gap_s = setpoint_m, time_gap_s
+        self._kp, self._kv = params.acc_kp, params.acc_kv
+        self.vehicle = vehicle
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        a = self.cruise.acceleration(speed_mps)
+        spacing = self._kp * (gap_m - self.setpoint_m - self.time_gap_s * speed_mps) + self._kv * (lead_speed_mps - speed_mps)
+        return acceleration_to_command(min(a, spacing), self.vehicle)
 
 
 # --- registry of follower controllers ------------------------------------------------------------

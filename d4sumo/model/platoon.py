@@ -19,11 +19,12 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
-from .control import CruiseControl, SwitchingController, SwitchingParams, user_module
+from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_module
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
+from .traffic import TRAFFIC_ID
 
 
 class ControllerError(D4sumoError, ValueError):
@@ -95,6 +96,9 @@ class PythonFollower:
         self.command = sensed_command(command, observe, episode.radar, episode.step_s, car)
         self.has_mode = hasattr(self.controller, "mode")
 
+
+#: the time gap the attacker keeps to traffic ahead of it where it does not attack [s]: a careful driver's
+ATTACKER_TIME_GAP_S = 1.5
 
 #: SUMO's default comfortable deceleration of a passenger car, which its models plan with
 PASSENGER_DECEL_MPS2 = 4.5
@@ -181,6 +185,11 @@ class Platoon:
         # ... and plays its attack as their controller does: a new pedal each control period
         self._attacker_every = max(1, int(round((gains.control_period_s or dt) / dt)))
         self.attacker_actuator = Actuator(vehicle, dt, attacker_max_speed_mps)
+        #: in traffic, where it does not attack the attacker drives as a careful driver would (`CautiousDriver`)
+        #: behind whatever is ahead of it, never into the traffic it blends into
+        self._attacker_driver = (CautiousDriver(gains, setpoint_m=config.setpoint_m, time_gap_s=ATTACKER_TIME_GAP_S,
+                                                target_speed_mps=config.attacker_cruise_mps, vehicle=vehicle, step_s=dt)
+                                 if config.traffic is not None else None)
         n = config.followers + 1
         #: the maneuver's other car: a benign lead cruising like the attacker, or an obstacle at a constant speed
         self._others = [(i, CruiseControl(gains, config.speed_mps, dt) if self.maneuver.other_cruises else None,
@@ -202,7 +211,17 @@ class Platoon:
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
         u = self.attack_u[k]
-        if self._attacker_as_run is not None:  # the authors' attacker: their controller on a free road, or its attack
+        ahead: dict[int, tuple[int, float]] = {}
+        for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
+            if b not in ahead or gap < ahead[b][1]:
+                ahead[b] = (a, gap)
+        if self._attacker_driver is not None and u != u:  # in traffic, between attacks: it follows what is ahead
+            if self._attacking:
+                self._attacker_driver.cruise.reset()
+                self._attacking = False
+            leader, gap = ahead.get(0, (0, FREE_ROAD_GAP_M))
+            u = self._attacker_driver.command(gap, speeds[0], speeds[leader])
+        elif self._attacker_as_run is not None:  # the authors' attacker: their controller on a free road, or its attack
             attack = self.attack_u[k - k % self._attacker_every]  # the attack's pedal at this control period's start
             u = self._attacker_as_run.command_as_run(FREE_ROAD_GAP_M, speeds[0], speeds[0], act=attack != attack)
             if u is None:  # attacking: the attack sets the pedal, and holds it for the period
@@ -216,10 +235,6 @@ class Platoon:
             self._attacking = True
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
-        ahead: dict[int, tuple[int, float]] = {}
-        for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
-            if b not in ahead or gap < ahead[b][1]:
-                ahead[b] = (a, gap)
         for i, follower in self._python:
             leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
             c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
@@ -288,6 +303,10 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
         signals[f"cmd_{vid}"] = cmds[:, i]
     if config.maneuver_class.lateral:
         rows = _lane_gaps(ids, signals, pairs, lateral_m)
+    elif config.traffic is not None:  # who followed whom is what the step sensed (a traffic car is index N + 1)
+        rows = _lane_gaps((*ids, TRAFFIC_ID), signals, pairs, None)
+        for i in range(config.followers):  # the paper's column names: gap_I is v(I+1)'s gap to whatever is ahead
+            signals[f"gap_{i}"] = signals[f"gap_v{i + 1}"]
     else:
         rows = _column_gaps([v.length_m for v in config.car_vehicles], signals, positions)
     start = min(config.attack_start_step, n_samples - 1)
@@ -332,10 +351,11 @@ def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -
 
 
 def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]],
-               lateral_m: np.ndarray) -> dict[str, list[tuple[int, float]]]:
+               lateral_m: np.ndarray | None) -> dict[str, list[tuple[int, float]]]:
     """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
-    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions; each
-    pair's gaps at the samples where it followed."""
+    pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions (when
+    given); each pair's gaps at the samples where it followed. With traffic the last of ``ids`` is every
+    traffic car (`traffic.TRAFFIC_ID`): its gaps are not a signal, its pairs' are (``traffic-v3``)."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
     victim = np.full(n_samples, FREE_ROAD_GAP_M)
@@ -349,9 +369,10 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]],
             else:
                 victim[k] = min(victim[k], gap)
             rows.setdefault(f"{ids[a]}-{ids[b]}", []).append((k, gap))
-    for i, vid in enumerate(ids):
+    for i, vid in enumerate(ids if lateral_m is not None else ids[:-1]):
         signals[f"gap_{vid}"] = gaps[:, i]
-        signals[f"y_{vid}"] = lateral_m[:, i]
+        if lateral_m is not None:
+            signals[f"y_{vid}"] = lateral_m[:, i]
     signals["victim_gap"] = victim
     signals["attacker_gap"] = attacker
     return rows

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ..errors import ConfigError
-from ..model.config import EpisodeConfig
+from ..model.config import TABLES, EpisodeConfig
 from ..model.plugins import names_only
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 
@@ -169,8 +169,7 @@ def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
 
 
 #: the [scenario] keys: every field of EpisodeConfig but those of its [vehicle] and [controller] tables
-SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig)
-                      if f.name not in ("vehicle", "vehicles", "controller", "radar"))
+SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in TABLES)
 #: the keys a definition leaves out where they have no effect: the warm-up's length without a warm-up, the
 #: attacker's declared deceleration without a SUMO model to read it, another maneuver's settings
 NO_EFFECT_WHEN_LEFT_OUT = frozenset({"warmup_s", "attacker_declared_decel_mps2"} | {

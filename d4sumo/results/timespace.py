@@ -1,6 +1,6 @@
 """Figures of one episode from SUMO's FCD: the time-space diagram (every car's position along the route over
-time, coloured by speed, a panel per lane) and every car's acceleration; and the FCD read as positions
-along the route."""
+time, coloured by speed, a panel per lane; SUMO's traffic around the platoon in light grey) and every
+platoon car's acceleration; and the FCD read as positions along the route."""
 
 from __future__ import annotations
 
@@ -9,7 +9,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..model.traffic import is_traffic
 from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_path, wrap_title
+
+#: traffic cars: lighter than the platoon, whose speeds the colours tell
+TRAFFIC_COLOR = "0.75"
 
 
 def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -> dict[str, dict[str, np.ndarray]]:
@@ -38,17 +42,27 @@ def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -
         for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "speed", "pos", "acceleration"]):
             rows.setdefault(v.id, []).append((float(step.time), float(v.pos), float(v.speed), float(v.acceleration), "",
                                               np.nan))
-    edges = {lane.rpartition("_")[0] for r in rows.values() for *_, lane, _ in r if lane and not lane.startswith(":")}
+    platoon = [vid for vid in rows if not is_traffic(vid)]
+    edges = {lane.rpartition("_")[0] for vid in platoon for *_, lane, _ in rows[vid] if lane and not lane.startswith(":")}
     many_edges = len(edges) > 1
+    # With traffic SUMO's clock ran through the traffic's warm-up first: the episode's starts with the platoon
+    t0 = min((rows[vid][0][0] for vid in platoon), default=0.0) if len(platoon) < len(rows) else 0.0
+    offsets: dict[str, float] = {}  # each edge's start along the route, as the platoon drove it
     out = {}
     for vid in sorted(rows, key=_vehicle_order):
         time, pos, speed, accel, lane, odometer = zip(*rows[vid])
         pos = np.array(pos)
-        if many_edges:
+        if many_edges and not is_traffic(vid):
             odometer = np.array(odometer)
-            pos = pos[0] - odometer[0] + odometer  # every car starts on the route's first edge
+            along = pos[0] - odometer[0] + odometer  # every car of the platoon starts on the route's first edge
+            for edge_lane, p, a in zip(lane, pos, along):
+                offsets.setdefault(edge_lane.rpartition("_")[0], a - p)
+            pos = along
+        elif many_edges:  # a traffic car: along the route where it drives an edge of it, else not drawn
+            pos = np.array([offsets.get(ln.rpartition("_")[0], np.nan) + p for ln, p in zip(lane, pos)])
+        if many_edges:
             lane = _lane_indices(lane, platoon_lanes or {})
-        out[vid] = {"time": np.array(time), "pos": pos, "speed": np.array(speed),
+        out[vid] = {"time": np.array(time) - t0, "pos": pos, "speed": np.array(speed),
                     "acceleration": np.array(accel), "lane": np.array(lane, dtype=str)}
     return out
 
@@ -66,7 +80,8 @@ def _lane_indices(lane_ids: Sequence[str], platoon_lanes: Mapping[str, int]) -> 
 
 
 def _vehicle_order(vid: str):
-    return (0, int(vid[1:]), "") if vid[1:].isdigit() else (1, 0, vid)
+    """The platoon front to back (traffic cars last: they are drawn first, under it)."""
+    return (0, int(vid[1:]), "") if vid[1:].isdigit() else (2, 0, vid) if is_traffic(vid) else (1, 0, vid)
 
 
 def _vehicle_label(vid: str) -> str:
@@ -74,9 +89,9 @@ def _vehicle_label(vid: str) -> str:
 
 
 def lanes(fcd: dict) -> list[str]:
-    """The lanes the cars use, leftmost first (SUMO counts lanes from the right: lane 0 is the
+    """The lanes the platoon's cars use, leftmost first (SUMO counts lanes from the right: lane 0 is the
     rightmost), so that stacked panels look like the road seen from above."""
-    used = {str(lane) for d in fcd.values() for lane in d.get("lane", [""])}
+    used = {str(lane) for vid, d in fcd.items() if not is_traffic(vid) for lane in d.get("lane", [""])}
 
     def key(lane: str):
         edge, _, index = lane.rpartition("_")
@@ -189,9 +204,16 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
     axes = fig.subplots(len(lane_ids), 1, sharex=True, sharey=True, squeeze=False)[:, 0]
     crash_lane = _collision_lane(fcd, collision, lane_ids) if collision else None
     ends: dict[int, list[tuple[str, float, float]]] = {i: [] for i in range(len(lane_ids))}
+    traffic_drawn = [False] * len(lane_ids)
     for i, (ax, lane) in enumerate(zip(axes, lane_ids)):
         for vid, d in fcd.items():
             inside = np.asarray(d.get("lane", np.full(len(d["time"]), "")), dtype=str) == lane
+            if is_traffic(vid):  # lighter, under the platoon, unlabelled
+                for a, b in _runs(inside):
+                    ax.plot(d["time"][a:b], d["pos"][a:b], color=TRAFFIC_COLOR, linewidth=0.9, zorder=1.5,
+                            label="traffic" if not traffic_drawn[i] else None)
+                    traffic_drawn[i] = True
+                continue
             for a, b in _runs(inside):
                 points = np.column_stack([d["time"][a:b], d["pos"][a:b]]).reshape(-1, 1, 2)
                 if b - a >= 2:
@@ -215,10 +237,11 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
         ax.grid(alpha=0.25)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper left", fontsize=8)
-    times = np.concatenate([d["time"] for d in fcd.values()])
-    positions = np.concatenate([d["pos"] for d in fcd.values()])
+    platoon = [d for vid, d in fcd.items() if not is_traffic(vid)] or list(fcd.values())  # the axes hold the platoon
+    times = np.concatenate([d["time"] for d in platoon])
+    positions = np.concatenate([d["pos"] for d in platoon])
     t0, t1 = float(times.min()), float(times.max())
-    p0, p1 = float(positions.min()), float(positions.max())
+    p0, p1 = float(np.nanmin(positions)), float(np.nanmax(positions))
     axes[0].set_xlim(t0, _episode_end_s(t1, collision))  # the axis ends with the episode; the labels go beyond it
     axes[0].set_ylim(p0 - 0.04 * (p1 - p0 or 1.0), p1 + 0.06 * (p1 - p0 or 1.0))
     axes[-1].set_xlabel("time [s]")
@@ -252,6 +275,7 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
     """Every car's acceleration over time."""
     fig = _figure(figsize=(8.0, 3.8))
     ax = fig.subplots()
+    fcd = {vid: d for vid, d in fcd.items() if not is_traffic(vid)}  # the platoon's
     for vid, d in fcd.items():
         ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" else 1.1,
                 color="black" if vid == "v0" else None, zorder=3 if vid == "v0" else 2)

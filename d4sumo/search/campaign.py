@@ -78,7 +78,8 @@ class Campaign:
         c = self.config
         start = c.attack_start_step if self.score_from_attack_start else 0
         return Specification(followers=c.followers, step_s=c.step_s, formula=self.formula, d_safe_m=self.d_safe_m,
-                             duration_s=c.total_s - start * c.step_s, start_step=start, maneuver=c.maneuver)
+                             duration_s=c.total_s - start * c.step_s, start_step=start, maneuver=c.maneuver,
+                             traffic=c.traffic is not None)
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""

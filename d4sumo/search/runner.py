@@ -25,6 +25,22 @@ from .store import Store, StoreError
 log = logging.getLogger(__name__)
 
 
+def campaign_network(config: EpisodeConfig) -> NetworkSource | str:
+    """What a campaign's roads are built from, by value where a route names a part of a network (Dask
+    workers may not see the client's disk): the route's edges alone, or the network whole where a user's
+    traffic demand drives its other ways (`EpisodeConfig.whole_network`)."""
+    if not config.route:
+        return config.network
+    return network_source(config.network, route=() if config.whole_network else config.route)
+
+
+def campaign_road(network: NetworkSource | str, config: EpisodeConfig) -> Road:
+    """The road a campaign's episodes play alone on, from `campaign_network`'s ``network``."""
+    if config.whole_network:
+        return build_road(network, route=config.route, lane=config.lane, whole=True)
+    return build_road(network, lane=config.lane)
+
+
 class Evaluator:
     """Simulates and scores parameter vectors of one campaign (road built and formula parsed once):
     one at a time, or a batch side by side in one SUMO (`simulation.simulate_batch`)."""
@@ -34,8 +50,8 @@ class Evaluator:
         self.family = campaign.family()
         self.spec = campaign.specification()
         config = campaign.config  # what batches' roads are built from: the network, or its route's edges alone
-        self.network = network or (network_source(config.network, route=config.route) if config.route else config.network)
-        self.road = road or build_road(self.network, lane=config.lane)
+        self.network = network or campaign_network(config)
+        self.road = road or campaign_road(self.network, config)
         check_episode(campaign.config, self.road)
         self._batch_road: Road | None = None
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it

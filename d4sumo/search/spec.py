@@ -39,8 +39,12 @@ def lane_formula(d_safe_m: float = 0.0) -> str:
     return f"(eventually(victim_gap <= {d_safe_m!r})) and (always(attacker_gap > {d_safe_m!r}))"
 
 
-def default_formula(maneuver: str, followers: int, d_safe_m: float = 0.0) -> str:
-    return lane_formula(d_safe_m) if MANEUVERS[maneuver].lateral else paper_formula(followers, d_safe_m)
+def default_formula(maneuver: str, followers: int, d_safe_m: float = 0.0, traffic: bool = False) -> str:
+    """psi for the maneuver: over whoever follows whom where the attacker changes lanes or traffic may come
+    between the cars (a follower hitting a traffic car is a victim's crash, not the attacker's), else over
+    the paper's column of gaps."""
+    lanes = MANEUVERS[maneuver].lateral or traffic
+    return lane_formula(d_safe_m) if lanes else paper_formula(followers, d_safe_m)
 
 
 def psi_robustness(trace: Trace, d_safe_m: float = 0.0) -> float:
@@ -91,13 +95,13 @@ class Specification:
     """
 
     def __init__(self, *, followers: int, step_s: float, formula: str | None = None, d_safe_m: float = 0.0,
-                 duration_s: float | None = None, start_step: int = 0, maneuver: str = "inlane"):
+                 duration_s: float | None = None, start_step: int = 0, maneuver: str = "inlane", traffic: bool = False):
         import rtamt
 
         self.followers = followers
         self.start_step = start_step
         self.d_safe_m = d_safe_m
-        self.formula = formula if formula is not None else default_formula(maneuver, followers, d_safe_m)
+        self.formula = formula if formula is not None else default_formula(maneuver, followers, d_safe_m, traffic)
         if not isinstance(self.formula, str) or not self.formula.strip():
             raise ConfigError("spec.formula", formula, "an STL formula in rtamt syntax, e.g. eventually(gap_v2 <= 0)")
         declared = trace_signals(followers, maneuver)

@@ -25,11 +25,11 @@ log = logging.getLogger(__name__)
 
 SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start",
                       *dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings))  # maneuver, cutin_follower, ...
-GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "radar", "attack", "optimizer", "seed")
+GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "radar", "traffic", "attack", "optimizer", "seed")
 #: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
 #: table, or a list of them for a mixed platoon)
 GRID_TO_KEY = {**{k: f"scenario.{k}" for k in SCENARIO_GRID_KEYS}, "controller": "controller", "radar": "radar",
-               "attack": "attack.family",
+               "traffic": "traffic", "attack": "attack.family",
                "optimizer": "search.optimizer", "seed": "search.seed"}
 
 
@@ -92,8 +92,9 @@ class Sweep:
             if len(set(map(repr, values))) != len(values):
                 raise ConfigError(f"grid.{key}", values, "a list without repeated values")
         base = {k: v for k, v in doc.items() if k not in ("name", "grid")}
-        if "radar" in grid and "radar" in base:
-            raise ConfigError(f"{source}: [radar]", base["radar"], "no [radar] table beside grid.radar, which sets it for every campaign")
+        for table in ("radar", "traffic"):
+            if table in grid and table in base:
+                raise ConfigError(f"{source}: [{table}]", base[table], f"no [{table}] table beside grid.{table}, which sets it for every campaign")
         if "controller" in grid and "controller" in base:
             raise ConfigError(f"{source}: [controller]", base["controller"],
                               "no [controller] beside grid.controller: give each controller's values in the grid")
@@ -130,7 +131,8 @@ class Sweep:
         for c in self.campaigns:
             key = c.config.network, c.config.route, c.config.lane
             if key not in roads:
-                roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane)
+                roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane,
+                                         whole=c.config.whole_network)
             check_episode(c.config, roads[key])
         seen = set()
         for c in self.campaigns:

@@ -130,9 +130,9 @@ def run_sweep(
             cid = store.open_campaign(c.definition(), c.samples, sweep.name)
             stored = stored_results(store, cid, c.samples)
             if len(stored) < c.samples:
-                key = c.config.network, c.config.route
+                key = c.config.network, c.config.route, c.config.whole_network
                 if key not in sources:
-                    sources[key] = network_source(c.config.network, route=c.config.route)
+                    sources[key] = network_source(c.config.network, route=() if c.config.whole_network else c.config.route)
                 todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch))
         total = sweep.samples
         counts = list(store.sweep_counts(sweep.name))

@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine.scenarios import NetworkSource, build_road
+from ..engine.scenarios import NetworkSource
 from ..errors import D4sumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
 from ..search.campaign import Campaign, SampleResult
-from ..search.runner import CampaignRunner, Evaluator, play_pending, step_together
+from ..search.runner import CampaignRunner, Evaluator, campaign_road, play_pending, step_together
 from ..search.store import campaign_key
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,8 @@ def _evaluator(chunk: Chunk | Play) -> Evaluator:
     if evaluator is None:
         if len(_EVALUATORS) >= 8 * GANG_SIZE:
             _EVALUATORS.clear()
-        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=build_road(chunk.network, lane=chunk.campaign.config.lane), network=chunk.network)
+        evaluator = _EVALUATORS[key] = Evaluator(chunk.campaign, road=campaign_road(chunk.network, chunk.campaign.config),
+                                                           network=chunk.network)
     return evaluator
 
 

@@ -1,0 +1,241 @@
+"""Traffic around the platoon, the [traffic] table: what SUMO inserts, and how the platoon joins it.
+
+Pure code, no SUMO. SUMO drives the traffic with its own models; d4sumo writes the demand (`demand_xml`)
+and the world (`engine.sumo`) plays it:
+
+- the user's own SUMO demand, ``demand``: route files of vehicles, flows and trips as SUMO reads them
+  (sumo-rl and Flow take the same), from t = 0 of SUMO's clock. Every vehicle's id gets the prefix
+  `TRAFFIC_ID` (so it never meets a platoon car's), and SUMO's insertion checks where it sets none. The
+  files' content is part of the campaign (``demand_sha256``): a changed file is other traffic, and is
+  refused where the campaign's is expected;
+- and, or instead (the default when no demand is given: 1200), a flow of ``vehicles_per_hour`` in every
+  lane of the route's first edge that leads on through the route, along the platoon's route, its
+  departures a Poisson process (exponential headways, as free-flowing motorway traffic arrives); each
+  vehicle is of one of the ``types`` (a share of the flow each, SUMO's <vType> attributes as given: its
+  car-following and lane-changing models and their parameters; none: SUMO's default passenger car,
+  Krauss and LC2013 with its speed spread);
+- a warm-up of ``warmup_s`` with the traffic alone, so it is in its own equilibrium along the road when
+  the platoon joins it;
+- the platoon's places are then cleared: every traffic car whose body is in a lane of the platoon's,
+  between ``clear_m`` behind the platoon's rear bumper and ``clear_m`` ahead of its front car, leaves;
+  the platoon is inserted there, and the episode's clock (t = 0 of the trace) starts;
+- SUMO's random streams (departures, speed spread, lane changes) are seeded with ``seed``: every episode
+  of a configuration meets the same traffic, so a sample's score depends on its attack alone, and a
+  replay reproduces it.
+
+The traffic inserts itself with SUMO's insertion checks (the platoon's cars are placed where they are
+put). The followers sense whatever is ahead of them in their lane, a traffic car included; a collision of
+a platoon car with a traffic car is the platoon's (`maneuvers.Pair`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+from xml.sax.saxutils import quoteattr
+
+from ..errors import ConfigError, check_int, check_number, is_number
+
+#: the flow per lane without a demand of the user's [vehicles per hour per lane]
+DEFAULT_VPH = 1200.0
+#: the prefix of every traffic vehicle's id (and the name its pairs go by in the minimum gaps)
+TRAFFIC_ID = "traffic"
+#: a vehicle type's name: SUMO's ids allow more, a flow's id is built from it
+_TYPE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
+#: <vType> attributes d4sumo sets itself (the type's id)
+_OWN_ATTRIBUTES = ("id",)
+
+
+@dataclass(frozen=True)
+class TrafficParams:
+    """SUMO's traffic around the platoon, the [traffic] table (see the module)."""
+
+    #: a Poisson flow per lane of the route's first edge [vehicles per hour per lane]; none: 1200 without a
+    #: demand, no flow beside one
+    vehicles_per_hour: float | None = None
+    #: the user's SUMO route files (paths), their vehicles, flows and trips the traffic
+    demand: tuple[str, ...] = ()
+    #: the demand files' content (sha256 over them, in order), taken when they are first read: what identifies them
+    demand_sha256: str = ""
+    warmup_s: float = 60.0  # the traffic alone before the platoon joins it
+    clear_m: float = 50.0  # traffic this close behind or ahead of the platoon, in its lanes, leaves at its insertion
+    seed: int = 0  # SUMO's random streams: every episode of the configuration meets the same traffic
+    #: vehicle types by name, each its share of the flow and SUMO <vType> attributes, as ((name, ((key,
+    #: value), ...)), ...) (a mapping of tables is taken too); none: SUMO's default passenger car
+    types: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+
+    def __post_init__(self) -> None:
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        if self.vehicles_per_hour is not None:
+            fix("vehicles_per_hour", check_number("traffic.vehicles_per_hour", self.vehicles_per_hour, 0.0, 3600.0,
+                                                  "vehicles per hour per lane", low_open=True))
+        if isinstance(self.demand, str):
+            fix("demand", (self.demand,))
+        if not isinstance(self.demand, (list, tuple)) or not all(isinstance(p, str) and p for p in self.demand):
+            raise ConfigError("traffic.demand", self.demand, "SUMO route files, e.g. \"demand.rou.xml\" or a list of them")
+        fix("demand", tuple(self.demand))
+        if self.vehicles_per_hour is None and not self.demand:  # no demand of the user's: d4sumo's flow
+            fix("vehicles_per_hour", DEFAULT_VPH)
+        if self.demand and not self.demand_sha256:
+            fix("demand_sha256", demand_digest(self.demand))
+        if not isinstance(self.demand_sha256, str) or (self.demand_sha256 and not self.demand):
+            raise ConfigError("traffic.demand_sha256", self.demand_sha256, "the digest d4sumo takes of traffic.demand (leave it out)")
+        fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
+        fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
+        fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
+        fix("types", _checked_types(self.types))
+
+    @classmethod
+    def from_table(cls, table: Any) -> "TrafficParams":
+        if not isinstance(table, Mapping):
+            raise ConfigError("traffic", table, "a [traffic] table")
+        keys = [f.name for f in dataclasses.fields(cls)]
+        for key, value in table.items():
+            if key not in keys:
+                raise ConfigError(f"traffic.{key}", value, f"a key of [traffic]: {', '.join(keys)}")
+        return cls(**table)
+
+    def to_dict(self) -> dict:
+        """As a definition stores it: every key that has an effect (the traffic is part of what identifies
+        the episode)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("types", "demand")}
+        if self.vehicles_per_hour is None:
+            del out["vehicles_per_hour"]
+        if self.demand:
+            out["demand"] = list(self.demand)
+        else:
+            del out["demand_sha256"]
+        if self.types and self.vehicles_per_hour is not None:
+            out["types"] = {name: dict(attributes) for name, attributes in self.types}
+        return out
+
+    @property
+    def label(self) -> str:
+        """In a few words: ``1200 veh/h/lane, seed 0`` (the types' names where given, the demand files')."""
+        parts = [Path(p).name for p in self.demand]
+        if self.vehicles_per_hour is not None:
+            types = f" of {', '.join(name for name, _ in self.types)}" if self.types else ""
+            parts.append(f"{self.vehicles_per_hour:g} veh/h/lane{types}")
+        return f"{' + '.join(parts)}, seed {self.seed}"
+
+    @property
+    def type_shares(self) -> list[tuple[str, float, dict[str, Any]]]:
+        """Each vehicle type: its name, its share of the flow (they sum to 1) and its <vType> attributes."""
+        types = self.types or (("car", (("share", 1.0),)),)
+        total = sum(dict(a).get("share", 1.0) for _, a in types)
+        return [(name, dict(a).get("share", 1.0) / total, {k: v for k, v in a if k != "share"}) for name, a in types]
+
+
+def _checked_types(types: Any) -> tuple:
+    if isinstance(types, Mapping):
+        types = tuple(types.items())
+    if not isinstance(types, (list, tuple)):
+        raise ConfigError("traffic.types", types, "tables of vehicle types, e.g. [traffic.types.car] share = 0.9")
+    out = []
+    for item in types:
+        if not (isinstance(item, (list, tuple)) and len(item) == 2):
+            raise ConfigError("traffic.types", types, "tables of vehicle types, e.g. [traffic.types.car] share = 0.9")
+        name, attributes = item
+        if not isinstance(name, str) or not _TYPE_NAME.match(name):
+            raise ConfigError(f"traffic.types.{name}", name, "a type name of letters, digits and _ (a letter first, at most 32)")
+        if isinstance(attributes, Mapping):
+            attributes = tuple(attributes.items())
+        if not isinstance(attributes, (list, tuple)):
+            raise ConfigError(f"traffic.types.{name}", attributes, "a table of share and SUMO <vType> attributes")
+        checked = []
+        for key, value in attributes:
+            field = f"traffic.types.{name}.{key}"
+            if key == "share":
+                value = check_number(field, value, 0.0, 1e6, "(its part of the flow)", low_open=True)
+            elif key in _OWN_ATTRIBUTES:
+                raise ConfigError(field, value, "a <vType> attribute other than id (the table's name is the type's)")
+            elif not isinstance(key, str) or not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", key):
+                raise ConfigError(field, value, "a SUMO <vType> attribute, e.g. carFollowModel, tau, speedFactor, lcStrategic")
+            elif not (isinstance(value, str) or is_number(value)) or isinstance(value, bool):
+                raise ConfigError(field, value, "a number or a string, as SUMO's <vType> attribute reads it")
+            checked.append((key, value))
+        out.append((name, tuple(sorted(checked))))
+    names = [name for name, _ in out]
+    if len(set(names)) != len(names):
+        raise ConfigError("traffic.types", names, "types of distinct names")
+    return tuple(sorted(out))
+
+
+def demand_digest(paths: Sequence[str]) -> str:
+    """sha256 over the demand files' bytes, in order; an unreadable file is a ConfigError naming it."""
+    digest = hashlib.sha256()
+    for path in paths:
+        try:
+            digest.update(Path(path).read_bytes())
+        except OSError as exc:
+            raise ConfigError("traffic.demand", path, f"a readable SUMO route file ({exc.strerror or exc})") from None
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+#: the demand elements that are vehicles (or make them): their ids get the traffic's prefix
+_VEHICLE_TAGS = ("vehicle", "flow", "trip")
+
+
+def user_demand_xml(path: str) -> list[str]:
+    """A user's route file as the traffic plays it: every vehicle's, flow's and trip's id prefixed with
+    `TRAFFIC_ID` (a "-" in it an "_": pairs are named "leader-follower"), and SUMO's insertion checks
+    where it sets none (d4sumo places the platoon's cars without them). A file that does not parse is a
+    ConfigError naming it and the place. Returns the file's elements, each as XML."""
+    try:
+        tree = ET.parse(path)
+    except ET.ParseError as exc:
+        raise ConfigError("traffic.demand", path, f"a SUMO route file that parses (XML: {exc})") from None
+    except OSError as exc:
+        raise ConfigError("traffic.demand", path, f"a readable SUMO route file ({exc.strerror or exc})") from None
+    root = tree.getroot()
+    if root.tag != "routes":
+        raise ConfigError("traffic.demand", path, f"a SUMO route file, its root <routes> (this one's is <{root.tag}>)")
+    for element in root.iter():
+        if element.tag in _VEHICLE_TAGS:
+            element.set("id", f"{TRAFFIC_ID}.{element.get('id', '').replace('-', '_')}")
+            element.attrib.setdefault("insertionChecks", "all")
+    return [ET.tostring(child, encoding="unicode").strip() for child in root]
+
+
+def demand_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequence[int], end_s: float) -> str:
+    """The traffic's demand as SUMO reads it (one route file): the user's demand files' elements
+    (`user_demand_xml`), then d4sumo's flow where there is one: its vehicle types as one distribution, its
+    route (the platoon's), and a flow per lane of the first edge (``lanes``, SUMO's indices) from t = 0 to
+    ``end_s``. Every traffic vehicle's id starts with `TRAFFIC_ID`. A demand file whose content is not
+    the campaign's (``params.demand_sha256``) is refused."""
+    if params.demand and demand_digest(params.demand) != params.demand_sha256:
+        raise ConfigError("traffic.demand", list(params.demand), "the demand files this campaign was run with (their "
+                                                                  "content has changed since: other traffic)")
+    lines = ["<routes>"] + [f"    {element}" for path in params.demand for element in user_demand_xml(path)]
+    if params.vehicles_per_hour is None:
+        return "\n".join([*lines, "</routes>"]) + "\n"
+    shares = params.type_shares
+    for name, _, attributes in shares:
+        attrs = "".join(f" {k}={quoteattr(_sumo_value(v))}" for k, v in attributes.items())
+        lines.append(f'    <vType id="{TRAFFIC_ID}_{name}"{attrs}/>')
+    distribution = " ".join(f"{TRAFFIC_ID}_{name}" for name, _, _ in shares)
+    probabilities = " ".join(repr(p) for _, p, _ in shares)
+    lines.append(f'    <vTypeDistribution id="{TRAFFIC_ID}" vTypes="{distribution}" probabilities="{probabilities}"/>')
+    lines.append(f'    <route id="{TRAFFIC_ID}" edges={quoteattr(" ".join(route_edges))}/>')
+    for lane in lanes:
+        # insertionChecks: the traffic enters only where SUMO's models find room (the platoon's cars are placed)
+        lines.append(f'    <flow id="{TRAFFIC_ID}.{lane}" type="{TRAFFIC_ID}" route="{TRAFFIC_ID}" begin="0" end={quoteattr(repr(end_s))} '
+                     f'period="exp({params.vehicles_per_hour / 3600.0!r})" departLane="{lane}" departPos="base" '
+                     f'departSpeed="max" insertionChecks="all"/>')
+    lines.append("</routes>")
+    return "\n".join(lines) + "\n"
+
+
+def _sumo_value(value: Any) -> str:
+    return repr(float(value)) if is_number(value) and not isinstance(value, int) else str(value)
+
+
+def is_traffic(vehicle_id: str) -> bool:
+    """Whether a vehicle id is a traffic car's (`demand_xml`)."""
+    return vehicle_id.startswith(TRAFFIC_ID + ".")

@@ -1,0 +1,137 @@
+"""Traffic around the platoon (issue 37), for real in SUMO: SUMO's traffic warms up, the platoon's places
+are cleared, every follower senses whatever is ahead in its lane (a traffic car included) and the gaps,
+collisions and verdicts agree with SUMO's FCD."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sumolib.xml import parse_fast_nested
+
+from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.simulation import simulate, simulate_batch
+from d4sumo.engine.sumo import open_world
+from d4sumo.errors import ConfigError
+from d4sumo.model.config import EpisodeConfig
+from d4sumo.model.traffic import is_traffic
+
+pytestmark = pytest.mark.sumo
+
+#: the 3-lane motorway, 1500 vehicles per hour in each lane, the platoon joining it at 30 m/s
+BUSY = EpisodeConfig(network="highway_3lane_120kmh", start="steady", speed_mps=30.0, duration_s=30.0,
+                     traffic={"vehicles_per_hour": 1500, "warmup_s": 40.0})
+
+
+def _fcd(path):
+    """{time: {vehicle: (lane, front position, length)}} from SUMO's FCD of a road of one edge."""
+    steps: dict[float, dict] = {}
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "pos", "lane"]):
+        steps.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos))
+    return steps
+
+
+def test_every_gap_the_followers_sense_is_the_one_sumo_fcd_shows_to_whatever_car_is_ahead(tmp_path):
+    u = np.full(BUSY.steps, np.nan)
+    u[40:120] = -0.6  # the attacker brakes; the traffic ahead drives on
+    episode = simulate(BUSY, u, fcd_path=tmp_path / "fcd.xml")
+    steps = _fcd(tmp_path / "fcd.xml")
+    times = sorted(steps)
+    t0 = next(t for t in times if "v0" in steps[t])  # the platoon joins after the traffic's warm-up
+    assert t0 == pytest.approx(BUSY.traffic.warmup_s)
+    lengths = {vid: 5.0 for t in times for vid in steps[t]}  # SUMO's passenger car
+    lengths.update({vid: v.length_m for vid, v in zip(BUSY.vehicle_ids, BUSY.car_vehicles)})
+    compared = 0
+    for k, t in enumerate(times[times.index(t0):][:len(episode.trace)]):
+        cars = steps[t]
+        for vid in ("v0", "v1", "v2", "v3"):
+            lane, pos = cars[vid]
+            ahead = [p - lengths[o] - pos for o, (ln, p) in cars.items() if ln == lane and p > pos and o != vid]
+            fcd_gap = min(ahead) if ahead else 1000.0
+            sensed = episode.trace[f"gap_{vid}"][k]
+            assert min(fcd_gap, 1000.0) == pytest.approx(sensed, abs=2.5e-6), (t, vid)
+            compared += 1
+    assert compared == 4 * len(episode.trace)
+    traffic_ahead = [k for k in episode.min_gaps if k.startswith("traffic-")]
+    assert traffic_ahead == ["traffic-v0"]  # a traffic car led the attacker, none came between the cars
+
+
+def test_the_platoon_joins_traffic_in_its_own_places_and_every_episode_meets_the_same_traffic():
+    u = np.full(BUSY.steps, np.nan)
+    first, again = simulate(BUSY, u), simulate(BUSY, u)
+    assert first.trace.signals.keys() == again.trace.signals.keys()
+    assert all(np.array_equal(first.trace[k], again.trace[k]) for k in first.trace.names)
+    assert first.trace["gap_v0"][0] >= BUSY.traffic.clear_m  # cleared ahead of the attacker
+    other = dataclasses.replace(BUSY, traffic={"vehicles_per_hour": 1500, "warmup_s": 40.0, "seed": 7})
+    assert not np.array_equal(simulate(other, u).trace["gap_v0"], first.trace["gap_v0"])  # another seed, other traffic
+    # a batch plays its episodes one at a time with traffic, each as alone
+    batch = simulate_batch(BUSY, [u, u])
+    assert all(np.array_equal(b.trace[k], first.trace[k]) for b in batch for k in first.trace.names)
+
+
+def test_a_traffic_car_that_comes_between_two_followers_is_the_one_the_rear_follower_senses():
+    config = dataclasses.replace(BUSY, setpoint_m=40.0)
+    road = build_road(config.network)
+    with open_world(config, road, [config]) as world:
+        api, ids = world.api, world.platoons[0]
+        x = [world.get_position(v) for v in ids]
+        # a car of traffic lands 15 m behind v1's rear bumper (as a lane change would put it)
+        api.vehicle.add("traffic.in", "platoon", depart="now", departLane="0", departPos=repr(x[1] - 4.5 - 15.0),
+                        departSpeed="30")
+        world.step()
+        x, v = [world.get_position(vid) for vid in ids], [world.get_speed(vid) for vid in ids]
+        pairs, names, xs, vs = world.sense(0, x, v)
+        t = names.index("traffic.in")
+        front = api.vehicle.getLanePosition("traffic.in")
+        assert (t, 2, pytest.approx(front - 5.0 - x[2], abs=1e-9)) in pairs  # v2 senses it, 5 m long
+        assert (1, t, pytest.approx(x[1] - 4.5 - front, abs=1e-9)) in pairs  # and it follows v1
+        assert (1, 2) not in [(a, b) for a, b, _ in pairs]
+        assert xs[t] == pytest.approx(front, abs=1e-9) and vs[t] == api.vehicle.getSpeed("traffic.in")
+
+
+def test_an_attacker_that_runs_into_traffic_ahead_is_an_attacker_crash_with_the_traffic_car_named():
+    episode = simulate(BUSY, np.ones(BUSY.steps))  # full throttle into the traffic ahead
+    first = episode.first_collision
+    assert is_traffic(first.leader) and first.follower == "v0"
+    assert episode.outcome == "attacker_crash"
+    assert episode.min_gaps["traffic-v0"] < 0 and episode.trace["attacker_gap"][-1] < 0
+
+
+def test_a_density_sumo_cannot_insert_and_a_vehicle_type_it_refuses_get_one_line():
+    jammed = dataclasses.replace(BUSY, traffic={"vehicles_per_hour": 3600, "warmup_s": 40.0})
+    with pytest.raises(ConfigError) as info:
+        simulate(jammed, np.full(jammed.steps, np.nan))
+    assert info.value.field == "traffic.vehicles_per_hour" and "waited to enter" in info.value.allowed
+    refused = dataclasses.replace(BUSY, traffic={"types": {"car": {"carFollowModel": "Nope"}}})
+    with pytest.raises(ConfigError) as info:
+        simulate(refused, np.full(refused.steps, np.nan))
+    assert info.value.field.startswith("traffic")
+
+
+def test_sumo_own_bremen_motorway_plays_with_its_own_demand_the_ramp_traffic_merging_into_the_platoon_lane(tmp_path):
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    config = EpisodeConfig(network=str(game / "highway.net.xml"), route=("145354574", "189597495", "E0", "191842213"),
+                           start="steady", speed_mps=30.0, duration_s=20.0, traffic={"demand": str(game / "highway.rou.xml")})
+    assert config.whole_network
+    road = build_road(config.network, route=config.route, whole=True)
+    assert road.lane_path == (0, 0, 1, 0) and road.through_lanes == (0, 1, 2)
+    u = np.full(config.steps, np.nan)
+    u[:100] = -0.5
+    episode = simulate(config, u, road=road, fcd_path=tmp_path / "fcd.xml")
+    assert np.array_equal(episode.trace["gap_v0"], simulate(config, u, road=road).trace["gap_v0"])
+    seen = {v.id for _, v in parse_fast_nested(str(tmp_path / "fcd.xml"), "timestep", ["time"], "vehicle", ["id"])}
+    assert any(v.startswith("traffic.ramp.") for v in seen) and any(v.startswith("traffic.highway.") for v in seen)
+    assert "traffic-v0" in episode.min_gaps
+
+
+def test_a_demand_over_edges_the_network_lacks_is_refused_naming_the_file(tmp_path):
+    demand = tmp_path / "elsewhere.rou.xml"
+    demand.write_text('<routes><route id="r" edges="nowhere"/><flow id="f" route="r" begin="0" end="10" vehsPerHour="100"/></routes>')
+    config = dataclasses.replace(BUSY, traffic={"demand": str(demand)})
+    with pytest.raises(ConfigError) as info:
+        simulate(config, np.full(config.steps, np.nan))
+    assert info.value.field == "traffic.demand" and "nowhere" in info.value.allowed

@@ -1,0 +1,119 @@
+"""Episode cost with SUMO's traffic around the platoon against bare libsumo stepping of the same vehicles
+(the target: ratio <= 1.5), and the memory of a busy 10 km motorway (the target: a worker under 1 GiB).
+
+Both sides are timed the same way, start to close, interleaved in one run so machine noise hits both:
+  bare     libsumo start with the same demand, the traffic's warm-up, its places cleared and the same
+           platoon inserted (the same cars, vehicle types and speed modes: `sumo.warm_up_traffic`,
+           `sumo.load_platoon`), then `steps` calls of simulationStep, close
+  episode  d4sumo.engine.simulation.simulate: the same, plus every step the followers' sensing of
+           whoever is ahead (SUMO's leader, traffic included), their controllers, actuators and speed
+           commands, the collision checks and the Trace, for an attack that never crashes
+
+The memory: a falsify campaign on a straight 10 km, 3-lane motorway at 1800 vehicles per hour per lane
+(a few hundred vehicles on the road at once), its peak resident set size as the kernel counts it.
+
+Usage: python tools/bench_traffic.py [--repeats 10] [--densities 600 1800] [--no-memory]
+"""
+
+from __future__ import annotations
+
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import libsumo
+import numpy as np
+
+from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.simulation import check_episode, simulate
+from d4sumo.engine.sumo import load_platoon, sumo_command, traffic_file, warm_up_traffic
+from d4sumo.model.config import EpisodeConfig
+from toolargs import Parser, run_main
+
+TARGET = 1.5  # an episode with traffic at most this many times bare libsumo stepping of the same vehicles
+MEMORY_TARGET_MIB = 1024.0
+
+
+def bare(config: EpisodeConfig, road) -> float:
+    t0 = time.perf_counter()
+    libsumo.start(sumo_command(config, road, types_file=check_episode(config, road), demand_file=traffic_file(config, road)))
+    warm_up_traffic(libsumo, config, road)
+    load_platoon(libsumo, config, road)
+    for _ in range(config.steps):
+        libsumo.simulationStep()
+    libsumo.close()
+    return time.perf_counter() - t0
+
+
+def episode(config: EpisodeConfig, road, attack_u: np.ndarray) -> float:
+    t0 = time.perf_counter()
+    result = simulate(config, attack_u, road=road)
+    elapsed = time.perf_counter() - t0
+    assert len(result.trace) == config.steps + 1, "the benchmark attack must not crash"
+    return elapsed
+
+
+def busy_motorway_peak_mib(samples: int) -> tuple[float, int]:
+    """A falsify campaign's peak RSS [MiB] on a 10 km, 3-lane motorway at 1800 veh/h/lane, and the most
+    vehicles on the road at once in its first episode."""
+    with tempfile.TemporaryDirectory() as tmp:
+        road = Path(tmp) / "motorway"
+        road.mkdir()
+        (road / "road.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="10000" y="0"/></nodes>')
+        (road / "road.edg.xml").write_text('<edges><edge id="m" from="a" to="b" numLanes="3" speed="33.33"/></edges>')
+        traffic = {"vehicles_per_hour": 1800, "warmup_s": 300.0}
+        config = EpisodeConfig(network=str(road), start="steady", speed_mps=30.0, traffic=traffic)
+        built = build_road(config.network)
+        libsumo.start(sumo_command(config, built, demand_file=traffic_file(config, built)))
+        warm_up_traffic(libsumo, config, built)
+        on_road = libsumo.vehicle.getIDCount()
+        libsumo.close()
+        cmd = [sys.executable, "-m", "d4sumo", "falsify", "--network", str(road), "--start", "steady", "--speed", "30",
+               "--set", "traffic.vehicles_per_hour=1800", "--set", "traffic.warmup_s=300", "--samples", str(samples),
+               "--db", str(Path(tmp) / "busy.db")]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        subprocess.run(cmd, check=True, capture_output=True)
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        return max(peak, before) / 1024.0, on_road
+
+
+def main() -> None:
+    parser = Parser(__doc__)
+    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--densities", type=float, nargs="+", default=[600.0, 1800.0])
+    parser.add_argument("--memory-samples", type=int, default=20)
+    parser.add_argument("--no-memory", action="store_true")
+    args = parser.parse_args()
+    parser.check_counts({"--repeats": (args.repeats, 1), "--memory-samples": (args.memory_samples, 1)})
+    configs = [EpisodeConfig(network="highway_3lane_120kmh", start="steady", speed_mps=30.0, duration_s=40.0,
+                             traffic={"vehicles_per_hour": d, "warmup_s": 60.0}) for d in args.densities]
+    road = build_road(configs[0].network)
+    attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length
+    times: dict[float, tuple[list[float], list[float]]] = {d: ([], []) for d in args.densities}
+    for config in configs:
+        bare(config, road), episode(config, road, attack_u)  # warm caches (and check SUMO's demand)
+    for _ in range(args.repeats):
+        for d, config in zip(args.densities, configs):
+            times[d][0].append(bare(config, road))
+            times[d][1].append(episode(config, road, attack_u))
+    c = configs[0]
+    print(f"{c.steps} steps after a {c.traffic.warmup_s:g} s warm-up, {c.followers + 1} platoon cars, "
+          f"{args.repeats} repeats (median, start to close)")
+    for d in args.densities:
+        mb, me = statistics.median(times[d][0]), statistics.median(times[d][1])
+        ratio = me / mb
+        print(f"{d:6g} veh/h/lane  bare {mb * 1e3:7.1f} ms  episode {me * 1e3:7.1f} ms  ratio {ratio:5.2f}  (target <= {TARGET}: "
+              + ("met)" if ratio <= TARGET else f"{ratio / TARGET:.2f} times it)"))
+    if not args.no_memory:
+        peak, on_road = busy_motorway_peak_mib(args.memory_samples)
+        print(f"busy 10 km motorway ({on_road} vehicles on the road when the platoon joins): falsify of "
+              f"{args.memory_samples} samples peaks at {peak:.0f} MiB resident (target < {MEMORY_TARGET_MIB:g}: "
+              + ("met)" if peak < MEMORY_TARGET_MIB else "not met)"))
+
+
+if __name__ == "__main__":
+    run_main(main)
