@@ -2,9 +2,10 @@
 (the target: ratio <= 1.5), and the memory of a busy 10 km motorway (the target: a worker under 1 GiB).
 
 Both sides are timed the same way, start to close, interleaved in one run so machine noise hits both:
-  bare     libsumo start with the same demand, the traffic's warm-up, its places cleared and the same
-           platoon inserted (the same cars, vehicle types and speed modes: `sumo.warm_up_traffic`,
-           `sumo.load_platoon`), then `steps` calls of simulationStep, close
+  bare     libsumo start in the same warmed-up traffic (`sumo.traffic_state`, made once and cached: both
+           load it), the platoon's places cleared and the same platoon inserted (the same cars, vehicle
+           types and speed modes: `sumo.clear_platoon_places`, `sumo.load_platoon`), then `steps` calls
+           of simulationStep, close
   episode  d4sumo.engine.simulation.simulate: the same, plus every step the followers' sensing of
            whoever is ahead (SUMO's leader, traffic included), their controllers, actuators and speed
            commands, the collision checks and the Trace, for an attack that never crashes
@@ -30,7 +31,7 @@ import numpy as np
 
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_episode, simulate
-from d4sumo.engine.sumo import load_platoon, sumo_command, traffic_file, warm_up_traffic
+from d4sumo.engine.sumo import clear_platoon_places, load_platoon, sumo_command, traffic_state
 from d4sumo.model.config import EpisodeConfig
 from toolargs import Parser, run_main
 
@@ -40,8 +41,8 @@ MEMORY_TARGET_MIB = 1024.0
 
 def bare(config: EpisodeConfig, road) -> float:
     t0 = time.perf_counter()
-    libsumo.start(sumo_command(config, road, types_file=check_episode(config, road), demand_file=traffic_file(config, road)))
-    warm_up_traffic(libsumo, config, road)
+    libsumo.start(sumo_command(config, road, types_file=check_episode(config, road), state_file=traffic_state(config, road)))
+    clear_platoon_places(libsumo, config, road)
     load_platoon(libsumo, config, road)
     for _ in range(config.steps):
         libsumo.simulationStep()
@@ -68,11 +69,10 @@ def busy_motorway_peak_mib(samples: int) -> tuple[float, int]:
         traffic = {"vehicles_per_hour": 1800, "warmup_s": 300.0}
         config = EpisodeConfig(network=str(road), start="steady", speed_mps=30.0, traffic=traffic)
         built = build_road(config.network)
-        libsumo.start(sumo_command(config, built, demand_file=traffic_file(config, built)))
-        warm_up_traffic(libsumo, config, built)
+        libsumo.start(sumo_command(config, built, state_file=traffic_state(config, built)))
         on_road = libsumo.vehicle.getIDCount()
         libsumo.close()
-        cmd = [sys.executable, "-m", "d4sumo", "falsify", "--network", str(road), "--start", "steady", "--speed", "30",
+        cmd = [sys.executable, "-m", "d4sumo.cli", "falsify", "--network", str(road), "--start", "steady", "--speed", "30",
                "--set", "traffic.vehicles_per_hour=1800", "--set", "traffic.warmup_s=300", "--samples", str(samples),
                "--db", str(Path(tmp) / "busy.db")]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss

@@ -170,9 +170,11 @@ def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) 
 
 
 def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo", *,
-                 types_file: Path | None = None, demand_file: Path | None = None) -> list[str]:
+                 types_file: Path | None = None, demand_file: Path | None = None,
+                 state_file: Path | None = None) -> list[str]:
     """The SUMO command line, as one explicit list; ``types_file``: the followers' vehicle types, as
-    `check_episode` returns them; ``demand_file``: the traffic's (`traffic_file`)."""
+    `check_episode` returns them; ``demand_file``: the traffic's (`traffic_file`), to warm it up;
+    ``state_file``: the warmed-up traffic (`traffic_state`), to play an episode in it."""
     cmd = [
         binary,
         "--net-file", str(road.net_file),
@@ -195,8 +197,11 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
     if demand_file is not None:
-        # eager: a traffic car queued to enter (its place taken) must not hold the platoon back in the queue
-        cmd += ["--route-files", str(demand_file), "--eager-insert", "true"]
+        cmd += ["--route-files", str(demand_file)]
+    if state_file is not None:  # the traffic's vehicles, flows and random streams at the end of its warm-up
+        cmd += ["--load-state", str(state_file)]
+    if config.traffic is not None:  # a traffic car queued to enter must not hold the platoon back in the queue
+        cmd += ["--eager-insert", "true"]
     if config.maneuver_class.lateral and config.lane_change_s > 0:  # the attacker moves across over this time
         cmd += ["--lanechange.duration", repr(config.lane_change_s)]
     if fcd_path is not None:
@@ -373,12 +378,55 @@ class _LanePathCheck:
                     f"a limited distance; name a shorter scenario.route, or a scenario.lane without such a junction")
 
 
-def warm_up_traffic(api, config: EpisodeConfig, road: Road) -> int:
-    """Play the traffic alone for its warm-up (`traffic.TrafficParams`), then clear the platoon's places:
-    every traffic car whose body is in a lane of the platoon's on the first edge, from ``clear_m`` behind
-    its rear bumper to ``clear_m`` ahead of its front car, leaves. Returns how many left. A density SUMO
-    cannot insert (more than two vehicles per lane, and a tenth of the demand, still waiting to enter at the
-    warm-up's end) and a collision among the traffic are refused: neither is the platoon's doing."""
+#: the version of the warm-up d4sumo saves: a cached state of another is warmed up again
+TRAFFIC_STATE = 1
+
+
+def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
+    """The traffic at the end of its warm-up (`traffic.TrafficParams`), as SUMO's saved state (its
+    vehicles, flows and random streams), or None without traffic. Every episode of the configuration loads
+    it and so meets the same traffic; it is warmed up once per SUMO build, road, demand, seed, step and
+    warm-up, and kept in d4sumo's cache (a warm-up of 300 s costs as much as five 60 s episodes).
+
+    The warm-up plays the traffic alone. A density SUMO cannot insert (more than two vehicles per lane, and
+    a tenth of the demand, still waiting to enter at its end) and a collision among the traffic are refused:
+    neither is the platoon's doing."""
+    if config.traffic is None:
+        return None
+    import libsumo
+
+    demand = traffic_file(config, road)
+    sumo = sumo_binary("sumo")
+    key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, demand.name,
+                     str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s)])
+    folder = Path(default_cache_dir()).parent / "traffic-states"
+    path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
+    if path.is_file():
+        return path
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".xml.gz")
+        os.close(fd)
+    except OSError as exc:
+        raise SumoError(f"cannot write the traffic's warm-up under {folder}: {exc.strerror or exc}") from None
+    cmd = sumo_command(config, road, demand_file=demand) + ["--save-state.rng", "true", "--save-state.precision", "17"]
+    try:
+        libsumo.start(cmd)
+        try:
+            _warm_up(libsumo, config, road)
+            libsumo.simulation.saveState(tmp)
+        finally:
+            libsumo.close()
+        os.replace(tmp, path)
+    except libsumo.TraCIException as exc:
+        raise SumoError(f"SUMO failed in the traffic's warm-up: {exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _warm_up(api, config: EpisodeConfig, road: Road) -> None:
     traffic = config.traffic
     step = simulation_step(api)
     departed = 0
@@ -395,14 +443,22 @@ def warm_up_traffic(api, config: EpisodeConfig, road: Road) -> int:
         raise ConfigError("traffic.vehicles_per_hour", traffic.vehicles_per_hour,
                           f"a density SUMO can insert on {road.name}: {waiting} of {departed + waiting} vehicles still waited "
                           f"to enter after the {traffic.warmup_s:g} s warm-up")
-    for vid in api.simulation.getPendingVehicles():  # queued at the road's start, they would enter before the platoon
+
+
+def clear_platoon_places(api, config: EpisodeConfig, road: Road) -> int:
+    """Make room for the platoon in the warmed-up traffic: every traffic car whose body is in a lane of the
+    platoon's on the first edge, from ``clear_m`` behind its rear bumper to ``clear_m`` ahead of its front
+    car, leaves, and so do the cars queued to enter the road (they would enter before the platoon, into
+    its places). Returns how many left."""
+    removed = 0
+    for vid in api.simulation.getPendingVehicles():
         api.vehicle.remove(vid)
+        removed += 1
     cars = maneuver_of(config).cars()
     lanes = {f"{road.route_edges[0]}_{road.platoon_lane + car.lane}" for car in cars}
     lengths = dict(zip(config.vehicle_ids, config.car_vehicles))
-    rear = min(car.position_m - lengths[car.id].length_m for car in cars) - traffic.clear_m
-    front = max(car.position_m for car in cars) + traffic.clear_m
-    removed = 0
+    rear = min(car.position_m - lengths[car.id].length_m for car in cars) - config.traffic.clear_m
+    front = max(car.position_m for car in cars) + config.traffic.clear_m
     for lane in sorted(lanes):
         for vid in api.lane.getLastStepVehicleIDs(lane):
             position = api.vehicle.getLanePosition(vid)
@@ -542,7 +598,7 @@ class open_world:
             import libsumo as api
 
             binary = "sumo"
-        cmd = sumo_command(config, road, fcd_path, binary=binary, types_file=types_file, demand_file=traffic_file(config, road))
+        cmd = sumo_command(config, road, fcd_path, binary=binary, types_file=types_file, state_file=traffic_state(config, road))
         self.api, self.cmd, self.config, self.road, self.configs = api, cmd, config, road, list(configs)
 
     def __enter__(self) -> SumoWorld:
@@ -552,7 +608,7 @@ class open_world:
             raise SumoError(f"SUMO did not start: {exc}") from None
         try:
             if self.config.traffic is not None:
-                warm_up_traffic(self.api, self.config, self.road)
+                clear_platoon_places(self.api, self.config, self.road)
             platoons = load_platoon(self.api, self.config, self.road, len(self.configs), self.configs)
             return SumoWorld(self.api, self.config, self.road, platoons)
         except BaseException as exc:
