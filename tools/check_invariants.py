@@ -182,9 +182,9 @@ TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0
 def traffic_table(rng: np.random.Generator) -> dict:
     """A [traffic] table: a density, a warm-up, how much is cleared, a seed and a mix of types."""
     names = [str(n) for n in rng.choice(list(TRAFFIC_TYPES), size=int(rng.integers(1, 3)), replace=False)]
-    return {"vehicles_per_hour": float(rng.choice([600.0, 1000.0, 1400.0])), "warmup_s": float(rng.choice([20.0, 40.0])),
+    return {"vehicles_per_hour": float(rng.choice([500.0, 800.0, 1100.0])), "warmup_s": float(rng.choice([20.0, 40.0])),
             "clear_m": float(rng.choice([10.0, 50.0])), "seed": int(rng.integers(0, 1000)),
-            "types": {n: TRAFFIC_TYPES[n] for n in names}}
+            "types": {n: TRAFFIC_TYPES[n] for n in names}, "per_sample": bool(rng.random() < 0.3)}
 
 
 def vehicle_table(rng: np.random.Generator) -> dict:
@@ -320,7 +320,7 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         if (row.robustness > 0) != (row.outcome == "success"):
             broken.append("outcome/robustness sign")
     # an independent look: SUMO's FCD file
-    episode = simulate(config, evaluator.plan(row.params), road=evaluator.road)
+    episode = evaluator.simulate(row.index, row.params)  # in the traffic that sample met
     if (config.followers >= 2 and config.maneuver == "inlane" and config.traffic is None  # the paper's psi is the default
             and abs(psi_robustness(episode.trace.window(evaluator.spec.start_step), campaign.d_safe_m) - row.robustness) > 1e-9):
         broken.append("rtamt/numpy psi")

@@ -61,7 +61,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from ..engine.simulation import simulate
     from ..search.campaign import Campaign, open_store
     from ..search.runner import Evaluator
 
@@ -76,7 +75,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
     evaluator = Evaluator(campaign)
     plan = evaluator.plan(row.params)
-    episode = simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    episode = evaluator.simulate(row.index, row.params, fcd_path=fcd, gui=args.gui)
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, plan, episode, rho, campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives

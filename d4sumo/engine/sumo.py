@@ -454,18 +454,55 @@ def clear_platoon_places(api, config: EpisodeConfig, road: Road) -> int:
     for vid in api.simulation.getPendingVehicles():
         api.vehicle.remove(vid)
         removed += 1
+    zone = _platoon_zone(config, road)
+    for lane in sorted(zone[0]):
+        for vid in api.lane.getLastStepVehicleIDs(lane):
+            if _in_zone(api, vid, zone):
+                api.vehicle.remove(vid)
+                removed += 1
+    return removed
+
+
+#: how many steps after the traffic's warm-up the platoon may try to join it (`join_traffic`)
+MAX_JOINS = 50
+
+
+def join_traffic(api, config: EpisodeConfig, road: Road, later: int) -> list[tuple[str, ...]] | None:
+    """The platoon joins the warmed-up traffic (SUMO started in `traffic_state`) ``later`` steps after its
+    warm-up: its places cleared (`clear_platoon_places`), its cars inserted (`load_platoon`). A traffic car
+    that enters the road in the same step does not see the platoon and may enter in its places: then
+    None, and the caller starts again a step later (the same steps in every episode of the configuration:
+    the traffic is the same). Else the platoon's vehicle ids, as `load_platoon` returns them."""
+    step = simulation_step(api)
+    for _ in range(later):
+        step()
+    clear_platoon_places(api, config, road)
+    platoons = load_platoon(api, config, road)
+    ours = set(platoons[0])
+    zone = _platoon_zone(config, road)
+    for vid in api.simulation.getDepartedIDList():
+        if vid not in ours and _in_zone(api, vid, zone):
+            return None
+    return platoons
+
+
+def _platoon_zone(config: EpisodeConfig, road: Road) -> tuple[set[str], float, float]:
+    """The platoon's places on the first edge: its lanes (SUMO's ids), and from ``clear_m`` behind its rear
+    bumper to ``clear_m`` ahead of its front car [m]."""
     cars = maneuver_of(config).cars()
     lanes = {f"{road.route_edges[0]}_{road.platoon_lane + car.lane}" for car in cars}
     lengths = dict(zip(config.vehicle_ids, config.car_vehicles))
     rear = min(car.position_m - lengths[car.id].length_m for car in cars) - config.traffic.clear_m
     front = max(car.position_m for car in cars) + config.traffic.clear_m
-    for lane in sorted(lanes):
-        for vid in api.lane.getLastStepVehicleIDs(lane):
-            position = api.vehicle.getLanePosition(vid)
-            if position > rear and position - api.vehicle.getLength(vid) < front:
-                api.vehicle.remove(vid)
-                removed += 1
-    return removed
+    return lanes, rear, front
+
+
+def _in_zone(api, vid: str, zone: tuple[set[str], float, float]) -> bool:
+    lanes, rear, front = zone
+    if api.vehicle.getLaneID(vid) not in lanes:
+        return False
+    position = api.vehicle.getLanePosition(vid)
+    return position > rear and position - api.vehicle.getLength(vid) < front
 
 
 class _TrafficSense:
@@ -602,18 +639,24 @@ class open_world:
         self.api, self.cmd, self.config, self.road, self.configs = api, cmd, config, road, list(configs)
 
     def __enter__(self) -> SumoWorld:
-        try:
-            self.api.start(self.cmd)
-        except Exception as exc:  # libsumo/traci raise their own types, or FatalTraCIError
-            raise SumoError(f"SUMO did not start: {exc}") from None
-        try:
-            if self.config.traffic is not None:
-                clear_platoon_places(self.api, self.config, self.road)
-            platoons = load_platoon(self.api, self.config, self.road, len(self.configs), self.configs)
-            return SumoWorld(self.api, self.config, self.road, platoons)
-        except BaseException as exc:
-            self.__exit__(type(exc), exc, None)
-            raise
+        for later in range(MAX_JOINS if self.config.traffic is not None else 1):
+            try:
+                self.api.start(self.cmd)
+            except Exception as exc:  # libsumo/traci raise their own types, or FatalTraCIError
+                raise SumoError(f"SUMO did not start: {exc}") from None
+            try:
+                if self.config.traffic is None:
+                    return SumoWorld(self.api, self.config, self.road, load_platoon(self.api, self.config, self.road,
+                                                                                   len(self.configs), self.configs))
+                platoons = join_traffic(self.api, self.config, self.road, later)
+                if platoons is not None:
+                    return SumoWorld(self.api, self.config, self.road, platoons)
+                self.api.close()  # a traffic car entered its places with it: again, a step later
+            except BaseException as exc:
+                self.__exit__(type(exc), exc, None)
+                raise
+        raise SumoError(f"the platoon found no room to join the traffic on {self.road.name} in {MAX_JOINS} steps of trying: "
+                        "every step a traffic car entered the road in its places (a lower traffic.clear_m leaves more room)")
 
     def __exit__(self, kind, exc, tb):
         try:

@@ -349,6 +349,13 @@ class EpisodeConfig:
             label += "; radar: " + self.radar.label
         return label
 
+    def for_sample(self, index: int) -> "EpisodeConfig":
+        """The episode sample ``index`` of a campaign plays: this one, or where each sample meets its own
+        traffic (`TrafficParams.per_sample`), this one in that traffic."""
+        if self.traffic is None or not self.traffic.per_sample:
+            return self
+        return dataclasses.replace(self, traffic=self.traffic.for_sample(index))
+
     @property
     def whole_network(self) -> bool:
         """Whether the road is the route through the network built whole (`scenarios.build_road`): a user's

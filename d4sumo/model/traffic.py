@@ -21,7 +21,8 @@ and the world (`engine.sumo`) plays it:
   the platoon is inserted there, and the episode's clock (t = 0 of the trace) starts;
 - SUMO's random streams (departures, speed spread, lane changes) are seeded with ``seed``: every episode
   of a configuration meets the same traffic, so a sample's score depends on its attack alone, and a
-  replay reproduces it.
+  replay reproduces it; with ``per_sample`` each sample of a campaign meets traffic of its own, seeded
+  by the seed and the sample's index (`for_sample`).
 
 The traffic inserts itself with SUMO's insertion checks (the platoon's cars are placed where they are
 put). The followers sense whatever is ahead of them in their lane, a traffic car included; a collision of
@@ -65,6 +66,8 @@ class TrafficParams:
     warmup_s: float = 60.0  # the traffic alone before the platoon joins it
     clear_m: float = 50.0  # traffic this close behind or ahead of the platoon, in its lanes, leaves at its insertion
     seed: int = 0  # SUMO's random streams: every episode of the configuration meets the same traffic
+    #: each sample of a campaign meets traffic of its own, seeded by the seed and its index (`for_sample`)
+    per_sample: bool = False
     #: vehicle types by name, each its share of the flow and SUMO <vType> attributes, as ((name, ((key,
     #: value), ...)), ...) (a mapping of tables is taken too); none: SUMO's default passenger car
     types: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
@@ -88,6 +91,8 @@ class TrafficParams:
         fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
         fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
         fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
+        if not isinstance(self.per_sample, bool):
+            raise ConfigError("traffic.per_sample", self.per_sample, "true or false")
         fix("types", _checked_types(self.types))
 
     @classmethod
@@ -110,9 +115,19 @@ class TrafficParams:
             out["demand"] = list(self.demand)
         else:
             del out["demand_sha256"]
+        if not self.per_sample:  # stored where set
+            del out["per_sample"]
         if self.types and self.vehicles_per_hour is not None:
             out["types"] = {name: dict(attributes) for name, attributes in self.types}
         return out
+
+    def for_sample(self, index: int) -> "TrafficParams":
+        """The traffic sample ``index`` of a campaign meets: this one, or with ``per_sample`` its own, seeded
+        by the seed and the index (a replay of the sample meets it again)."""
+        if not self.per_sample:
+            return self
+        digest = hashlib.sha256(f"{self.seed}:{index}".encode()).digest()
+        return dataclasses.replace(self, seed=int.from_bytes(digest[:4], "big") & 0x7FFFFFFF, per_sample=False)
 
     @property
     def label(self) -> str:
@@ -121,7 +136,7 @@ class TrafficParams:
         if self.vehicles_per_hour is not None:
             types = f" of {', '.join(name for name, _ in self.types)}" if self.types else ""
             parts.append(f"{self.vehicles_per_hour:g} veh/h/lane{types}")
-        return f"{' + '.join(parts)}, seed {self.seed}"
+        return f"{' + '.join(parts)}, seed {self.seed}" + (" per sample" if self.per_sample else "")
 
     @property
     def type_shares(self) -> list[tuple[str, float, dict[str, Any]]]:

@@ -177,6 +177,37 @@ def table_systems(records: Sequence[Record]) -> Table:
                   "worst speed difference km/h", "time from attack start to collision s, mean (std)"), tuple(rows))
 
 
+#: the kinds of first collision among traffic, by who ran into whom (`crash_kind`)
+CRASH_KINDS = ("followers", "follower into traffic", "traffic into follower", "attacker and a follower",
+               "attacker into traffic", "traffic into attacker")
+
+
+def crash_kind(pair: str) -> str:
+    """What a first collision ``leader-follower`` was: between followers, a follower and a traffic car
+    (which ran into which), or the attacker's."""
+    leader, _, follower = pair.partition("-")
+    traffic = lambda vid: not (vid[:1] == "v" and vid[1:].isdigit())  # noqa: E731 (ids of traffic are SUMO's)
+    if "v0" in (leader, follower):
+        return ("attacker into traffic" if traffic(leader) else "traffic into attacker" if traffic(follower)
+                else "attacker and a follower")
+    return "follower into traffic" if traffic(leader) else "traffic into follower" if traffic(follower) else "followers"
+
+
+def has_traffic(records: Sequence[Record]) -> bool:
+    return any(dict(r.scenario).get("traffic", "none") != "none" for r in records)
+
+
+def table_crash_kinds(records: Sequence[Record]) -> Table:
+    """Among traffic: per run, the samples whose first collision was of each kind (`crash_kind`). The
+    first three are successes (the followers crashed, the attacker untouched), the last three attacker crashes."""
+    rows = []
+    for key, rs in runs(records, "attack", "optimizer")[1].items():
+        kinds = [crash_kind(r.pair) for r in rs if r.pair and r.outcome in ("success", "attacker_crash")]
+        rows.append((run_label(key), str(len(rs)), *(str(kinds.count(k)) for k in CRASH_KINDS)))
+    return Table("Crashes among traffic: who ran into whom first (successes: the first three kinds)",
+                 ("attack", "samples", *CRASH_KINDS), tuple(rows))
+
+
 #: Two successes closer than this in every parameter (as a fraction of its range) are one attack.
 DISTINCT_RADIUS = 0.05
 

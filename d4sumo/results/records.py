@@ -57,6 +57,8 @@ class Record:
     #: the campaign's scenario: its [scenario] keys as stored (a key without effect is not), but GRID_KEYS;
     #: campaigns of different scenarios are never pooled (`analysis.scenario_labels`)
     scenario: tuple[tuple[str, Any], ...] = ()
+    #: the sample's place in its campaign (0 the first): where each sample meets traffic of its own, its traffic
+    index: int = 0
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -119,7 +121,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                 records.append(Record(
                     db=str(path), sample_id=s.id, campaign_id=s.campaign_id, params=s.params, robustness=s.robustness,
                     outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
-                    speed_diff_kmh=s.speed_diff_kmh,
+                    speed_diff_kmh=s.speed_diff_kmh, index=s.index,
                     swerve_change_steps=_swerve_change_steps(families[s.campaign_id], s.params, c.config),
                     **settings[s.campaign_id],
                 ))
@@ -154,7 +156,8 @@ def _campaign_settings(campaign) -> dict[str, Any]:
 
 
 def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
-    """A campaign's scenario: its [scenario] keys but GRID_KEYS, in the config's order (a route as a tuple).
+    """A campaign's scenario: its [scenario] keys but GRID_KEYS, in the config's order (a route as a tuple),
+    and the traffic around the platoon ("none": it drives alone).
     A key the definition leaves out at its default so that earlier campaigns keep their identity (route,
     collision_gap_m, the inlane maneuver, ...) is part of it all the same; one it leaves out because it has
     no effect in this campaign (`NO_EFFECT_WHEN_LEFT_OUT`) is not."""
@@ -165,6 +168,7 @@ def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
             continue
         value = stored.get(key, getattr(config, key))
         out.append((key, tuple(value) if isinstance(value, (list, tuple)) else value))
+    out.append(("traffic", config.traffic.label if config.traffic is not None else "none"))  # alone is a scenario too
     return tuple(out)
 
 

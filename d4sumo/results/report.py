@@ -16,15 +16,15 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .. import __version__
-from ..engine.simulation import name_fcd, simulate
+from ..engine.simulation import name_fcd
 from ..errors import ConfigError
 from ..files import part_of, remove_stale_parts
 from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
 from . import figures, paper, timespace
-from .analysis import (Table, count_noun, most_severe, scenario_labels, table_attacker_crashes, table_by_speed,
-                       table_success_statistics, table_systems)
+from .analysis import (Table, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes, table_by_speed,
+                       table_crash_kinds, table_success_statistics, table_systems)
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records
 
@@ -42,10 +42,10 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
     campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
     evaluator = Evaluator(campaign)
     try:
-        plan = evaluator.plan(record.params)
+        evaluator.plan(record.params)
     except ConfigError as exc:  # a damaged database: say which sample of which
         raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
-    simulate(campaign.config, plan, road=evaluator.road, fcd_path=fcd_path)
+    evaluator.simulate(record.index, record.params, fcd_path=fcd_path)
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
     return timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
@@ -62,7 +62,8 @@ def describe(record: Record) -> str:
         f"route [{' '.join(scenario['route'])}], " if scenario.get("route") else "") + (
         f"lane {scenario['lane']}, " if scenario.get("lane") is not None else "") + (
         f"{record.followers} followers, " if record.followers != 3 else "") + (
-        f"duration {scenario['duration_s']:g} s, " if scenario.get("duration_s", 60.0) != 60.0 else "")
+        f"duration {scenario['duration_s']:g} s, " if scenario.get("duration_s", 60.0) != 60.0 else "") + (
+        f"traffic {scenario['traffic']}, " if scenario.get("traffic", "none") != "none" else "")
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
     system = f"{record.system}, " if record.system != "switching" else ""
     maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""
@@ -183,6 +184,8 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
     tables = [table_success_statistics(records), table_attacker_crashes(records), table_by_speed(records)]
     if compare_systems:
         tables.insert(0, table_systems(records))
+    if has_traffic(records):
+        tables.append(table_crash_kinds(records))
     for t in tables:
         parts.append(_table_html(t))
     (out / "tables.txt").write_text("\n\n".join(t.to_text() for t in tables) + "\n")

@@ -18,6 +18,7 @@ from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_b
 from ..errors import SumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
 from ..model.maneuvers import AttackPlan, attack_plan
+from ..model.trace import Episode
 from .campaign import Campaign, CampaignSummary, SampleResult
 from .optimizers import make_optimizer
 from .store import Store, StoreError
@@ -62,11 +63,16 @@ class Evaluator:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
         return attack_plan(self.family, params, self.campaign.config)
 
+    def simulate(self, index: int, params, *, fcd_path: str | Path | None = None, gui: bool = False) -> Episode:
+        """Sample ``index``'s episode with these parameters, alone (a replay's, a figure's): in the traffic
+        that sample meets (`EpisodeConfig.for_sample`)."""
+        return simulate(self.campaign.config.for_sample(index), self.plan(params), road=self.road, fcd_path=fcd_path, gui=gui)
+
     def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
         t0 = time.perf_counter()
         x = tuple(float(v) for v in params)
         try:
-            episode = simulate(self.campaign.config, self.plan(x), road=self.road, fcd_path=fcd_path)
+            episode = self.simulate(index, x, fcd_path=fcd_path)
         except Exception as exc:  # SUMO or a user's controller: store the sample as errored, go on
             return self._failed(index, x, exc, time.perf_counter() - t0)
         return self._scored(index, x, episode, t0)

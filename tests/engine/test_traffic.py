@@ -135,3 +135,35 @@ def test_a_demand_over_edges_the_network_lacks_is_refused_naming_the_file(tmp_pa
     with pytest.raises(ConfigError) as info:
         simulate(config, np.full(config.steps, np.nan))
     assert info.value.field == "traffic.demand" and "nowhere" in info.value.allowed
+
+
+def test_each_sample_meets_traffic_of_its_own_where_asked_and_a_replay_meets_it_again(tmp_path):
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.search.runner import Evaluator
+
+    config = dataclasses.replace(BUSY, traffic={"vehicles_per_hour": 1500, "warmup_s": 40.0, "per_sample": True})
+    evaluator = Evaluator(Campaign(config=config, attack="knots", optimizer="random"))
+    x = np.zeros(evaluator.family.dimension)
+    first, second = evaluator.simulate(0, x), evaluator.simulate(1, x)
+    assert not np.array_equal(first.trace["gap_v0"], second.trace["gap_v0"])  # other traffic ahead
+    assert np.array_equal(evaluator.simulate(1, x).trace["gap_v0"], second.trace["gap_v0"])
+    r = evaluator(1, x)
+    assert r.min_gaps == second.min_gaps_m()
+
+
+def test_no_traffic_car_is_in_the_platoon_places_when_it_joins_not_even_one_entering_with_it():
+    """A traffic car entering the road in the platoon's insertion step does not see it: the platoon then joins a
+    step later (the trucks of this draw entered on top of the rear follower before it did)."""
+    later = []
+    for seed in range(12):
+        config = dataclasses.replace(BUSY, followers=6, setpoint_m=11.2, traffic={
+            "vehicles_per_hour": 1400, "warmup_s": 20.0, "clear_m": 10.0, "seed": seed,
+            "types": {"truck": {"vClass": "truck", "length": 12.0, "maxSpeed": 25.0}}})
+        road = build_road(config.network)
+        with open_world(config, road, [config]) as world:
+            ids = world.platoons[0]
+            x, v = [world.get_position(vid) for vid in ids], [world.get_speed(vid) for vid in ids]
+            pairs, names, _, _ = world.sense(0, x, v)
+            assert all(gap >= 10.0 for a, b, gap in pairs if max(a, b) >= len(ids)), seed
+            later.append(world.api.simulation.getTime() > 20.0 + config.step_s + 1e-9)  # joined after its first step
+    assert any(later)  # some draws joined a step later

@@ -129,3 +129,16 @@ def test_a_demand_file_that_is_no_route_file_gets_one_line(tmp_path, text, words
     with pytest.raises(ConfigError) as info:
         TrafficParams(demand=str(tmp_path / "missing.rou.xml"))
     assert info.value.field == "traffic.demand" and "readable" in info.value.allowed
+
+
+def test_per_sample_traffic_gives_each_sample_its_own_seed_and_the_same_one_again():
+    config = EpisodeConfig(start="steady", traffic={"seed": 3, "per_sample": True})
+    seeds = [config.for_sample(i).traffic.seed for i in range(50)]
+    assert len(set(seeds)) == 50 and seeds == [config.for_sample(i).traffic.seed for i in range(50)]
+    assert seeds[0] != 3 and config.to_dict()["traffic"]["per_sample"] is True
+    assert config.traffic.label.endswith("seed 3 per sample")
+    same = EpisodeConfig(start="steady", traffic={"seed": 3})
+    assert same.for_sample(7) is same and "per_sample" not in same.to_dict()["traffic"]
+    with pytest.raises(ConfigError) as info:
+        TrafficParams(per_sample="yes")
+    assert info.value.field == "traffic.per_sample"

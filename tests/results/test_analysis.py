@@ -224,3 +224,34 @@ def _record_of(config, i):
 
     return _record([0] * 9, sample_id=i, start=config.start, scenario=scenario_of(config))
 
+
+
+# --- crashes among traffic --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("pair, kind", [("v1-v2", "followers"), ("traffic.0.3-v2", "follower into traffic"),
+                                        ("v3-traffic.ramp.12", "traffic into follower"), ("v0-v1", "attacker and a follower"),
+                                        ("traffic.1.0-v0", "attacker into traffic"), ("v0-traffic.1.0", "traffic into attacker")])
+def test_a_first_collision_among_traffic_says_who_ran_into_whom(pair, kind):
+    from d4sumo.results.analysis import crash_kind
+
+    assert crash_kind(pair) == kind
+
+
+def test_campaigns_alone_and_among_traffic_are_other_scenarios_and_their_crashes_are_told_apart():
+    from d4sumo.results.analysis import has_traffic, scenario_labels, table_crash_kinds
+    from d4sumo.results.records import scenario_of
+
+    alone = EpisodeConfig(start="steady")
+    busy = dataclasses.replace(alone, traffic={"vehicles_per_hour": 1500})
+    records = [_record([0] * 9, sample_id=0, scenario=scenario_of(alone)),
+               _record([0] * 9, sample_id=1, scenario=scenario_of(busy), pair="traffic.0.4-v2"),
+               _record([0] * 9, sample_id=2, scenario=scenario_of(busy), pair="v3-traffic.0.9"),
+               _record([0] * 9, sample_id=3, scenario=scenario_of(busy), pair="traffic.0.1-v0", outcome="attacker_crash")]
+    labels = scenario_labels(records)
+    assert labels[scenario_of(alone)] == "traffic=none" and labels[scenario_of(busy)] == "traffic=1500 veh/h/lane, seed 0"
+    assert has_traffic(records) and not has_traffic(records[:1])
+    table = table_crash_kinds(records)
+    rows = {row[0]: row[1:] for row in table.rows}
+    busy_row = next(v for k, v in rows.items() if "1500" in k)
+    assert busy_row == ("3", "0", "1", "1", "0", "1", "0")  # samples, then each kind in CRASH_KINDS' order
