@@ -2,10 +2,10 @@
 
 Plays N random episodes (on the shipped 4-lane highway, in lane 0, 1 or 2, and on roads of several edges: a
 speed change, a lane drop, a curve, an acceleration lane, a route through netgenerate's grid, SUMO's own
-Bremen motorway through its on-ramp (the platoon's lane index changing along both); one in seven in-lane
-episodes among SUMO's traffic on the 4-lane highway (densities, warm-ups, clearances, seeds and mixes of
-car-following models and trucks drawn: who follows whom from the FCD is then the nearest car in the lane, a
-traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
+Bremen motorway through its on-ramp (the platoon's lane index changing along both); one episode in seven
+among SUMO's traffic on the 4-lane highway (densities, warm-ups, clearances, seeds, per-sample traffic
+and mixes of car-following models and trucks drawn: who follows whom from the FCD is then the nearest
+car in each lane a car covers, a traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
 SUMO's models, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
@@ -55,7 +55,7 @@ from d4sumo.inputs import campaign_of
 from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import attack_plan, maneuver_of, occupied_lanes
+from d4sumo.model.maneuvers import attack_plan, lane_pairs, maneuver_of, occupied_lanes
 from d4sumo.model.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
@@ -159,7 +159,7 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
             range_m=float(rng.choice([np.inf, 60.0, 150.0])), gap_noise_m=float(rng.choice([0.0, 0.2, 1.0])),
             speed_noise_mps=float(rng.choice([0.0, 0.1, 0.5])), latency_s=float(rng.choice([0.0, 0.1, 0.3])),
             seed=int(rng.integers(0, 1000))))
-    if not maneuver and rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
+    if rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
         config = dataclasses.replace(config, network="highway_4lane", route=(), duration_s=60.0, start="steady",
                                      traffic=traffic_table(rng))
     if rng.random() < 0.25:  # a platoon of different vehicles: a truck, a bus or a small car among the cars
@@ -228,13 +228,13 @@ def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool,
     order it drove them (junction lanes left out). On a route of many edges a position is the car's first
     lane position (every car starts on the first edge) plus SUMO's odometer, not the lane position, which
     starts again at 0 on each edge. ``traffic``: a list to which each sample's traffic cars are appended,
-    {id: (lane, front position, length)} (roads of one edge)."""
+    {id: (lane, front position, length, lateral coordinate)} (roads of one edge)."""
     rows: dict[float, dict[str, tuple[float, float, float]]] = {}
     lanes: dict[str, list[str]] = {}
     others: dict[float, dict] = {}
     for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "type", "pos", "lane", "odometer"]):
         if v.id not in ids:
-            others.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), TRAFFIC_LENGTHS[v.type])
+            others.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), TRAFFIC_LENGTHS[v.type], float(v.y))
             continue
         rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y), float(v.odometer))
         driven = lanes.setdefault(v.id, [])
@@ -258,16 +258,32 @@ def fcd_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, lanes: list[
         sample = []
         for b in range(n):
             ahead = [(xs[a] - lengths[a] - xs[b], a) for a in range(n) if a != b and xs[a] > xs[b]]
-            ahead += [(p - length - xs[b], n) for lane, p, length in cars.values() if lane == lanes[b] and p > xs[b]]
+            ahead += [(p - length - xs[b], n) for lane, p, length, _ in cars.values() if lane == lanes[b] and p > xs[b]]
             if ahead:
                 gap, a = min(ahead)
                 if gap < 1000.0 or a < n:
                     sample.append((a, b, gap))
             behind = [(xs[b] - lengths[b] - xs[c], c) for c in range(n) if c != b and xs[c] < xs[b]]
-            behind += [(xs[b] - lengths[b] - p, n) for lane, p, _ in cars.values() if lane == lanes[b] and p < xs[b]]
+            behind += [(xs[b] - lengths[b] - p, n) for lane, p, _, _ in cars.values() if lane == lanes[b] and p < xs[b]]
             if behind and min(behind)[1] == n and min(behind)[0] < 1000.0:
                 sample.append((b, n, min(behind)[0]))
         out.append(sample)
+    return out
+
+
+def fcd_lateral_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, y: np.ndarray, traffic: list[dict],
+                              lane_width_m: float) -> list[list[tuple]]:
+    """Who follows whom at each FCD sample with traffic and a lane-changing attacker, from the FCD alone:
+    every car's lanes from its lateral coordinate (lane 0's centre is where v1 drives), the nearest cars
+    in each lane, a pair of two traffic cars or of a traffic car over 1000 m away left out (a traffic car
+    is index N + 1, as the stored pairs count it)."""
+    n, lengths = len(config.vehicle_ids), [v.length_m for v in config.car_vehicles]
+    out = []
+    for xs, ys, cars in zip(positions, y, traffic):
+        ids = sorted(cars)
+        lanes = [occupied_lanes(yi - ys[1] + 0.5 * lane_width_m, lane_width_m) for yi in [*ys, *(cars[t][3] for t in ids)]]
+        pairs = lane_pairs([*xs, *(cars[t][1] for t in ids)], lanes, [*lengths, *(cars[t][2] for t in ids)], apart=n)
+        out.append([(min(a, n), min(b, n), g) for a, b, g in pairs if g < 1000.0 or max(a, b) < n])
     return out
 
 
@@ -334,7 +350,9 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > rounding:
         broken.append("FCD/trace positions")
         return broken
-    if config.traffic is not None:
+    if config.traffic is not None and config.maneuver_class.lateral:
+        pairs = fcd_lateral_traffic_pairs(config, positions, y, traffic, road.lane_width_m)
+    elif config.traffic is not None:
         pairs = fcd_traffic_pairs(config, positions, [lanes[vid][0] for vid in config.vehicle_ids], traffic)
     else:
         pairs = fcd_pairs(config, positions, y, road.lane_width_m)
@@ -351,7 +369,9 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         if abs(c["time_s"] - episode.trace.times_s[-1]) > 1e-9:
             broken.append("collision time/end of episode")
         ids = (*config.vehicle_ids, "traffic")
-        last = {f"{ids[a]}-{ids[b]}": g for a, b, g in pairs[-1]}
+        last: dict[str, float] = {}
+        for a, b, g in pairs[-1]:  # a car covering two lanes may be in two pairs of one name: the nearer
+            last[f"{ids[a]}-{ids[b]}"] = min(g, last.get(f"{ids[a]}-{ids[b]}", g))
         pair = "-".join(car if car in ids else "traffic" for car in c["pair"].split("-"))  # any traffic car as one
         if last.get(pair, np.inf) > crash + FCD_TOLERANCE_M or row.min_gaps[pair] >= crash:
             broken.append("collision pair/gap")

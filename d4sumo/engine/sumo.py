@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, maneuver_of, occupied_lanes
+from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, lane_pairs, maneuver_of, occupied_lanes
 from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_xml
 from ..model.vehicle import VehicleParams
@@ -470,8 +470,8 @@ MAX_JOINS = 50
 def join_traffic(api, config: EpisodeConfig, road: Road, later: int) -> list[tuple[str, ...]] | None:
     """The platoon joins the warmed-up traffic (SUMO started in `traffic_state`) ``later`` steps after its
     warm-up: its places cleared (`clear_platoon_places`), its cars inserted (`load_platoon`). A traffic car
-    that enters the road in the same step does not see the platoon and may enter in its places: then
-    None, and the caller starts again a step later (the same steps in every episode of the configuration:
+    that enters the road, or changes lanes, in the same step does not see the platoon and may land in its
+    places: then None, and the caller starts again a step later (the same steps in every episode of the configuration:
     the traffic is the same). Else the platoon's vehicle ids, as `load_platoon` returns them."""
     step = simulation_step(api)
     for _ in range(later):
@@ -480,9 +480,10 @@ def join_traffic(api, config: EpisodeConfig, road: Road, later: int) -> list[tup
     platoons = load_platoon(api, config, road)
     ours = set(platoons[0])
     zone = _platoon_zone(config, road)
-    for vid in api.simulation.getDepartedIDList():
-        if vid not in ours and _in_zone(api, vid, zone):
-            return None
+    for lane in sorted(zone[0]):  # a car that entered the road, or changed lanes, in that step
+        for vid in api.lane.getLastStepVehicleIDs(lane):
+            if vid not in ours and _in_zone(api, vid, zone):
+                return None
     return platoons
 
 
@@ -518,6 +519,7 @@ class _TrafficSense:
 
     def __init__(self, api, config: EpisodeConfig, ids: tuple[str, ...]):
         self.ids = ids
+        self.index = {vid: i for i, vid in enumerate(ids)}
         self.names = config.vehicle_ids
         self.lengths = [v.length_m for v in config.car_vehicles]
         self.min_gaps = [api.vehicle.getMinGap(vid) for vid in ids]
@@ -549,6 +551,10 @@ class _TrafficSense:
                 continue
             if not hit or not hit[0]:
                 continue  # nobody ahead of the attacker
+            if hit[0] in self.index:  # another car of the platoon (a car ahead of it left the lane): their pair
+                a = self.index[hit[0]]
+                pairs.append((a, b, x[a] - self.lengths[a] - x[b]))
+                continue
             gap = hit[1] + self.min_gaps[b]
             if gap >= look:
                 continue
@@ -572,6 +578,43 @@ class _TrafficSense:
         return pairs, names, xs, vs
 
 
+class _LateralTrafficSense:
+    """Who follows whom among traffic when the attacker changes lanes (`maneuvers.LaneChange`, a road of
+    one edge): in every lane each car covers (from its lateral position, a car changing lanes covering
+    both), the nearest cars, a traffic car included (`maneuvers.lane_pairs`: the arithmetic of the
+    maneuver alone, bit for bit, between cars of the platoon). The traffic cars that may be next to a car
+    of the platoon are SUMO's: its leader and follower, and its leaders and followers in the lanes beside
+    it. Returns what `_TrafficSense` returns."""
+
+    def __init__(self, api, config: EpisodeConfig, ids: tuple[str, ...], lateral: _Lateral, road: Road):
+        self.ids, self.index, self.lateral = ids, {vid: i for i, vid in enumerate(ids)}, lateral
+        self.names = list(config.vehicle_ids)
+        self.lengths = [v.length_m for v in config.car_vehicles]
+        self.width, self.base = road.lane_width_m, road.platoon_lane
+        call = lambda name: vehicle_call(api, name)  # noqa: E731
+        self.get_leader, self.get_follower, self.get_neighbors = call("getLeader"), call("getFollower"), call("getNeighbors")
+        self.get_position, self.get_speed, self.get_length = call("getLanePosition"), call("getSpeed"), call("getLength")
+        self.get_lane, self.get_lateral = call("getLaneIndex"), call("getLateralLanePosition")
+
+    def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
+        lanes = self.lateral.sense()  # the platoon's cars' lanes (and the attacker's lateral position, recorded)
+        near: set[str] = set()
+        for vid in self.ids:
+            for hit in (self.get_leader(vid, FREE_ROAD_GAP_M), self.get_follower(vid, FREE_ROAD_GAP_M)):
+                if hit and hit[0]:
+                    near.add(hit[0])
+            for mode in range(4):  # the lanes to its right and left, followers and leaders
+                near.update(other for other, _ in self.get_neighbors(vid, mode))
+        traffic = sorted(near - self.index.keys())
+        xs = list(x) + [self.get_position(t) for t in traffic]  # a road of one edge: the lane position is along it
+        vs = list(v) + [self.get_speed(t) for t in traffic]
+        lengths = self.lengths + [self.get_length(t) for t in traffic]
+        covered = list(lanes) + [occupied_lanes((self.get_lane(t) - self.base + 0.5) * self.width + self.get_lateral(t), self.width)
+                                 for t in traffic]
+        pairs = [p for p in lane_pairs(xs, covered, lengths, apart=len(self.ids)) if p[2] < FREE_ROAD_GAP_M or max(p[:2]) < len(self.ids)]
+        return pairs, self.names + traffic, xs, vs
+
+
 class SumoWorld:
     """Platoons in one running SUMO, as the step loop sees them: each episode's vehicle ids (``platoons``),
     fast bound calls to sense and command them, a step, and the removal of an ended episode's cars.
@@ -585,8 +628,12 @@ class SumoWorld:
         self.get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
         maneuver = maneuver_of(config)
         self.laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
-        #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`); None: the maneuver's pairs
-        self.traffic = [_TrafficSense(api, config, ids) for ids in platoons] if config.traffic is not None else None
+        #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`, `_LateralTrafficSense`); None:
+        #: the maneuver's pairs
+        self.traffic = None
+        if config.traffic is not None:
+            self.traffic = [_LateralTrafficSense(api, config, ids, self.laterals[e], road) if self.laterals
+                            else _TrafficSense(api, config, ids) for e, ids in enumerate(platoons)]
         step = simulation_step(api)
         if road.forks:  # SUMO may take another lane than the path at a fork: each step checks it did not
             check = _LanePathCheck(api, config, road, platoons, maneuver)

@@ -219,8 +219,6 @@ class EpisodeConfig:
         if self.traffic is not None:
             if not isinstance(self.traffic, TrafficParams):
                 raise ConfigError("traffic", self.traffic, "a [traffic] table")
-            if self.maneuver != "inlane":  # who follows whom is SUMO's leader in the platoon's lane
-                raise ConfigError("scenario.maneuver", self.maneuver, "inlane with [traffic] (the attacker in the platoon's lane)")
             if self.start != "steady":  # a platoon standing on a road with traffic at speed is a crash of its own
                 raise ConfigError("scenario.start", self.start, "steady with [traffic] (the platoon joins the traffic at its speed)")
             if not _on_grid(self.traffic.warmup_s, self.step_s):

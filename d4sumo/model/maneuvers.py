@@ -201,16 +201,24 @@ class LaneChange(Maneuver):
     def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
         if lanes is None:
             raise ValueError("a lane-changing maneuver needs each car's lanes")
-        by_lane: dict[int, list[int]] = {}
-        for i, covered in enumerate(lanes):
-            for lane in covered:
-                by_lane.setdefault(lane, []).append(i)
-        lengths = self.lengths_m
-        found = set()
-        for cars in by_lane.values():
-            cars.sort(key=lambda i: (-positions[i], i))
-            found.update(zip(cars, cars[1:]))
-        return sorted(((a, b, positions[a] - lengths[a] - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
+        return lane_pairs(positions, lanes, self.lengths_m)
+
+
+def lane_pairs(positions: Sequence[float], lanes: Sequence[tuple[int, ...]], lengths_m: Sequence[float],
+               apart: int | None = None) -> list[Pair]:
+    """(leader, follower, gap) of the cars next to each other in each lane they cover, frontmost first;
+    ``apart``: cars from this index on are others' (traffic), and a pair of two of them is left out."""
+    by_lane: dict[int, list[int]] = {}
+    for i, covered in enumerate(lanes):
+        for lane in covered:
+            by_lane.setdefault(lane, []).append(i)
+    found = set()
+    for cars in by_lane.values():
+        cars.sort(key=lambda i: (-positions[i], i))
+        found.update(zip(cars, cars[1:]))
+    if apart is not None:
+        found = {(a, b) for a, b in found if a < apart or b < apart}
+    return sorted(((a, b, positions[a] - lengths_m[a] - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
 
 
 class CutIn(LaneChange):

@@ -301,12 +301,13 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
         signals[f"speed_{vid}"] = speeds[:, i]
         signals[f"accel_{vid}"] = accel[:, i]
         signals[f"cmd_{vid}"] = cmds[:, i]
-    if config.maneuver_class.lateral:
+    if config.traffic is not None:  # who followed whom is what the step sensed (a traffic car is index N + 1)
+        rows = _lane_gaps((*ids, TRAFFIC_ID), signals, pairs, lateral_m, traffic=True)
+        if not config.maneuver_class.lateral:  # the paper's column names: gap_I is v(I+1)'s gap to whatever is ahead
+            for i in range(config.followers):
+                signals[f"gap_{i}"] = signals[f"gap_v{i + 1}"]
+    elif config.maneuver_class.lateral:
         rows = _lane_gaps(ids, signals, pairs, lateral_m)
-    elif config.traffic is not None:  # who followed whom is what the step sensed (a traffic car is index N + 1)
-        rows = _lane_gaps((*ids, TRAFFIC_ID), signals, pairs, None)
-        for i in range(config.followers):  # the paper's column names: gap_I is v(I+1)'s gap to whatever is ahead
-            signals[f"gap_{i}"] = signals[f"gap_v{i + 1}"]
     else:
         rows = _column_gaps([v.length_m for v in config.car_vehicles], signals, positions)
     start = min(config.attack_start_step, n_samples - 1)
@@ -350,11 +351,11 @@ def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -
     return {f"v{i}-v{i + 1}": signals[f"gap_{i}"] for i in range(n - 1)}
 
 
-def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]],
-               lateral_m: np.ndarray | None) -> dict[str, list[tuple[int, float]]]:
+def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lateral_m: np.ndarray | None,
+               traffic: bool = False) -> dict[str, list[tuple[int, float]]]:
     """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
     pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions (when
-    given); each pair's gaps at the samples where it followed. With traffic the last of ``ids`` is every
+    given); each pair's gaps at the samples where it followed. With ``traffic`` the last of ``ids`` is every
     traffic car (`traffic.TRAFFIC_ID`): its gaps are not a signal, its pairs' are (``traffic-v3``)."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
@@ -369,7 +370,7 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]],
             else:
                 victim[k] = min(victim[k], gap)
             rows.setdefault(f"{ids[a]}-{ids[b]}", []).append((k, gap))
-    for i, vid in enumerate(ids if lateral_m is not None else ids[:-1]):
+    for i, vid in enumerate(ids[:-1] if traffic else ids):
         signals[f"gap_{vid}"] = gaps[:, i]
         if lateral_m is not None:
             signals[f"y_{vid}"] = lateral_m[:, i]

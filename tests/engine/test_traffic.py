@@ -167,3 +167,31 @@ def test_no_traffic_car_is_in_the_platoon_places_when_it_joins_not_even_one_ente
             assert all(gap >= 10.0 for a, b, gap in pairs if max(a, b) >= len(ids)), seed
             later.append(world.api.simulation.getTime() > 20.0 + config.step_s + 1e-9)  # joined after its first step
     assert any(later)  # some draws joined a step later
+
+
+def test_a_swerving_attacker_among_traffic_senses_and_is_sensed_in_every_lane_it_covers_as_sumo_fcd_shows(tmp_path):
+    """Who follows whom from SUMO's FCD alone (each car's lanes from its lateral coordinate, the nearest
+    cars in each lane, traffic included) is what the followers and the attacker sensed, every sample."""
+    from d4sumo.model.attacks import make_attack
+    from d4sumo.model.config import ControllerConfig
+    from d4sumo.model.maneuvers import attack_plan, lane_pairs, maneuver_of, occupied_lanes
+
+    config = EpisodeConfig(network="highway_3lane_120kmh", maneuver="swerve", start="steady", speed_mps=28.0,
+                           controller=ControllerConfig("timegap"), duration_s=40.0, traffic={"vehicles_per_hour": 1200})
+    family = maneuver_of(config).family(make_attack("knots"))
+    x = family.lower + np.random.default_rng(0).random(family.dimension) * (family.upper - family.lower)
+    episode = simulate(config, attack_plan(family, x, config), fcd_path=tmp_path / "fcd.xml")
+    assert any(k.startswith("traffic-v") and k != "traffic-v0" for k in episode.min_gaps)  # traffic ahead of a follower
+    steps: dict[float, dict] = {}
+    for step, v in parse_fast_nested(str(tmp_path / "fcd.xml"), "timestep", ["time"], "vehicle", ["id", "y", "pos"]):
+        steps.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y))
+    n, width = len(config.vehicle_ids), 3.2
+    lengths = {vid: v.length_m for vid, v in zip(config.vehicle_ids, config.car_vehicles)}
+    for k, t in enumerate(sorted(steps)[:len(episode.trace)]):
+        cars = steps[t]
+        order = [*config.vehicle_ids, *sorted(c for c in cars if c not in lengths)]
+        lanes = [occupied_lanes(cars[c][1] - cars["v1"][1] + 0.5 * width, width) for c in order]
+        pairs = lane_pairs([cars[c][0] for c in order], lanes, [lengths.get(c, 5.0) for c in order], apart=n)
+        for i, vid in enumerate(config.vehicle_ids):
+            ahead = [g for a, b, g in pairs if b == i and (a < n or g < 1000.0)]
+            assert min(ahead, default=1000.0) == pytest.approx(episode.trace[f"gap_{vid}"][k], abs=2.5e-6), (t, vid)
