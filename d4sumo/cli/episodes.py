@@ -132,6 +132,8 @@ def episode_summary(config, family, params, plan, episode, robustness, d_safe, f
         # outcome and robustness, and a warm-up's apart
         "min_gaps_m": episode.min_gaps_m(),
         "warmup_min_gaps_m": episode.warmup_min_gaps and dict(episode.warmup_min_gaps),
+        # among traffic: SUMO's collisions of two traffic cars (in no verdict)
+        "traffic_collisions": [{"time_s": t, "pair": f"{a}-{b}"} for t, a, b in episode.traffic_collisions],
         "attack_start_s": config.attack_start_s,
         "robustness": robustness,
         "d_safe_m": d_safe,
@@ -191,6 +193,10 @@ def _print_summary(s: dict, road_name: str) -> None:
     else:  # the window the outcome and robustness speak of, and the warm-up's apart
         print(f"min gaps from the attack's start at {s['attack_start_s']:.2f} s: " + gaps(s["min_gaps_m"]))
         print("min gaps in the warm-up before it: " + gaps(s["warmup_min_gaps_m"]))
+    if s.get("traffic_collisions"):
+        print("collisions among the traffic (in no verdict): " + ", ".join(
+            f"{c['pair']} at {c['time_s']:.2f} s" for c in s["traffic_collisions"][:5])
+              + (f" and {len(s['traffic_collisions']) - 5} more" if len(s["traffic_collisions"]) > 5 else ""))
     if s["robustness"] is not None:
         what = "the formula" if s.get("formula") else f"psi (d_safe {s['d_safe_m']:g} m)"
         print(f"robustness of {what}: {s['robustness']:.4f}")

@@ -631,6 +631,10 @@ class SumoWorld:
         #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`, `_LateralTrafficSense`); None:
         #: the maneuver's pairs
         self.traffic = None
+        self._platoon = {vid for ids in platoons for vid in ids}
+        self._traffic_collisions: list[tuple[float, str, str]] = []
+        self._seen: set[tuple[str, str]] = set()
+        self._k, self._step_s = -1, config.step_s  # the samples sensed (the first at t = 0)
         if config.traffic is not None:
             self.traffic = [_LateralTrafficSense(api, config, ids, self.laterals[e], road) if self.laterals
                             else _TrafficSense(api, config, ids) for e, ids in enumerate(platoons)]
@@ -653,8 +657,19 @@ class SumoWorld:
 
     def sense(self, e: int, x: list[float], v: list[float]) -> tuple[list, list[str], list[float], list[float]]:
         """With traffic: the pairs of episode ``e`` at this step and the ids, positions and speeds they index
-        (`_TrafficSense`)."""
+        (`_TrafficSense`); and the collisions among the traffic SUMO reported in the step, kept."""
+        self._k += 1  # traffic plays one episode to a SUMO: each call is the next sample
+        for c in self.api.simulation.getCollisions():
+            pair = (c.collider, c.victim)
+            if self._platoon.isdisjoint(pair) and pair not in self._seen:  # SUMO reports an overlap every step it lasts
+                self._seen.add(pair)
+                self._traffic_collisions.append((self._k * self._step_s, *pair))
         return self.traffic[e](x, v)
+
+    def traffic_collisions(self, e: int) -> tuple[tuple[float, str, str], ...]:
+        """The collisions of two traffic cars so far (time from the platoon's insertion [s], the car that ran
+        into the other, that car)."""
+        return tuple(self._traffic_collisions)
 
     def lateral_rows(self, e: int) -> np.ndarray | None:
         """Each car's lateral position at every sample of episode ``e`` (lane-changing maneuvers), else None."""

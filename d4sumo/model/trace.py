@@ -93,6 +93,9 @@ class Episode:
     min_gaps: Mapping[str, float] | None = None
     #: the same during a warm-up before the attack (None without one)
     warmup_min_gaps: Mapping[str, float] | None = None
+    #: among traffic, the collisions of two traffic cars SUMO reported during the episode, as (time [s],
+    #: the car that ran into the other, that car): none of the platoon's, and in no verdict
+    traffic_collisions: tuple[tuple[float, str, str], ...] = ()
 
     @property
     def first_collision(self) -> Collision | None:

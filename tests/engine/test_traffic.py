@@ -195,3 +195,22 @@ def test_a_swerving_attacker_among_traffic_senses_and_is_sensed_in_every_lane_it
         for i, vid in enumerate(config.vehicle_ids):
             ahead = [g for a, b, g in pairs if b == i and (a < n or g < 1000.0)]
             assert min(ahead, default=1000.0) == pytest.approx(episode.trace[f"gap_{vid}"][k], abs=2.5e-6), (t, vid)
+
+
+def test_a_collision_of_two_traffic_cars_is_kept_apart_from_the_platoon_verdict():
+    config = BUSY
+    road = build_road(config.network)
+    with open_world(config, road, [config]) as world:
+        api, ids = world.api, world.platoons[0]
+        x, v = [world.get_position(vid) for vid in ids], [world.get_speed(vid) for vid in ids]
+        world.sense(0, x, v)  # t = 0
+        ahead = [t for t in api.lane.getLastStepVehicleIDs("highway_2") if api.vehicle.getLanePosition(t) > 300.0][0]
+        at = api.vehicle.getLanePosition(ahead)
+        api.vehicle.add("traffic.ram", "platoon", depart="now", departLane="2", departPos=repr(at - 3.0), departSpeed="40")
+        for _ in range(3):
+            world.step()
+            x, v = [world.get_position(vid) for vid in ids], [world.get_speed(vid) for vid in ids]
+            world.sense(0, x, v)
+        kept = world.traffic_collisions(0)
+        assert [(a, b) for _, a, b in kept] == [("traffic.ram", ahead)]  # once, though the overlap lasts
+        assert kept[0][0] == pytest.approx(config.step_s)  # the step it entered, on top of the other
