@@ -214,3 +214,39 @@ def test_a_collision_of_two_traffic_cars_is_kept_apart_from_the_platoon_verdict(
         kept = world.traffic_collisions(0)
         assert [(a, b) for _, a, b in kept] == [("traffic.ram", ahead)]  # once, though the overlap lasts
         assert kept[0][0] == pytest.approx(config.step_s)  # the step it entered, on top of the other
+
+
+def test_on_bremen_the_traffic_ahead_of_the_attacker_is_where_sumo_fcd_puts_it_edge_after_edge(tmp_path):
+    """A traffic car's gap is SUMO's, along lanes and junctions: on SUMO's Bremen motorway, with its own
+    demand, the attacker's gap to the traffic car ahead agrees with the FCD's positions wherever both drive
+    one edge of the route (each edge's start along the route read from the attacker's own odometer)."""
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    config = EpisodeConfig(network=str(game / "highway.net.xml"), route=("145354574", "189597495", "E0", "191842213"),
+                           start="steady", speed_mps=30.0, duration_s=40.0, traffic={"demand": str(game / "highway.rou.xml")})
+    # no attack: the attacker drives behind the traffic ahead (the paper's followers, 7 m apart at 30 m/s,
+    # crash on their own when it brakes for a car from the ramp)
+    episode = simulate(config, np.full(config.steps, np.nan), fcd_path=tmp_path / "fcd.xml")
+    steps: dict[float, dict] = {}
+    for step, v in parse_fast_nested(str(tmp_path / "fcd.xml"), "timestep", ["time"], "vehicle", ["id", "pos", "lane", "odometer"]):
+        steps.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), float(v.odometer))
+    times = [t for t in sorted(steps) if "v0" in steps[t]]  # from the platoon's joining (here after the warm-up's end)
+    start = steps[times[0]]["v0"]
+    offsets = {}  # each edge's start along the route, as the attacker drove it
+    for t in times:
+        lane, pos, odometer = steps[t]["v0"]
+        offsets.setdefault(lane.rpartition("_")[0], start[1] + odometer - pos)
+    compared, edges = 0, set()
+    for k, t in enumerate(times[:len(episode.trace)]):
+        cars = steps[t]
+        lane0, pos0, _ = cars["v0"]
+        edge0 = lane0.rpartition("_")[0]
+        ahead = [(offsets[edge0] + p - 5.0 - (offsets[edge0] + pos0), vid) for vid, (lane, p, _) in cars.items()
+                 if lane == lane0 and p > pos0 and vid != "v0"]
+        gap = episode.trace["gap_v0"][k]
+        if ahead and min(ahead)[0] < 1000.0 and gap < 1000.0:
+            assert min(ahead)[0] == pytest.approx(gap, abs=2.5e-6), t
+            compared += 1
+            edges.add(edge0)
+    assert compared > 300 and len(edges) >= 3  # before, on and past the ramp's edge
