@@ -23,7 +23,7 @@ from ..files import part_of, remove_stale_parts
 from ..model.batch import episode_configs
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
-from ..model.platoon import followers_of, road_needed_m
+from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, build_road
@@ -74,10 +74,10 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
         )
     needed = road_needed_m(config, road.speed_limit_mps)
     if needed > road.length_m:
-        # the longest that fits: what is left past the front car's start, at the limit, less a warm-up
-        longest = math.floor(((road.length_m - start) / road.speed_limit_mps - config.attack_start_s) / config.step_s) * config.step_s
-        fits = (f"at most {longest:g} s fits, the frontmost car at most at the {road.speed_limit_mps:g} m/s limit"
-                + (f" after the {config.attack_start_s:g} s warm-up" if config.attack_start_s else "")
+        longest = longest_duration_s(config, road.length_m, road.speed_limit_mps)
+        accel = max(v.max_accel_mps2 for v in config.car_vehicles)
+        fits = (f"at most {longest:g} s fits, the frontmost car accelerating at most at {accel:g} m/s^2 up to the "
+                f"{road.speed_limit_mps:g} m/s limit" + (f" after the {config.attack_start_s:g} s warm-up" if config.attack_start_s else "")
                 if longest > 0 else "none fits: use a longer road")
         raise ConfigError(
             "scenario.duration_s",

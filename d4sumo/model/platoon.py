@@ -50,9 +50,52 @@ def _named_errors(command, car: int, name: str):
     return checked
 
 
+def reach_m(speed_mps: float, accel_mps2: float, limit_mps: float, duration_s: float) -> float:
+    """How far a car that starts at ``speed_mps`` can drive in ``duration_s``, accelerating at most at
+    ``accel_mps2`` up to ``limit_mps`` [m]."""
+    if speed_mps >= limit_mps or accel_mps2 <= 0.0:  # at its speed (held to the limit) all along
+        return min(speed_mps, limit_mps) * duration_s
+    t_limit = (limit_mps - speed_mps) / accel_mps2
+    if duration_s <= t_limit:
+        return speed_mps * duration_s + 0.5 * accel_mps2 * duration_s ** 2
+    return speed_mps * t_limit + 0.5 * accel_mps2 * t_limit ** 2 + limit_mps * (duration_s - t_limit)
+
+
+def reach_s(speed_mps: float, accel_mps2: float, limit_mps: float, distance_m: float) -> float:
+    """The inverse of `reach_m`: the longest time in which such a car drives at most ``distance_m``."""
+    if distance_m <= 0.0:
+        return 0.0
+    if speed_mps >= limit_mps or accel_mps2 <= 0.0:
+        fastest = min(speed_mps, limit_mps)
+        return distance_m / fastest if fastest > 0.0 else math.inf
+    t_limit = (limit_mps - speed_mps) / accel_mps2
+    to_limit = speed_mps * t_limit + 0.5 * accel_mps2 * t_limit ** 2
+    if distance_m <= to_limit:
+        return (math.sqrt(speed_mps ** 2 + 2.0 * accel_mps2 * distance_m) - speed_mps) / accel_mps2
+    return t_limit + (distance_m - to_limit) / limit_mps
+
+
+def _frontmost(config: EpisodeConfig) -> tuple[float, float, float]:
+    """The frontmost start [m], the fastest start [m/s] and the strongest full throttle [m/s^2] of the cars."""
+    cars = maneuver_of(config).cars()
+    return (max(car.position_m for car in cars), max(car.speed_mps for car in cars),
+            max(v.max_accel_mps2 for v in config.car_vehicles))
+
+
 def road_needed_m(config: EpisodeConfig, speed_limit_mps: float) -> float:
-    """Road length an episode may use: no car, clamped to the limit, passes the frontmost car's start."""
-    return max(car.position_m for car in maneuver_of(config).cars()) + speed_limit_mps * config.total_s
+    """Road length an episode may use: what the frontmost car's start leaves to a car that starts as fast as
+    the fastest, accelerates as hard as the strongest, up to the limit, for the whole episode (its warm-up
+    included): no car passes it."""
+    start, speed, accel = _frontmost(config)
+    return start + reach_m(speed, accel, speed_limit_mps, config.total_s)
+
+
+def longest_duration_s(config: EpisodeConfig, length_m: float, speed_limit_mps: float) -> float:
+    """The longest scenario.duration_s (on the step grid, after the warm-up) a road of ``length_m`` holds
+    (`road_needed_m`); 0 or less: none."""
+    start, speed, accel = _frontmost(config)
+    total = reach_s(speed, accel, speed_limit_mps, length_m - start)
+    return math.floor(round((total - config.attack_start_s) / config.step_s, 9)) * config.step_s
 
 
 def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], speeds: list[float],

@@ -155,3 +155,23 @@ def test_each_car_brakes_and_is_measured_as_its_own_vehicle():
     # the truck stops later than a car would: the attacker's gap to it closes further
     assert mixed.min_gaps_m()["v0-v1"] < uniform.min_gaps_m()["v0-v1"]
     assert mixed.outcome == "attacker_crash" and mixed.first_collision.pair == "v0-v1"
+
+
+# --- how far an episode reaches (issue 37) ---------------------------------------------------------
+
+
+def test_an_episode_reaches_as_far_as_its_fastest_start_and_strongest_throttle_take_it_up_to_the_limit():
+    from d4sumo.model.maneuvers import maneuver_of
+    from d4sumo.model.platoon import longest_duration_s, reach_m, reach_s, road_needed_m
+
+    assert reach_m(0.0, 2.0, 20.0, 5.0) == 25.0  # still accelerating
+    assert reach_m(0.0, 2.0, 20.0, 15.0) == 100.0 + 20.0 * 5.0  # 10 s to the limit, then at it
+    assert reach_m(25.0, 3.5, 20.0, 10.0) == 200.0  # above the limit: at the limit (the attacker is held to it)
+    for v, a, limit, t in [(0.0, 2.0, 20.0, 5.0), (0.0, 2.0, 20.0, 15.0), (25.0, 3.5, 33.0, 40.0), (30.0, 0.0, 33.0, 9.0)]:
+        assert reach_s(v, a, limit, reach_m(v, a, limit, t)) == pytest.approx(t)
+    # from rest the platoon needs far less road than the limit for the whole episode: 3.5 m/s^2 to 33.33 m/s
+    rest = EpisodeConfig(start="rest", duration_s=60.0)
+    front = max(car.position_m for car in maneuver_of(rest).cars())
+    assert road_needed_m(rest, 33.33) == pytest.approx(front + 33.33 * 60.0 - 33.33 ** 2 / (2 * 3.5))
+    longest = longest_duration_s(rest, road_needed_m(rest, 33.33), 33.33)
+    assert longest == pytest.approx(60.0)
