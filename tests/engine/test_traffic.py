@@ -250,3 +250,15 @@ def test_on_bremen_the_traffic_ahead_of_the_attacker_is_where_sumo_fcd_puts_it_e
             compared += 1
             edges.add(edge0)
     assert compared > 300 and len(edges) >= 3  # before, on and past the ramp's edge
+
+
+def test_a_lane_changing_attacker_among_traffic_on_a_road_of_several_edges_gets_one_line():
+    from d4sumo.engine.simulation import check_road
+
+    road = build_road(str(Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges"))
+    config = EpisodeConfig(network=road.name, maneuver="swerve", start="steady", speed_mps=25.0, duration_s=30.0,
+                           traffic={"vehicles_per_hour": 600})
+    with pytest.raises(ConfigError) as info:
+        check_road(config, road)
+    assert info.value.field == "scenario.maneuver" and "a road of one edge" in info.value.allowed
+    check_road(dataclasses.replace(config, maneuver="inlane"), road)  # in lane it plays there

@@ -66,7 +66,6 @@ def test_traffic_is_stored_only_where_there_is_some_and_round_trips():
 
 
 @pytest.mark.parametrize("scenario, field", [
-    ({"maneuver": "cutin"}, "scenario.maneuver"),
     ({"start": "rest"}, "scenario.start"),
     ({"start": "steady", "step_s": 0.1, "traffic": {"warmup_s": 10.05}}, "traffic.warmup_s"),
 ])
