@@ -13,6 +13,7 @@ A document is the tables of a config file:
                  measure of the car ahead (none: the truth)
     [traffic]    vehicles_per_hour, warmup_s, clear_m, seed, [traffic.types.NAME] (share and SUMO <vType>
                  attributes): SUMO's traffic around the platoon (none: it drives alone)
+    [v2v]        beacon_interval_s, latency_s, loss, seed: the platoon's V2V channel (cooperative controllers)
     [attack]     family, params (simulate only), and the families' options (knots: delta_s, horizon_s)
     [spec]       d_safe_m, formula
     [search]     optimizer, samples, seed; [search.bo], [search.ce]: the optimisers' options
@@ -35,18 +36,20 @@ from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, 
 from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
 from .model.sensing import RadarParams
 from .model.traffic import TrafficParams
+from .model.v2v import ChannelParams
 from .model.maneuvers import maneuver_of
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
 
-SECTIONS = ("scenario", "vehicle", "controller", "radar", "traffic", "attack", "spec", "search")
+SECTIONS = ("scenario", "vehicle", "controller", "radar", "traffic", "v2v", "attack", "spec", "search")
 SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in TABLES)
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "scenario": SCENARIO_KEYS,
     "vehicle": tuple(f.name for f in dataclasses.fields(VehicleParams)),
     "radar": tuple(f.name for f in dataclasses.fields(RadarParams)),
     "traffic": tuple(f.name for f in dataclasses.fields(TrafficParams)),
+    "v2v": tuple(f.name for f in dataclasses.fields(ChannelParams)),
     "attack": ("family", "params", *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
@@ -103,6 +106,11 @@ def with_overrides(doc: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict
             if not isinstance(value, Mapping):
                 raise ConfigError("radar", _short(value), "a [radar] table, e.g. {gap_noise_m = 0.5, latency_s = 0.2}")
             out["radar"] = copy.deepcopy(dict(value))
+            continue
+        if dotted == "v2v":  # a whole [v2v] table (a sweep's grid.v2v point; {} the default channel)
+            if not isinstance(value, Mapping):
+                raise ConfigError("v2v", _short(value), "a [v2v] table, e.g. {latency_s = 0.2, loss = 0.1}")
+            out["v2v"] = copy.deepcopy(dict(value))
             continue
         if dotted == "traffic":  # a whole [traffic] table (a sweep's grid.traffic point; {} none: the platoon alone)
             if not isinstance(value, Mapping):

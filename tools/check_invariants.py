@@ -7,8 +7,9 @@ among SUMO's traffic on the 4-lane highway (densities, warm-ups, clearances, see
 and mixes of car-following models and trucks drawn: who follows whom from the FCD is then the nearest
 car in each lane a car covers, a traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
-metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one or
-SUMO's models, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
+metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one,
+SUMO's models or the cooperative ones (PATH's CACC, Ploeg's) over a V2V channel, half of those late or
+lossy, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
 and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
 campaign stores a sample, and counts the samples where any of these disagree:
@@ -117,7 +118,7 @@ def netgenerate_grid() -> str:
 #: the systems under test drawn from: Python controllers and SUMO-driven followers
 SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("sumo:ACC"),
            ControllerConfig("sumo:ACC", (("tau", 0.5),)), ControllerConfig("sumo:IDM"), ControllerConfig("sumo:Krauss"),
-           ControllerConfig("sumo:CACC")]
+           ControllerConfig("sumo:CACC"), ControllerConfig("cacc"), ControllerConfig("ploeg")]
 
 
 #: the share of in-lane episodes played among traffic (--traffic)
@@ -162,6 +163,10 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     if rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
         config = dataclasses.replace(config, network="highway_4lane", route=(), duration_s=60.0, start="steady",
                                      traffic=traffic_table(rng))
+    if config.v2v is not None and rng.random() < 0.5:  # cooperative followers over a late or lossy channel
+        config = dataclasses.replace(config, v2v={"beacon_interval_s": float(rng.choice([0.05, 0.1, 0.2])),
+                                                  "latency_s": float(rng.choice([0.0, 0.1, 0.3])),
+                                                  "loss": float(rng.choice([0.0, 0.1, 0.5])), "seed": int(rng.integers(0, 1000))})
     if rng.random() < 0.25:  # a platoon of different vehicles: a truck, a bus or a small car among the cars
         cars = rng.choice(config.vehicle_ids, size=int(rng.integers(1, min(3, len(config.vehicle_ids)) + 1)), replace=False)
         config = dataclasses.replace(config, vehicles={str(car): vehicle_table(rng) for car in cars})

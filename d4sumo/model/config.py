@@ -24,6 +24,7 @@ from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_
 from .plugins import ControllerImportError, NotImported, build_params
 from .sensing import RadarParams
 from .traffic import TrafficParams
+from .v2v import ChannelParams
 from .vehicle import VehicleParams
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES, SWERVE_KNOTS, SWERVE_LANES
 
@@ -140,6 +141,9 @@ class EpisodeConfig:
     radar: RadarParams | None = None
     #: SUMO's traffic around the platoon, the [traffic] table (`traffic`); none: the platoon drives alone
     traffic: TrafficParams | None = None
+    #: the platoon's V2V channel, the [v2v] table (`v2v`); none: no beacons, unless a follower's controller
+    #: reads them (cacc, ploeg): then the default channel
+    v2v: ChannelParams | None = None
     #: the maximum deceleration the attacker declares to the cars behind it (SUMO's apparentDecel),
     #: which SUMO's models may plan with; it can truly brake at vehicle.max_decel_mps2, the default
     attacker_declared_decel_mps2: float | None = None
@@ -214,6 +218,21 @@ class EpisodeConfig:
                 raise ConfigError("radar.latency_s", self.radar.latency_s, f"a whole number of steps of {self.step_s:g} s")
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
+        if isinstance(self.v2v, Mapping):
+            fix("v2v", ChannelParams.from_table(self.v2v))
+        listening = [_listens(c) for c in controllers]
+        if self.v2v is not None:
+            if not isinstance(self.v2v, ChannelParams):
+                raise ConfigError("v2v", self.v2v, "a [v2v] table")
+            if not any(x is not False for x in listening):
+                raise ConfigError("v2v", self.v2v.to_dict(), "a platoon with a follower whose controller reads V2V beacons "
+                                                             "(cacc, ploeg, or your own with listens = True)")
+            for name in ("beacon_interval_s", "latency_s"):
+                value = getattr(self.v2v, name)
+                if not _on_grid(value, self.step_s):
+                    raise ConfigError(f"v2v.{name}", value, f"a whole number of steps of {self.step_s:g} s")
+        elif any(listening):  # a cooperative controller's platoon exchanges beacons: Plexe's default channel
+            fix("v2v", ChannelParams())
         if isinstance(self.traffic, Mapping):
             fix("traffic", TrafficParams.from_table(self.traffic))
         if self.traffic is not None:
@@ -281,7 +300,7 @@ class EpisodeConfig:
     def batch_arrays(self) -> bool:
         """Whether a batch's arrays may play its platoons: they play the model as printed, one vehicle for
         every car (otherwise its platoons are commanded one by one, side by side in one SUMO all the same)."""
-        return not self.as_run and not self.vehicles and self.radar is None and self.traffic is None
+        return not self.as_run and not self.vehicles and self.radar is None and self.traffic is None and self.v2v is None
 
     @functools.cached_property
     def car_vehicles(self) -> tuple[VehicleParams, ...]:
@@ -345,6 +364,8 @@ class EpisodeConfig:
             label += f"; {car}: " + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in differs)
         if self.radar is not None:
             label += "; radar: " + self.radar.label
+        if self.v2v is not None:
+            label += "; v2v: " + self.v2v.label
         return label
 
     def for_sample(self, index: int) -> "EpisodeConfig":
@@ -403,6 +424,8 @@ class EpisodeConfig:
             out["radar"] = self.radar.to_dict()
         if self.traffic is not None:
             out["traffic"] = self.traffic.to_dict()
+        if self.v2v is not None:
+            out["v2v"] = self.v2v.to_dict()
         return out
 
     @classmethod
@@ -427,8 +450,9 @@ class EpisodeConfig:
             controller = ControllerConfig.from_table(_table(doc, "controller"))
         radar = RadarParams.from_table(doc["radar"]) if doc.get("radar") is not None else None
         traffic = TrafficParams.from_table(doc["traffic"]) if doc.get("traffic") is not None else None
+        v2v = ChannelParams.from_table(doc["v2v"]) if doc.get("v2v") is not None else None
         return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), vehicles=tuple(cars.items()),
-                   controller=controller, radar=radar, traffic=traffic)
+                   controller=controller, radar=radar, traffic=traffic, v2v=v2v)
 
 
 def read_toml(path: str | Path, field: str = "--config") -> dict:
@@ -464,7 +488,7 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
-TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic")
+TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 
 
 def _short_table(table: Any) -> Any:
@@ -475,6 +499,17 @@ def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> N
     for key in table:
         if key not in allowed:
             raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")
+
+
+def _listens(controller: ControllerConfig) -> bool | None:
+    """Whether a follower's controller reads V2V beacons (its class's ``listens``); None where a user's
+    class may not be imported here (`plugins.names_only`: a stored definition says what it had)."""
+    if controller.sumo_model:
+        return False
+    try:
+        return bool(getattr(controller.controller_class(), "listens", False))
+    except NotImported:
+        return None
 
 
 def _on_grid(value: float, step: float) -> bool:

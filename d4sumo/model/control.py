@@ -13,6 +13,7 @@ protocol (imported by `plugins`). (Followers driven by SUMO's own car-following 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -382,6 +383,104 @@ class CautiousDriver:
         return acceleration_to_command(min(a, spacing), self.vehicle)
 
 
+# --- cooperative controllers (CACC): they read V2V beacons (`v2v`) -------------------------------
+
+
+@dataclass(frozen=True)
+class PathParams:
+    """Rajamani's CACC (Plexe's "CACC", the PATH controller; Rajamani, Vehicle Dynamics and Control, Eq.
+    7.39), with Plexe's defaults."""
+
+    c1: float = 0.5  # C1: how much the platoon leader's acceleration weighs against the car ahead's
+    xi: float = 1.0  # the damping ratio (at least 1)
+    omega_n: float = 0.2  # the bandwidth [rad/s]
+
+    def __post_init__(self) -> None:
+        check_number("controller.c1", self.c1, 0.0, 1.0)
+        check_number("controller.xi", self.xi, 1.0, 10.0)
+        check_number("controller.omega_n", self.omega_n, 0.0, 10.0, "rad/s", low_open=True)
+
+
+class PathCACC:
+    """Rajamani's CACC (PATH), as Plexe's ``CACC``: constant spacing (the scenario's setpoint),
+
+        a = a1 a_ahead + a2 a_leader + a3 (v - v_ahead) + a4 (v - v_leader) + a5 (d - gap)
+
+    with a1 = 1 - C1, a2 = C1, a3 = -(2 xi - C1 (xi + sqrt(xi^2 - 1))) w, a4 = -C1 (xi + sqrt(xi^2 - 1)) w,
+    a5 = -w^2; the speeds and accelerations of the car ahead and of the platoon's leader from their
+    newest beacons, the gap from the radar. Until a beacon of each has arrived it asks for nothing (0),
+    as Plexe's."""
+
+    Params = PathParams
+    listens = True  # it reads V2V beacons: its platoon exchanges them (`v2v`)
+
+    def __init__(self, params: PathParams, *, setpoint_m: float, target_speed_mps: float, vehicle: VehicleParams,
+                 step_s: float):
+        root = math.sqrt(params.xi ** 2 - 1.0)
+        w = params.omega_n
+        self.a1, self.a2 = 1.0 - params.c1, params.c1
+        self.a3 = -(2.0 * params.xi - params.c1 * (params.xi + root)) * w
+        self.a4 = -params.c1 * (params.xi + root) * w
+        self.a5 = -w * w
+        self.setpoint_m, self.vehicle = setpoint_m, vehicle
+
+    def desired_acceleration(self, gap_m: float, speed_mps: float, ahead, leader) -> float:
+        """The law, given the beacons of the car ahead and of the leader (``Message``s)."""
+        return (self.a1 * ahead.accel_mps2 + self.a2 * leader.accel_mps2 + self.a3 * (speed_mps - ahead.speed_mps)
+                + self.a4 * (speed_mps - leader.speed_mps) + self.a5 * (self.setpoint_m - gap_m))
+
+    def observe(self, obs) -> float:
+        ahead, leader = obs.front_message, obs.leader_message
+        if ahead is None or leader is None:
+            return 0.0
+        return acceleration_to_command(self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader), self.vehicle)
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        raise ConfigError("controller", "cacc", "a platoon that exchanges V2V beacons (the [v2v] table)")
+
+
+@dataclass(frozen=True)
+class PloegParams:
+    """Ploeg's CACC (Plexe's "PLOEG"; Ploeg et al. 2011), with Plexe's defaults."""
+
+    h_s: float = 0.5  # the time headway of its spacing policy: the scenario's setpoint plus h v
+    kp: float = 0.2  # [1/s^2] on the spacing error
+    kd: float = 0.7  # [1/s] on its derivative
+
+    def __post_init__(self) -> None:
+        check_number("controller.h_s", self.h_s, 0.0, 10.0, "seconds", low_open=True)
+        check_number("controller.kp", self.kp, 0.0, 100.0)
+        check_number("controller.kd", self.kd, 0.0, 100.0)
+
+
+class PloegCACC:
+    """Ploeg's CACC, as Plexe's ``PLOEG``: spacing d + h v (d the scenario's setpoint), its command u
+    integrated each step, u' = (-u + kp (gap - d - h v) + kd (v_ahead - v - h a) + a_ahead) / h; the car
+    ahead's speed from the radar, its acceleration from its newest beacon, the car's own acceleration
+    its last step's. Until a beacon has arrived it asks for nothing (0), as Plexe's."""
+
+    Params = PloegParams
+    listens = True
+
+    def __init__(self, params: PloegParams, *, setpoint_m: float, target_speed_mps: float, vehicle: VehicleParams,
+                 step_s: float):
+        self.params, self.setpoint_m, self.vehicle, self.step_s = params, setpoint_m, vehicle, step_s
+        self.u = 0.0  # its command [m/s^2], integrated
+
+    def observe(self, obs) -> float:
+        ahead = obs.front_message
+        if ahead is None:
+            return 0.0
+        p = self.params
+        spacing_error = obs.gap_m - (self.setpoint_m + p.h_s * obs.speed_mps)
+        speed_error = obs.lead_speed_mps - obs.speed_mps - p.h_s * obs.accel_mps2
+        self.u += (-self.u + p.kp * spacing_error + p.kd * speed_error + ahead.accel_mps2) / p.h_s * self.step_s
+        return acceleration_to_command(self.u, self.vehicle)
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        raise ConfigError("controller", "ploeg", "a platoon that exchanges V2V beacons (the [v2v] table)")
+
+
 # --- registry of follower controllers ------------------------------------------------------------
 
 _REGISTRY: dict[str, type] = {}
@@ -396,6 +495,8 @@ def register_controller(name: str, cls: type) -> None:
 
 register_controller("switching", SwitchingController)
 register_controller("timegap", TimeGapController)
+register_controller("cacc", PathCACC)
+register_controller("ploeg", PloegCACC)
 
 
 def registered_controllers() -> tuple[str, ...]:

@@ -25,6 +25,7 @@ from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
 from .trace import Collision, Trace
 from .traffic import TRAFFIC_ID
+from .v2v import Channel
 
 
 class ControllerError(D4sumoError, ValueError):
@@ -136,7 +137,7 @@ class PythonFollower:
             command = _named_errors(command, car, config.cls)
             observe = observe and _named_errors(observe, car, config.cls)
         #: what it does with the truth (gap, own speed, speed ahead): through its radar, to its controller
-        self.command = sensed_command(command, observe, episode.radar, episode.step_s, car)
+        self.command = sensed_command(command, observe, episode.radar, episode.step_s, car, beacons=episode.v2v is not None)
         self.has_mode = hasattr(self.controller, "mode")
 
 
@@ -243,6 +244,9 @@ class Platoon:
         self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven),
                           *(i for i, _, _, _ in self._others))
         self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
+        #: the platoon's V2V channel (`v2v`), and each car's speed a step ago (the accelerations its beacons carry)
+        self.channel = Channel(config.v2v, dt, n) if config.v2v is not None else None
+        self._last_speeds: list[float] | None = None
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
         self.commands: list[list[float]] = []
@@ -278,9 +282,15 @@ class Platoon:
             self._attacking = True
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
+        if self.channel is not None:
+            accels = self._accelerations(speeds)
+            self.channel.send(k, positions, speeds, accels)
         for i, follower in self._python:
             leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
-            c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
+            if self.channel is None:
+                c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
+            else:
+                c = checked_command(follower.command(gap, speeds[i], speeds[leader], accels[i], self.channel.inbox(i)), i, k)
             commands.append(c)
             new_speeds.append(follower.actuator.apply(c, speeds[i]))
         for i, cruise, actuator, vehicle in self._others:
@@ -295,6 +305,13 @@ class Platoon:
         if self._with_mode:
             self.modes.append([c.mode for c in self._with_mode])
         return new_speeds
+
+    def _accelerations(self, speeds: list[float]) -> list[float]:
+        """Each car of the platoon's acceleration over its last step [m/s^2] (0 at the first)."""
+        n = len(self.ids)
+        last = self._last_speeds or speeds[:n]
+        self._last_speeds = list(speeds[:n])
+        return [(v - w) / self.config.step_s for v, w in zip(speeds[:n], last)]
 
     def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray,
               lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float], dict[str, float] | None]:

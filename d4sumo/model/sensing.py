@@ -79,14 +79,19 @@ class RadarParams:
 
 @dataclass(frozen=True)
 class Observation:
-    """What a follower's controller knows at a step: its own speed, and what its radar measures of the car
-    ahead in its lane (``leader``: whether there is one in range; without, the gap is a free road's and
-    the speed ahead the car's own)."""
+    """What a follower's controller knows at a step: its own speed (and its acceleration over its last
+    step), what its radar measures of the car ahead in its lane (``leader``: whether there is one in range;
+    without, the gap is a free road's and the speed ahead the car's own), and, in a platoon that exchanges
+    V2V beacons (`v2v`), the newest beacon it received from the platoon's leader and from the car ahead of
+    it in the platoon (None until one has arrived; for v1 both are the leader's)."""
 
     speed_mps: float
     gap_m: float
     lead_speed_mps: float
     leader: bool
+    accel_mps2: float = 0.0
+    leader_message: Any = None
+    front_message: Any = None
 
     @property
     def relative_speed_mps(self) -> float:
@@ -120,12 +125,28 @@ class Radar:
 
 
 def sensed_command(command: Callable[[float, float, float], float], observe: Callable[[Observation], float] | None,
-                   params: RadarParams | None, step_s: float, car: int) -> Callable[[float, float, float], float]:
+                   params: RadarParams | None, step_s: float, car: int,
+                   beacons: bool = False) -> Callable[..., float]:
     """A follower's command from the truth (gap, own speed, speed ahead): through its radar when it is not
     the perfect one, to the controller's ``observe`` (given an `Observation`) where it has one, else to its
     ``command`` (gap, own speed, speed ahead, as measured). The perfect radar and a controller without
-    ``observe``: the command itself, untouched."""
+    ``observe``: the command itself, untouched. With ``beacons`` (a platoon that exchanges V2V beacons) the
+    command also takes the car's own acceleration and its inbox (`v2v.Channel.inbox`), which ``observe``
+    is given."""
     radar = Radar(params, step_s, car) if params is not None and not params.perfect else None
+    if beacons:
+        front = car - 1
+
+        def listening(gap: float, own: float, lead: float, accel: float, inbox) -> float:
+            if radar is not None:
+                o = radar.observe(gap, own, lead)
+            else:
+                o = Observation(own, gap, lead, gap < FREE_ROAD_GAP_M)
+            if observe is None:
+                return command(o.gap_m, own, o.lead_speed_mps)
+            return observe(dataclasses.replace(o, accel_mps2=accel, leader_message=inbox.get(0), front_message=inbox.get(front)))
+
+        return listening
     if radar is None and observe is None:
         return command
     if radar is None:

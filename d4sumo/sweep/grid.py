@@ -25,11 +25,11 @@ log = logging.getLogger(__name__)
 
 SCENARIO_GRID_KEYS = ("network", "followers", "setpoint_m", "speed_mps", "start",
                       *dict.fromkeys(k for m in MANEUVERS.values() for k in m.settings))  # maneuver, cutin_follower, ...
-GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "radar", "traffic", "attack", "optimizer", "seed")
+GRID_KEYS = (*SCENARIO_GRID_KEYS, "controller", "radar", "traffic", "v2v", "attack", "optimizer", "seed")
 #: a grid axis -> the document key it sets (a controller replaces the whole [controller]: a name, a
 #: table, or a list of them for a mixed platoon)
 GRID_TO_KEY = {**{k: f"scenario.{k}" for k in SCENARIO_GRID_KEYS}, "controller": "controller", "radar": "radar",
-               "traffic": "traffic", "attack": "attack.family",
+               "traffic": "traffic", "v2v": "v2v", "attack": "attack.family",
                "optimizer": "search.optimizer", "seed": "search.seed"}
 
 
@@ -92,7 +92,7 @@ class Sweep:
             if len(set(map(repr, values))) != len(values):
                 raise ConfigError(f"grid.{key}", values, "a list without repeated values")
         base = {k: v for k, v in doc.items() if k not in ("name", "grid")}
-        for table in ("radar", "traffic"):
+        for table in ("radar", "traffic", "v2v"):
             if table in grid and table in base:
                 raise ConfigError(f"{source}: [{table}]", base[table], f"no [{table}] table beside grid.{table}, which sets it for every campaign")
         if "controller" in grid and "controller" in base:

@@ -1,0 +1,111 @@
+"""What the platoon's cars tell each other: V2V beacons over a channel, the [v2v] table. Pure code, no SUMO.
+
+Every car of the platoon (the attacker v0 leads it) broadcasts a beacon of its state every
+``beacon_interval_s``: who sent it, when, its position along the road, its speed and its acceleration
+over the last step. A follower receives the beacons of the platoon's leader and of the car ahead of it in
+the platoon (the topology of Plexe's cooperative controllers), each ``latency_s`` after it was sent
+(a whole number of steps), and loses each with probability ``loss``, drawn from a generator seeded by
+the table's seed and the pair of cars: every episode of a configuration loses the same beacons, and a
+replay loses them again. A cooperative controller reads the newest beacon of each (`Observation`).
+
+The beacons are the truth the world sensed (`sensing` reads the same); what a car does with a lost or a
+late one is its controller's. No [v2v] table: no messages, every earlier episode unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..errors import ConfigError, check_int, check_number
+
+
+@dataclass(frozen=True)
+class ChannelParams:
+    """The V2V channel, the [v2v] table (see the module)."""
+
+    beacon_interval_s: float = 0.1  # Plexe's default: ten beacons a second
+    latency_s: float = 0.0  # from a beacon's sending to its delivery
+    loss: float = 0.0  # the probability that a beacon is lost
+    seed: int = 0  # the losses': every episode of the configuration loses the same beacons
+
+    def __post_init__(self) -> None:
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        fix("beacon_interval_s", check_number("v2v.beacon_interval_s", self.beacon_interval_s, 0.0, 10.0, "seconds", low_open=True))
+        fix("latency_s", check_number("v2v.latency_s", self.latency_s, 0.0, 5.0, "seconds"))
+        fix("loss", check_number("v2v.loss", self.loss, 0.0, 1.0, "(a probability)"))
+        fix("seed", check_int("v2v.seed", self.seed, 0, 2**32 - 1))
+
+    @classmethod
+    def from_table(cls, table: Any) -> "ChannelParams":
+        if not isinstance(table, Mapping):
+            raise ConfigError("v2v", table, "a [v2v] table")
+        keys = [f.name for f in dataclasses.fields(cls)]
+        for key, value in table.items():
+            if key not in keys:
+                raise ConfigError(f"v2v.{key}", value, f"a key of [v2v]: {', '.join(keys)}")
+        return cls(**table)
+
+    def to_dict(self) -> dict:
+        """As a definition stores it: every key (the channel is part of the system under test)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @property
+    def label(self) -> str:
+        """In a few words: ``beacons 0.1 s, latency 0.2 s, loss 0.1``."""
+        text = f"beacons {self.beacon_interval_s:g} s"
+        if self.latency_s:
+            text += f", latency {self.latency_s:g} s"
+        if self.loss:
+            text += f", loss {self.loss:g}"
+        return text
+
+
+@dataclass(frozen=True)
+class Message:
+    """A beacon: who sent it (the car's index, 0 the attacker that leads the platoon), when [s], and its
+    position along the road [m], speed [m/s] and acceleration over its last step [m/s^2]."""
+
+    sender: int
+    time_s: float
+    position_m: float
+    speed_mps: float
+    accel_mps2: float
+
+
+class Channel:
+    """One episode's V2V channel: ``send(k, positions, speeds, accelerations)`` at each step's start, then
+    ``inbox(i)``, the newest beacon follower ``i`` received from each of its sources (the platoon's leader
+    and the car ahead of it)."""
+
+    def __init__(self, params: ChannelParams, step_s: float, cars: int):
+        self.params = params
+        self.step_s = step_s
+        self.every = max(1, int(round(params.beacon_interval_s / step_s)))
+        self.delay = int(round(params.latency_s / step_s))
+        self.sources = {i: tuple(dict.fromkeys((0, i - 1))) for i in range(1, cars)}  # the leader, the car ahead
+        self.rngs = {(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
+        self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
+        self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
+
+    def send(self, k: int, positions, speeds, accelerations) -> None:
+        """Step ``k``'s beacons (every ``beacon_interval_s``), and the deliveries due at it."""
+        if k % self.every == 0:
+            beacons = {}
+            for i, sources in self.sources.items():
+                for s in sources:
+                    if self.params.loss and self.rngs[s, i].random() < self.params.loss:
+                        continue
+                    if s not in beacons:
+                        beacons[s] = Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]))
+                    self.in_flight.append((k + self.delay, i, beacons[s]))
+        while self.in_flight and self.in_flight[0][0] <= k:
+            _, i, message = self.in_flight.popleft()
+            self.newest[i][message.sender] = message
+
+    def inbox(self, i: int) -> Mapping[int, Message]:
+        return self.newest[i]

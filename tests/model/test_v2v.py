@@ -1,0 +1,90 @@
+"""The V2V channel and the cooperative controllers that read it: pure code, no SUMO."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from d4sumo.errors import ConfigError
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.control import PathCACC, PathParams, PloegCACC, PloegParams
+from d4sumo.model.sensing import Observation
+from d4sumo.model.v2v import Channel, ChannelParams, Message
+from d4sumo.model.vehicle import VehicleParams
+
+STEP = 0.05
+
+
+def _play(channel: Channel, steps: int, cars: int = 4) -> list[dict]:
+    seen = []
+    for k in range(steps):
+        channel.send(k, [100.0 - 10 * i + k for i in range(cars)], [25.0] * cars, [0.1 * i for i in range(cars)])
+        seen.append({i: dict(channel.inbox(i)) for i in range(1, cars)})
+    return seen
+
+
+def test_beacons_come_every_interval_from_the_leader_and_the_car_ahead_latency_steps_late():
+    seen = _play(Channel(ChannelParams(beacon_interval_s=0.1, latency_s=0.15), STEP, 4), 10)
+    assert seen[2] == {1: {}, 2: {}, 3: {}}  # sent at step 0, due at step 3
+    inbox = seen[3][3]
+    assert set(inbox) == {0, 2} and inbox[2] == Message(2, 0.0, 80.0, 25.0, 0.2)
+    assert seen[4][3][2].time_s == 0.0 and seen[5][3][2].time_s == 0.1  # the next beacon, sent at step 2
+    assert set(seen[5][1]) == {0}  # v1's leader is the car ahead
+
+
+def test_lost_beacons_are_drawn_from_the_seed_and_the_pair_the_same_every_time():
+    params = ChannelParams(loss=0.5, seed=3)
+    first = _play(Channel(params, STEP, 4), 400)
+    assert first == _play(Channel(params, STEP, 4), 400)
+    newest = [inbox[3][2].time_s for inbox in first if 2 in inbox[3]]
+    gaps = np.diff(sorted(set(newest)))
+    assert gaps.max() > 0.1 + 1e-9  # some were lost
+    other = _play(Channel(ChannelParams(loss=0.5, seed=4), STEP, 4), 400)
+    assert other != first
+
+
+@pytest.mark.parametrize("table, field", [({"beacon_interval_s": 0}, "v2v.beacon_interval_s"), ({"loss": 1.5}, "v2v.loss"),
+                                          ({"latency": 0.1}, "v2v.latency"), ({"seed": -1}, "v2v.seed")])
+def test_a_bad_channel_gets_one_line(table, field):
+    with pytest.raises(ConfigError) as info:
+        ChannelParams.from_table(table)
+    assert info.value.field == field
+
+
+def test_a_cooperative_platoon_gets_plexe_default_channel_and_a_channel_needs_a_listener():
+    config = EpisodeConfig(controller=ControllerConfig("cacc"))
+    assert config.v2v == ChannelParams() and config.to_dict()["v2v"]["beacon_interval_s"] == 0.1
+    assert EpisodeConfig.from_dict(config.to_dict()) == config and not config.batch_arrays
+    assert "v2v" not in EpisodeConfig().to_dict()  # no listener, no channel: earlier campaigns keep their identity
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(v2v={"loss": 0.1})
+    assert info.value.field == "v2v"
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(controller=ControllerConfig("cacc"), v2v={"latency_s": 0.12})
+    assert info.value.field == "v2v.latency_s"
+
+
+def test_the_path_cacc_is_rajamani_law_with_plexe_gains():
+    vehicle = VehicleParams()
+    cacc = PathCACC(PathParams(), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)
+    ahead, leader = Message(2, 0.0, 0.0, 24.0, -1.0), Message(0, 0.0, 0.0, 23.0, -2.0)
+    a = cacc.desired_acceleration(4.0, 25.0, ahead, leader)
+    # Plexe's alphas at C1 = 0.5, xi = 1, omega_n = 0.2: 0.5, 0.5, -0.3, -0.1, -0.04
+    assert a == pytest.approx(0.5 * -1.0 + 0.5 * -2.0 - 0.3 * 1.0 - 0.1 * 2.0 - 0.04 * 1.0)
+    obs = Observation(25.0, 4.0, 24.0, True, 0.0, leader, ahead)
+    assert cacc.observe(obs) == pytest.approx(a / vehicle.max_decel_mps2)
+    assert cacc.observe(Observation(25.0, 4.0, 24.0, True)) == 0.0  # no beacon yet: nothing asked
+
+
+def test_ploeg_integrates_its_command_as_plexe_does():
+    vehicle = VehicleParams()
+    ploeg = PloegCACC(PloegParams(), setpoint_m=2.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)
+    ahead = Message(1, 0.0, 0.0, 24.0, -1.0)
+    u = 0.0
+    for _ in range(3):
+        ploeg.observe(Observation(25.0, 14.0, 24.0, True, 0.5, None, ahead))
+        u += (-u + 0.2 * (14.0 - (2.0 + 0.5 * 25.0)) + 0.7 * (24.0 - 25.0 - 0.5 * 0.5) - 1.0) / 0.5 * STEP
+        assert ploeg.u == pytest.approx(u)
+    assert math.isclose(ploeg.observe(Observation(25.0, 14.0, 24.0, True)), 0.0)
