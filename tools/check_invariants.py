@@ -8,7 +8,7 @@ and mixes of car-following models and trucks drawn: who follows whom from the FC
 car in each lane a car covers, a traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one,
-SUMO's models or the cooperative ones (PATH's CACC, Ploeg's) over a V2V channel, half of those late or
+SUMO's models or the cooperative ones (PATH's CACC, Ploeg's, in Python and Plexe's CACC in SUMO) over a V2V channel, half of those late or
 lossy, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
 and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
@@ -118,7 +118,8 @@ def netgenerate_grid() -> str:
 #: the systems under test drawn from: Python controllers and SUMO-driven followers
 SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("sumo:ACC"),
            ControllerConfig("sumo:ACC", (("tau", 0.5),)), ControllerConfig("sumo:IDM"), ControllerConfig("sumo:Krauss"),
-           ControllerConfig("sumo:CACC"), ControllerConfig("cacc"), ControllerConfig("ploeg")]
+           ControllerConfig("sumo:CACC"), ControllerConfig("cacc"), ControllerConfig("ploeg"),
+           ControllerConfig("sumo:CC", (("active_controller", "CACC"),))]
 
 
 #: the share of in-lane episodes played among traffic (--traffic)

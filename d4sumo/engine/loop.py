@@ -174,6 +174,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
                 continue
             for vid, s in zip(alone.commanded, out):
                 set_speed(vid, s)
+            if alone.platoon.beacons_for_sumo:  # SUMO's cooperative followers read the channel's beacons too
+                world.feed_beacons(alone.ids, alone.platoon.beacons_for_sumo)
         if not live:
             break
         world_step()

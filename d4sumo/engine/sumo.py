@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, lane_pairs, maneuver_of, occupied_lanes
+from ..model.carfollowing import beacon_parameters
 from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_xml
 from ..model.vehicle import VehicleParams
@@ -665,6 +666,13 @@ class SumoWorld:
                 self._seen.add(pair)
                 self._traffic_collisions.append((self._k * self._step_s, *pair))
         return self.traffic[e](x, v)
+
+    def feed_beacons(self, ids: tuple[str, ...], beacons) -> None:
+        """Give SUMO's cooperative followers (Plexe's CC model) the newest beacons of the platoon's leader
+        and of the car ahead of them, as Plexe's own application does: (follower, leader's, car ahead's)."""
+        for i, leader, front in beacons:
+            self.api.vehicle.setParameter(ids[i], "carFollowModel.cclsa", beacon_parameters(leader))
+            self.api.vehicle.setParameter(ids[i], "carFollowModel.ccpsa", beacon_parameters(front))
 
     def traffic_collisions(self, e: int) -> tuple[tuple[float, str, str], ...]:
         """The collisions of two traffic cars so far (time from the platoon's insertion [s], the car that ran

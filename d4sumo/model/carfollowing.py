@@ -58,8 +58,24 @@ def shares_sumo(model: str, params: Mapping[str, Any]) -> bool:
     return model in SHARE_SUMO and float(params.get("sigma", DEFAULTS["sigma"])) == 0.0
 
 
-#: Plexe's CC model runs one of its controllers; the others need data fed in by the application.
-CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1}
+#: Plexe's CC model runs one of its controllers (its ACTIVE_CONTROLLER); the cooperative ones read the V2V
+#: beacons the application feeds in (d4sumo's channel, `v2v`), the others do without
+CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1, "CACC": 2, "PLOEG": 4, "FLATBED": 6}
+CC_COOPERATIVE = frozenset({"CACC", "PLOEG", "FLATBED"})
+
+
+def listens(model: str, params: Mapping[str, Any]) -> bool:
+    """Whether SUMO's ``model`` with ``params`` reads V2V beacons (Plexe's cooperative controllers)."""
+    return model == "CC" and params.get("active_controller") in CC_COOPERATIVE
+
+
+def beacon_parameters(message) -> dict[str, str]:
+    """A beacon as Plexe's CC model takes it (its PAR_LEADER_SPEED_AND_ACCELERATION and
+    PAR_PRECEDING_SPEED_AND_ACCELERATION: speed, acceleration, x, y, time, controller acceleration, vx,
+    vy, angle, ':' between): the position along the road as x, the acceleration as both."""
+    m = message
+    return ":".join(repr(float(v)) for v in (m.speed_mps, m.accel_mps2, m.position_m, 0.0, m.time_s, m.accel_mps2,
+                                             m.speed_mps, 0.0, 0.0))
 
 
 @dataclass(frozen=True)

@@ -505,7 +505,7 @@ def _listens(controller: ControllerConfig) -> bool | None:
     """Whether a follower's controller reads V2V beacons (its class's ``listens``); None where a user's
     class may not be imported here (`plugins.names_only`: a stored definition says what it had)."""
     if controller.sumo_model:
-        return False
+        return carfollowing.listens(controller.sumo_model, dict(controller.params))
     try:
         return bool(getattr(controller.controller_class(), "listens", False))
     except NotImported:

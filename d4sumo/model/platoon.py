@@ -166,6 +166,8 @@ class SumoFollower:
         self.model = config.sumo_model
         self.params = dict(config.params)
         self.episode = episode
+        #: whether it reads V2V beacons (Plexe's cooperative controllers): the world feeds them to SUMO
+        self.listens = carfollowing.listens(self.model, self.params)
         #: whether its platoon may share one SUMO with others: not when its model draws random numbers
         self.shares_sumo = carfollowing.shares_sumo(self.model, self.params)
 
@@ -247,6 +249,11 @@ class Platoon:
         #: the platoon's V2V channel (`v2v`), and each car's speed a step ago (the accelerations its beacons carry)
         self.channel = Channel(config.v2v, dt, n) if config.v2v is not None else None
         self._last_speeds: list[float] | None = None
+        #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
+        #: the leader's newest, the car ahead's newest), where either is new
+        self._sumo_listening = [i for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]
+        self._fed: dict[int, tuple] = {}
+        self.beacons_for_sumo: list[tuple[int, object, object]] = []
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
         self.commands: list[list[float]] = []
@@ -285,6 +292,13 @@ class Platoon:
         if self.channel is not None:
             accels = self._accelerations(speeds)
             self.channel.send(k, positions, speeds, accels)
+            self.beacons_for_sumo = []
+            for i in self._sumo_listening:
+                inbox = self.channel.inbox(i)
+                newest = (inbox.get(0), inbox.get(i - 1))
+                if newest[0] is not None and newest[1] is not None and newest != self._fed.get(i):
+                    self._fed[i] = newest
+                    self.beacons_for_sumo.append((i, *newest))
         for i, follower in self._python:
             leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
             if self.channel is None:

@@ -45,3 +45,25 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
         batch = simulate_batch(c, plans)
         for plan, together in zip(plans, batch):
             assert_same_episode(together, simulate(c, plan))
+
+
+@pytest.mark.parametrize("cls, plexe, setpoint", [("cacc", "CACC", 5.0), ("ploeg", "PLOEG", 2.0)])
+def test_the_python_cacc_agrees_with_plexe_in_sumo_fed_the_same_beacons(cls, plexe, setpoint):
+    """SUMO's CC model (Plexe's) with its CACC or Ploeg's, fed the channel's beacons as Plexe's application
+    does, against d4sumo's Python law on the same attacks: the same outcomes, speeds within 0.3 m/s (the
+    engines differ in discretisation). Ploeg's standstill gap is Plexe's 2 m; SUMO's car may not exceed
+    the target speed (its maxSpeed), so the attacker here brakes or holds, never speeds away."""
+    python = EpisodeConfig(controller=ControllerConfig(cls), start="steady", setpoint_m=setpoint, duration_s=40.0)
+    table = (("active_controller", plexe), ("decel", 8.0), ("minGap", 0.0), ("tauEngine", 0.5))
+    table += (("constSpacing", setpoint),) if plexe == "CACC" else ()
+    sumo = dataclasses.replace(python, controller=ControllerConfig("sumo:CC", table))
+    assert sumo.v2v == python.v2v  # Plexe's controllers read the same channel
+    family = make_attack("knots")
+    rng = np.random.default_rng(2)
+    for _ in range(4):
+        x = -rng.random(family.dimension)
+        ours, plexes = simulate(python, attack_plan(family, x, python)), simulate(sumo, attack_plan(family, x, sumo))
+        assert ours.outcome == plexes.outcome
+        n = min(len(ours.trace), len(plexes.trace))
+        for j in (1, 2, 3):
+            assert np.max(np.abs(ours.trace[f"speed_v{j}"][:n] - plexes.trace[f"speed_v{j}"][:n])) < 0.3
