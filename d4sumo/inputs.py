@@ -37,7 +37,7 @@ from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
 from .model.sensing import RadarParams
 from .model.traffic import TrafficParams
 from .model.v2v import ChannelParams
-from .model.maneuvers import maneuver_of
+from .model.messages import attack_box
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
@@ -50,7 +50,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "radar": tuple(f.name for f in dataclasses.fields(RadarParams)),
     "traffic": tuple(f.name for f in dataclasses.fields(TrafficParams)),
     "v2v": tuple(f.name for f in dataclasses.fields(ChannelParams)),
-    "attack": ("family", "params", *ATTACK_OPTIONS),
+    "attack": ("family", "params", "message", "message_field", *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
 }
@@ -199,8 +199,10 @@ def _attack_options(doc: Mapping[str, Any]) -> dict[str, Any]:
 
 def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
     """The attack family of an episode: the signal family, with the lane change time when the
-    maneuver changes lanes."""
-    return maneuver_of(episode_config(doc)).family(_family(doc))
+    maneuver changes lanes, and a message attack's parameters (`messages`)."""
+    attack = doc.get("attack", {})
+    return attack_box(episode_config(doc), _family(doc), attack.get("message", ""), attack.get("message_field", "accel"),
+                      _attack_options(doc))
 
 
 def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
@@ -245,6 +247,8 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         formula=_get(doc, "spec.formula"),
         attack_options=tuple(family.options.items()),
         optimizer_options=tuple(options.items()),
+        message=doc.get("attack", {}).get("message", ""),
+        message_field=doc.get("attack", {}).get("message_field", "accel"),
     )
 
 

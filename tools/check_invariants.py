@@ -9,7 +9,7 @@ car in each lane a car covers, a traffic car included); one in five with the pap
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one,
 SUMO's models or the cooperative ones (PATH's CACC, Ploeg's, in Python and Plexe's CACC in SUMO) over a V2V channel, half of those late or
-lossy, a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
+lossy and half of those attacked over the air (every message attack, every field), a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
 and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
 campaign stores a sample, and counts the samples where any of these disagree:
@@ -57,6 +57,7 @@ from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
 from d4sumo.model.maneuvers import attack_plan, lane_pairs, maneuver_of, occupied_lanes
+from d4sumo.model.messages import MESSAGE_ATTACKS, MESSAGE_FIELDS
 from d4sumo.model.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
@@ -174,7 +175,10 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     family = str(rng.choice(FAMILIES))
     # with one follower the paper's psi is undefined: score the attacker's gap instead
     formula = None if config.followers >= 2 or config.maneuver != "inlane" else "always(gap_0 > 0)"
-    campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula)
+    message = {}
+    if config.v2v is not None and config.maneuver == "inlane" and rng.random() < 0.5:  # the attacker lies over the air
+        message = {"message": str(rng.choice(MESSAGE_ATTACKS)), "message_field": str(rng.choice(MESSAGE_FIELDS))}
+    campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, **message)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
 

@@ -97,6 +97,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         return 0
     config = campaign.config
     attack = f"{config.maneuver}, {campaign.attack}" if config.maneuver_class.lateral else campaign.attack
+    if campaign.message:
+        attack += f" with a lie ({campaign.message} on its {campaign.message_field})"
     where = f"lane {config.lane}, " if config.lane is not None else ""
     sensing = f"radar {config.radar.label}, " if config.radar else ""
     sensing += f"{config.world_label}, " if config.traffic else ""

@@ -170,6 +170,8 @@ def _print_summary(s: dict, road_name: str) -> None:
     sc = s["config"]["scenario"]
     attack = s["attack"]
     what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
+    if attack is not None and attack.get("message"):
+        what = f"{attack['family']} with a lie ({attack['message']} on its {attack['message_field']}) {attack['values']}"
     maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
     radar = s["config"].get("radar")
     sensing = f", radar {RadarParams.from_table(radar).label}" if radar else ""

@@ -103,7 +103,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         for e, (c, plan, ids) in enumerate(zip(configs, plans, platoons)):
             x, v = [get_position(vid) for vid in ids], [get_speed(vid) for vid in ids]
             pairs, sensed = sense_traffic(e, x, v) if traffic else (sense_pairs(e, x), None)
-            solo.append(_Alone(e, Platoon(c, plan.u, max_speed), ids, 0, x, v, pairs, sensed))
+            solo.append(_Alone(e, Platoon(c, plan.u, max_speed, beacons=plan.beacons), ids, 0, x, v, pairs, sensed))
 
     def end(e: int, steps_done: int, collisions: tuple, error: Exception | None = None) -> None:
         nonlocal solo, sensed

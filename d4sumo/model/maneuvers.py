@@ -409,12 +409,15 @@ class SwerveAttack(ManeuverAttack):
 @dataclass(frozen=True)
 class AttackPlan:
     """What the attacker does in an episode: its command at each step's start (NaN: it cruises), the
-    step at whose start it begins its lane change (None: it keeps its lane), and a swerving attacker's
-    lane changes: (step at whose start it begins, the lane it changes to), in time order."""
+    step at whose start it begins its lane change (None: it keeps its lane), a swerving attacker's
+    lane changes: (step at whose start it begins, the lane it changes to), in time order, and what it
+    tells over the air."""
 
     u: np.ndarray
     lane_change_step: int | None = None
     lane_changes: tuple[tuple[int, int], ...] = ()
+    #: a message attack's falsifier of the attacker's V2V beacons (`messages.BeaconFalsifier`); None: it tells the truth
+    beacons: object = None
 
 
 def lane_changes(plan: AttackPlan, maneuver: Maneuver) -> list[tuple[int, int]]:
@@ -430,6 +433,8 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
     from .attacks import attack_signal
 
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+    if hasattr(family, "falsifier"):  # a message attack (`messages`): its pedals, and its lie over the air
+        return AttackPlan(u, beacons=family.falsifier(params, config))
     if isinstance(family, SwerveAttack):
         return AttackPlan(u, lane_changes=tuple(family.change_steps(params, config)))
     t_lc_s = family.lane_change_s(params) if family is not None else None
@@ -446,7 +451,7 @@ def inert_parameters(family: AttackFamily, config: EpisodeSettings, draws: int =
     rng = np.random.default_rng(0)
     lower, upper = family.lower, family.upper
     inert = []
-    for i in range(len(lower)):
+    for i in range(getattr(family, "message_first", len(lower))):  # a message attack's own are the lie, not the plan
         moved = False
         for x in rng.uniform(lower, upper, size=(draws, len(lower))):
             plan = attack_plan(family, x, config)

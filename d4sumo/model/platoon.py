@@ -211,7 +211,7 @@ class Platoon:
     lead that cruises at the target speed, or an obstacle at its constant speed)."""
 
     def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float,
-                 followers: list[PythonFollower | SumoFollower] | None = None):
+                 followers: list[PythonFollower | SumoFollower] | None = None, beacons=None):
         attack_u = np.asarray(attack_u, dtype=float)
         if attack_u.shape != (config.steps,):
             raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
@@ -247,7 +247,7 @@ class Platoon:
                           *(i for i, _, _, _ in self._others))
         self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         #: the platoon's V2V channel (`v2v`), and each car's speed a step ago (the accelerations its beacons carry)
-        self.channel = Channel(config.v2v, dt, n) if config.v2v is not None else None
+        self.channel = Channel(config.v2v, dt, n, beacons) if config.v2v is not None else None
         self._last_speeds: list[float] | None = None
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
         #: the leader's newest, the car ahead's newest), where either is new
@@ -334,8 +334,25 @@ class Platoon:
         gaps (`assemble_trace`)."""
         commands = np.array(self.commands, dtype=float).reshape(-1, len(self.commanded))
         modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
-        return assemble_trace(self.config, self.followers, self.commanded, times_s, positions, speeds, commands, modes,
-                              self.pairs, lateral_m)
+        trace, min_gaps, warmup_min_gaps = assemble_trace(self.config, self.followers, self.commanded, times_s, positions,
+                                                          speeds, commands, modes, self.pairs, lateral_m)
+        if self.channel is not None and self.channel.falsify is not None:
+            trace.signals.update(sent_signals(self.channel.sent, times_s.size))
+        return trace, min_gaps, warmup_min_gaps
+
+
+def sent_signals(sent: list, n_samples: int) -> dict[str, np.ndarray]:
+    """Under a message attack, what the attacker's beacons said at each sample, beside the truth (``pos_v0``,
+    ``speed_v0``, ``accel_v0``): the newest beacon it sent at or before it (NaN before the first; a beacon
+    it did not send leaves the one before), ``sent_pos_v0``, ``sent_speed_v0``, ``sent_accel_v0``."""
+    out = {name: np.full(n_samples, np.nan) for name in ("sent_pos_v0", "sent_speed_v0", "sent_accel_v0")}
+    for k, message in sent:
+        if message is None or k >= n_samples:
+            continue
+        out["sent_pos_v0"][k:] = message.position_m
+        out["sent_speed_v0"][k:] = message.speed_mps
+        out["sent_accel_v0"][k:] = message.accel_mps2
+    return out
 
 
 def cruise_params(config: EpisodeConfig) -> SwitchingParams:

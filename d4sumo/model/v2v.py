@@ -82,27 +82,34 @@ class Channel:
     ``inbox(i)``, the newest beacon follower ``i`` received from each of its sources (the platoon's leader
     and the car ahead of it)."""
 
-    def __init__(self, params: ChannelParams, step_s: float, cars: int):
+    def __init__(self, params: ChannelParams, step_s: float, cars: int, falsify=None):
         self.params = params
+        #: a message attack's falsifier of the attacker's beacons (`messages.BeaconFalsifier`), or None
+        self.falsify = falsify
         self.step_s = step_s
         self.every = max(1, int(round(params.beacon_interval_s / step_s)))
         self.delay = int(round(params.latency_s / step_s))
         self.sources = {i: tuple(dict.fromkeys((0, i - 1))) for i in range(1, cars)}  # the leader, the car ahead
+        self.senders = sorted({s for sources in self.sources.values() for s in sources})
         self.rngs = {(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
         self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
         self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
+        self.sent: list[tuple[int, Message | None]] = []  # under a message attack: the attacker's beacons as sent
 
     def send(self, k: int, positions, speeds, accelerations) -> None:
         """Step ``k``'s beacons (every ``beacon_interval_s``), and the deliveries due at it."""
         if k % self.every == 0:
-            beacons = {}
+            beacons = {s: Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]))
+                       for s in self.senders}
+            if self.falsify is not None:  # the attacker's, as it chooses to send it (None: not at all)
+                beacons[0] = self.falsify(k, beacons[0])
+                self.sent.append((k, beacons[0]))
             for i, sources in self.sources.items():
                 for s in sources:
                     if self.params.loss and self.rngs[s, i].random() < self.params.loss:
                         continue
-                    if s not in beacons:
-                        beacons[s] = Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]))
-                    self.in_flight.append((k + self.delay, i, beacons[s]))
+                    if beacons[s] is not None:
+                        self.in_flight.append((k + self.delay, i, beacons[s]))
         while self.in_flight and self.in_flight[0][0] <= k:
             _, i, message = self.in_flight.popleft()
             self.newest[i][message.sender] = message

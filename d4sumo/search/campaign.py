@@ -19,7 +19,7 @@ from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_
 from ..model.config import EpisodeConfig
 from ..model.control import user_module
 from ..model.plugins import ControllerImportError, names_only
-from ..model.maneuvers import maneuver_of
+from ..model.messages import attack_box
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
@@ -44,6 +44,10 @@ class Campaign:
     #: score the specification from the attack's start (after a warm-up); campaigns stored before this
     #: existed scored the whole episode, and keep doing so
     score_from_attack_start: bool = True
+    #: a message attack on the attacker's V2V beacons (`messages`: offset, scaling, ...), searched with its
+    #: pedals; "": it tells the truth
+    message: str = ""
+    message_field: str = "accel"  # the field of the beacons it falsifies (accel, speed, position)
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -71,8 +75,10 @@ class Campaign:
             raise ConfigError("spec.from_attack_start", self.score_from_attack_start, "true or false")
 
     def family(self) -> AttackFamily:
-        """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes."""
-        return maneuver_of(self.config).family(make_attack(self.attack, dict(self.attack_options)))
+        """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes,
+        plus a message attack's parameters (`messages`)."""
+        return attack_box(self.config, make_attack(self.attack, dict(self.attack_options)), self.message,
+                          self.message_field, dict(self.attack_options))
 
     def specification(self) -> Specification:
         c = self.config
@@ -84,6 +90,8 @@ class Campaign:
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""
         attack: dict[str, Any] = {"family": self.attack, **dict(self.attack_options)}
+        if self.message:  # stored where there is one: earlier campaigns keep their identity
+            attack.update(message=self.message, message_field=self.message_field)
         return {
             "config": self.config.to_dict(),
             "attack": attack,
@@ -126,7 +134,9 @@ class Campaign:
                 seed=definition["seed"],
                 d_safe_m=definition["spec"]["d_safe_m"],
                 formula=definition["spec"]["formula"],
-                attack_options=tuple((k, v) for k, v in attack.items() if k != "family"),
+                attack_options=tuple((k, v) for k, v in attack.items() if k not in ("family", "message", "message_field")),
+                message=attack.get("message", ""),
+                message_field=attack.get("message_field", "accel"),
                 optimizer_options=tuple({**OPTIONS_SINCE.get(definition["optimizer"], {}),
                                          **definition.get("optimizer_options", {})}.items()),
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),
