@@ -394,11 +394,42 @@ class PathParams:
     c1: float = 0.5  # C1: how much the platoon leader's acceleration weighs against the car ahead's
     xi: float = 1.0  # the damping ratio (at least 1)
     omega_n: float = 0.2  # the bandwidth [rad/s]
+    #: the mitigation (`Fallback`): fall back to ACC while the car ahead's beacon and the radar disagree on
+    #: its speed by more than this [m/s]; 0: never
+    fallback_mps: float = 0.0
+    fallback_headway_s: float = 1.2  # the ACC's time headway it falls back to
 
     def __post_init__(self) -> None:
         check_number("controller.c1", self.c1, 0.0, 1.0)
         check_number("controller.xi", self.xi, 1.0, 10.0)
         check_number("controller.omega_n", self.omega_n, 0.0, 10.0, "rad/s", low_open=True)
+        check_number("controller.fallback_mps", self.fallback_mps, 0.0, 50.0, "m/s")
+        check_number("controller.fallback_headway_s", self.fallback_headway_s, 0.1, 10.0, "seconds")
+
+
+#: modes a cooperative controller with the mitigation records (signal ``mode_vI``)
+MODE_CACC, MODE_FALLBACK = 0.0, 1.0
+
+
+class Fallback:
+    """The mitigation the platoon-security literature proposes: where the car ahead's newest beacon and the
+    radar disagree on its speed by more than ``fallback_mps``, the car distrusts the channel and falls back
+    to an ACC (Plexe's, Rajamani's Eq. 6.18: a = -(v - v_ahead + lambda (h v + 2 - gap)) / h, lambda 0.1),
+    on what its radar measures; it trusts the channel again once they agree. Its mode is recorded."""
+
+    def __init__(self, threshold_mps: float, headway_s: float):
+        self.threshold, self.headway = threshold_mps, headway_s
+        self.mode = MODE_CACC
+
+    def check(self, obs) -> float | None:
+        """The ACC's acceleration while the channel is distrusted, else None."""
+        ahead = obs.front_message
+        if ahead is None or abs(ahead.speed_mps - obs.lead_speed_mps) <= self.threshold or not obs.leader:
+            self.mode = MODE_CACC
+            return None
+        self.mode = MODE_FALLBACK
+        h = self.headway
+        return -(obs.speed_mps - obs.lead_speed_mps + 0.1 * (h * obs.speed_mps + 2.0 - obs.gap_m)) / h
 
 
 class PathCACC:
@@ -423,6 +454,11 @@ class PathCACC:
         self.a4 = -params.c1 * (params.xi + root) * w
         self.a5 = -w * w
         self.setpoint_m, self.vehicle = setpoint_m, vehicle
+        self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
+
+    @property
+    def mode(self) -> float:
+        return self.fallback.mode
 
     def desired_acceleration(self, gap_m: float, speed_mps: float, ahead, leader) -> float:
         """The law, given the beacons of the car ahead and of the leader (``Message``s)."""
@@ -431,6 +467,8 @@ class PathCACC:
 
     def observe(self, obs) -> float:
         ahead, leader = obs.front_message, obs.leader_message
+        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
+            return acceleration_to_command(acc, self.vehicle)
         if ahead is None or leader is None:
             return 0.0
         return acceleration_to_command(self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader), self.vehicle)
@@ -446,11 +484,15 @@ class PloegParams:
     h_s: float = 0.5  # the time headway of its spacing policy: the scenario's setpoint plus h v
     kp: float = 0.2  # [1/s^2] on the spacing error
     kd: float = 0.7  # [1/s] on its derivative
+    fallback_mps: float = 0.0  # the mitigation, as PathParams'
+    fallback_headway_s: float = 1.2
 
     def __post_init__(self) -> None:
         check_number("controller.h_s", self.h_s, 0.0, 10.0, "seconds", low_open=True)
         check_number("controller.kp", self.kp, 0.0, 100.0)
         check_number("controller.kd", self.kd, 0.0, 100.0)
+        check_number("controller.fallback_mps", self.fallback_mps, 0.0, 50.0, "m/s")
+        check_number("controller.fallback_headway_s", self.fallback_headway_s, 0.1, 10.0, "seconds")
 
 
 class PloegCACC:
@@ -466,9 +508,17 @@ class PloegCACC:
                  step_s: float):
         self.params, self.setpoint_m, self.vehicle, self.step_s = params, setpoint_m, vehicle, step_s
         self.u = 0.0  # its command [m/s^2], integrated
+        self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
+
+    @property
+    def mode(self) -> float:
+        return self.fallback.mode
 
     def observe(self, obs) -> float:
         ahead = obs.front_message
+        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
+            self.u = acc  # it takes over from there when the channel is trusted again
+            return acceleration_to_command(acc, self.vehicle)
         if ahead is None:
             return 0.0
         p = self.params

@@ -140,11 +140,12 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
         def listening(gap: float, own: float, lead: float, accel: float, inbox) -> float:
             if radar is not None:
                 o = radar.observe(gap, own, lead)
+                gap, lead, seen = o.gap_m, o.lead_speed_mps, o.leader
             else:
-                o = Observation(own, gap, lead, gap < FREE_ROAD_GAP_M)
+                seen = gap < FREE_ROAD_GAP_M
             if observe is None:
-                return command(o.gap_m, own, o.lead_speed_mps)
-            return observe(dataclasses.replace(o, accel_mps2=accel, leader_message=inbox.get(0), front_message=inbox.get(front)))
+                return command(gap, own, lead)
+            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front)))
 
         return listening
     if radar is None and observe is None:

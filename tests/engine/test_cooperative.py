@@ -87,3 +87,30 @@ def test_an_attacker_that_lies_about_its_speed_is_rammed_by_the_cacc_that_believ
     assert np.all(np.abs(lie[(t < 4.9) & (t % 0.1 < 0.025)]) < 1e-9)
     honest = simulate(config, attack_plan(box, np.r_[x[:9], 0.0, 5.0], config))
     assert honest.outcome == "no_crash"  # the same pedals, the truth told
+
+
+@pytest.mark.parametrize("cls", ["cacc", "ploeg"])
+def test_the_mitigation_never_distrusts_honest_beacons_in_the_paper_scenarios(cls):
+    for start in ("rest", "steady", "warmup"):
+        for speed in (20.0, 30.0):
+            config = EpisodeConfig(controller=ControllerConfig(cls, (("fallback_mps", 1.0),)), start=start, setpoint_m=5.0,
+                                   speed_mps=speed, duration_s=40.0)
+            episode = simulate(config, np.full(config.steps, np.nan))
+            assert episode.outcome == "no_crash"
+            assert all(episode.trace[f"mode_v{i}"].max() == 0.0 for i in (1, 2, 3)), (start, speed)
+
+
+def test_the_mitigation_saves_v1_from_the_lie_and_the_followers_behind_it_crash_instead():
+    """v1 checks the attacker's beacons against its radar and falls back to ACC; v2 and v3 check the honest
+    beacons of the car ahead, keep believing the leader's lie about its speed, and v2 runs into v1."""
+    from d4sumo.model.messages import attack_box
+
+    config = EpisodeConfig(controller=ControllerConfig("cacc", (("fallback_mps", 1.0),)), start="steady", setpoint_m=5.0,
+                           duration_s=40.0)
+    box = attack_box(config, make_attack("knots"), "offset", "speed")
+    x = np.zeros(box.dimension)
+    x[9:] = 5.0, 5.0
+    episode = simulate(config, attack_plan(box, x, config))
+    assert episode.outcome == "success" and episode.first_collision.pair == "v1-v2"
+    assert episode.trace["mode_v1"].max() == 1.0 and episode.trace["mode_v2"].max() == 0.0
+    assert episode.min_gaps["v0-v1"] > 0.0  # v1 did not ram the attacker, as it does without the mitigation

@@ -88,3 +88,16 @@ def test_ploeg_integrates_its_command_as_plexe_does():
         u += (-u + 0.2 * (14.0 - (2.0 + 0.5 * 25.0)) + 0.7 * (24.0 - 25.0 - 0.5 * 0.5) - 1.0) / 0.5 * STEP
         assert ploeg.u == pytest.approx(u)
     assert math.isclose(ploeg.observe(Observation(25.0, 14.0, 24.0, True)), 0.0)
+
+
+def test_the_fallback_takes_over_while_the_car_ahead_beacon_and_the_radar_disagree():
+    vehicle = VehicleParams()
+    cacc = PathCACC(PathParams(fallback_mps=1.0), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)
+    ahead, leader = Message(0, 0.0, 0.0, 30.0, 0.0), Message(0, 0.0, 0.0, 30.0, 0.0)
+    lying = Observation(25.0, 5.0, 25.0, True, 0.0, leader, ahead)  # the radar sees 25 m/s, the beacon says 30
+    acc = -(25.0 - 25.0 + 0.1 * (1.2 * 25.0 + 2.0 - 5.0)) / 1.2
+    assert cacc.observe(lying) == pytest.approx(acc / vehicle.max_decel_mps2) and cacc.mode == 1.0
+    honest = Observation(25.0, 5.0, 30.0, True, 0.0, leader, ahead)
+    assert cacc.observe(honest) == pytest.approx(cacc.desired_acceleration(5.0, 25.0, ahead, leader) / vehicle.max_accel_mps2)
+    assert cacc.mode == 0.0
+    assert not hasattr(PathCACC(PathParams(), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP), "mode")
