@@ -734,5 +734,7 @@ class open_world:
         except Exception:  # already closed, or SUMO died: nothing left to close
             pass
         if kind is not None and issubclass(kind, self.api.TraCIException):
-            raise SumoError(f"SUMO failed during the episode: {exc}") from None
+            gone = " (it reached the end of the road: a car faster than its speed limit for long enough leaves it)" \
+                if "is not known" in str(exc) else ""
+            raise SumoError(f"SUMO failed during the episode: {exc}{gone}") from None
         return False

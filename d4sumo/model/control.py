@@ -409,6 +409,15 @@ class PathParams:
 
 #: modes a cooperative controller with the mitigation records (signal ``mode_vI``)
 MODE_CACC, MODE_FALLBACK = 0.0, 1.0
+#: Plexe's cruise control (Rajamani's Eq. 5.5, no integral): its gain [1/s] and its bounds [m/s^2]
+CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2 = 1.0, 1.5, 1.5
+
+
+def cruise_acceleration(speed_mps: float, target_speed_mps: float) -> float:
+    """Plexe's cruise control at the target speed: a cooperative controller never asks for more (its
+    desired acceleration is the smaller of the two, as Plexe's ACC and faked CACC take them), and holds
+    the target speed with nobody ahead."""
+    return min(CC_ACCEL_MPS2, max(-CC_DECEL_MPS2, -CC_KP * (speed_mps - target_speed_mps)))
 
 
 class Fallback:
@@ -440,7 +449,8 @@ class PathCACC:
     with a1 = 1 - C1, a2 = C1, a3 = -(2 xi - C1 (xi + sqrt(xi^2 - 1))) w, a4 = -C1 (xi + sqrt(xi^2 - 1)) w,
     a5 = -w^2; the speeds and accelerations of the car ahead and of the platoon's leader from their
     newest beacons, the gap from the radar. Until a beacon of each has arrived it asks for nothing (0),
-    as Plexe's."""
+    as Plexe's. It never asks for more than its cruise control at the target speed would
+    (`cruise_acceleration`), and cruises with nobody ahead."""
 
     Params = PathParams
     listens = True  # it reads V2V beacons: its platoon exchanges them (`v2v`)
@@ -453,7 +463,7 @@ class PathCACC:
         self.a3 = -(2.0 * params.xi - params.c1 * (params.xi + root)) * w
         self.a4 = -params.c1 * (params.xi + root) * w
         self.a5 = -w * w
-        self.setpoint_m, self.vehicle = setpoint_m, vehicle
+        self.setpoint_m, self.vehicle, self.target_speed_mps = setpoint_m, vehicle, target_speed_mps
         self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
 
     @property
@@ -467,11 +477,15 @@ class PathCACC:
 
     def observe(self, obs) -> float:
         ahead, leader = obs.front_message, obs.leader_message
+        cruise = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
         if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
-            return acceleration_to_command(acc, self.vehicle)
+            return acceleration_to_command(min(cruise, acc), self.vehicle)
+        if not obs.leader:  # nobody ahead within its radar's range: it cruises
+            return acceleration_to_command(cruise, self.vehicle)
         if ahead is None or leader is None:
             return 0.0
-        return acceleration_to_command(self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader), self.vehicle)
+        a = self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader)
+        return acceleration_to_command(min(cruise, a), self.vehicle)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         raise ConfigError("controller", "cacc", "a platoon that exchanges V2V beacons (the [v2v] table)")
@@ -499,7 +513,8 @@ class PloegCACC:
     """Ploeg's CACC, as Plexe's ``PLOEG``: spacing d + h v (d the scenario's setpoint), its command u
     integrated each step, u' = (-u + kp (gap - d - h v) + kd (v_ahead - v - h a) + a_ahead) / h; the car
     ahead's speed from the radar, its acceleration from its newest beacon, the car's own acceleration
-    its last step's. Until a beacon has arrived it asks for nothing (0), as Plexe's."""
+    its last step's. Until a beacon has arrived it asks for nothing (0), as Plexe's; never more than its
+    cruise control at the target speed (`cruise_acceleration`), and that with nobody ahead."""
 
     Params = PloegParams
     listens = True
@@ -507,6 +522,7 @@ class PloegCACC:
     def __init__(self, params: PloegParams, *, setpoint_m: float, target_speed_mps: float, vehicle: VehicleParams,
                  step_s: float):
         self.params, self.setpoint_m, self.vehicle, self.step_s = params, setpoint_m, vehicle, step_s
+        self.target_speed_mps = target_speed_mps
         self.u = 0.0  # its command [m/s^2], integrated
         self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
 
@@ -516,15 +532,20 @@ class PloegCACC:
 
     def observe(self, obs) -> float:
         ahead = obs.front_message
+        cruise = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
         if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
-            self.u = acc  # it takes over from there when the channel is trusted again
-            return acceleration_to_command(acc, self.vehicle)
+            self.u = min(cruise, acc)  # it takes over from there when the channel is trusted again
+            return acceleration_to_command(self.u, self.vehicle)
+        if not obs.leader:  # nobody ahead within its radar's range: it cruises
+            self.u = cruise
+            return acceleration_to_command(cruise, self.vehicle)
         if ahead is None:
             return 0.0
         p = self.params
         spacing_error = obs.gap_m - (self.setpoint_m + p.h_s * obs.speed_mps)
         speed_error = obs.lead_speed_mps - obs.speed_mps - p.h_s * obs.accel_mps2
         self.u += (-self.u + p.kp * spacing_error + p.kd * speed_error + ahead.accel_mps2) / p.h_s * self.step_s
+        self.u = min(cruise, self.u)  # never faster than its cruise control: the integrator does not wind up
         return acceleration_to_command(self.u, self.vehicle)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
