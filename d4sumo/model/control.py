@@ -414,10 +414,14 @@ CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2 = 1.0, 1.5, 1.5
 
 
 def cruise_acceleration(speed_mps: float, target_speed_mps: float) -> float:
-    """Plexe's cruise control at the target speed: a cooperative controller never asks for more (its
-    desired acceleration is the smaller of the two, as Plexe's ACC and faked CACC take them), and holds
-    the target speed with nobody ahead."""
+    """Plexe's cruise control at the target speed: what a cooperative controller asks for with nobody ahead."""
     return min(CC_ACCEL_MPS2, max(-CC_DECEL_MPS2, -CC_KP * (speed_mps - target_speed_mps)))
+
+
+def below_target(acceleration_mps2: float, speed_mps: float, target_speed_mps: float, step_s: float) -> float:
+    """An acceleration that takes the car no faster than the target speed within the step: as SUMO holds
+    its cars to their maximum speed (the target speed, for SUMO's own CC model)."""
+    return min(acceleration_mps2, (target_speed_mps - speed_mps) / step_s)
 
 
 class Fallback:
@@ -449,8 +453,8 @@ class PathCACC:
     with a1 = 1 - C1, a2 = C1, a3 = -(2 xi - C1 (xi + sqrt(xi^2 - 1))) w, a4 = -C1 (xi + sqrt(xi^2 - 1)) w,
     a5 = -w^2; the speeds and accelerations of the car ahead and of the platoon's leader from their
     newest beacons, the gap from the radar. Until a beacon of each has arrived it asks for nothing (0),
-    as Plexe's. It never asks for more than its cruise control at the target speed would
-    (`cruise_acceleration`), and cruises with nobody ahead."""
+    as Plexe's. It drives no faster than the target speed (`below_target`), and with nobody ahead it
+    cruises (`cruise_acceleration`)."""
 
     Params = PathParams
     listens = True  # it reads V2V beacons: its platoon exchanges them (`v2v`)
@@ -463,7 +467,7 @@ class PathCACC:
         self.a3 = -(2.0 * params.xi - params.c1 * (params.xi + root)) * w
         self.a4 = -params.c1 * (params.xi + root) * w
         self.a5 = -w * w
-        self.setpoint_m, self.vehicle, self.target_speed_mps = setpoint_m, vehicle, target_speed_mps
+        self.setpoint_m, self.vehicle, self.target_speed_mps, self.step_s = setpoint_m, vehicle, target_speed_mps, step_s
         self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
 
     @property
@@ -477,15 +481,14 @@ class PathCACC:
 
     def observe(self, obs) -> float:
         ahead, leader = obs.front_message, obs.leader_message
-        cruise = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
-        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
-            return acceleration_to_command(min(cruise, acc), self.vehicle)
         if not obs.leader:  # nobody ahead within its radar's range: it cruises
-            return acceleration_to_command(cruise, self.vehicle)
+            return acceleration_to_command(cruise_acceleration(obs.speed_mps, self.target_speed_mps), self.vehicle)
+        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
+            return acceleration_to_command(below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
         if ahead is None or leader is None:
             return 0.0
         a = self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader)
-        return acceleration_to_command(min(cruise, a), self.vehicle)
+        return acceleration_to_command(below_target(a, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         raise ConfigError("controller", "cacc", "a platoon that exchanges V2V beacons (the [v2v] table)")
@@ -513,8 +516,8 @@ class PloegCACC:
     """Ploeg's CACC, as Plexe's ``PLOEG``: spacing d + h v (d the scenario's setpoint), its command u
     integrated each step, u' = (-u + kp (gap - d - h v) + kd (v_ahead - v - h a) + a_ahead) / h; the car
     ahead's speed from the radar, its acceleration from its newest beacon, the car's own acceleration
-    its last step's. Until a beacon has arrived it asks for nothing (0), as Plexe's; never more than its
-    cruise control at the target speed (`cruise_acceleration`), and that with nobody ahead."""
+    its last step's. Until a beacon has arrived it asks for nothing (0), as Plexe's. It drives no faster
+    than the target speed (`below_target`), and with nobody ahead it cruises (`cruise_acceleration`)."""
 
     Params = PloegParams
     listens = True
@@ -532,20 +535,19 @@ class PloegCACC:
 
     def observe(self, obs) -> float:
         ahead = obs.front_message
-        cruise = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
-        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
-            self.u = min(cruise, acc)  # it takes over from there when the channel is trusted again
-            return acceleration_to_command(self.u, self.vehicle)
         if not obs.leader:  # nobody ahead within its radar's range: it cruises
-            self.u = cruise
-            return acceleration_to_command(cruise, self.vehicle)
+            self.u = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
+            return acceleration_to_command(self.u, self.vehicle)
+        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
+            self.u = below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s)  # it goes on from there
+            return acceleration_to_command(self.u, self.vehicle)
         if ahead is None:
             return 0.0
         p = self.params
         spacing_error = obs.gap_m - (self.setpoint_m + p.h_s * obs.speed_mps)
         speed_error = obs.lead_speed_mps - obs.speed_mps - p.h_s * obs.accel_mps2
         self.u += (-self.u + p.kp * spacing_error + p.kd * speed_error + ahead.accel_mps2) / p.h_s * self.step_s
-        self.u = min(cruise, self.u)  # never faster than its cruise control: the integrator does not wind up
+        self.u = below_target(self.u, obs.speed_mps, self.target_speed_mps, self.step_s)  # nor does the integrator wind up
         return acceleration_to_command(self.u, self.vehicle)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:

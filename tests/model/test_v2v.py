@@ -97,9 +97,9 @@ def test_the_fallback_takes_over_while_the_car_ahead_beacon_and_the_radar_disagr
     lying = Observation(25.0, 5.0, 25.0, True, 0.0, leader, ahead)  # the radar sees 25 m/s, the beacon says 30
     acc = -(25.0 - 25.0 + 0.1 * (1.2 * 25.0 + 2.0 - 5.0)) / 1.2
     assert cacc.observe(lying) == pytest.approx(acc / vehicle.max_decel_mps2) and cacc.mode == 1.0
-    honest = Observation(24.5, 5.0, 30.0, True, 0.0, leader, ahead)  # 0.5 m/s under its target speed
-    assert cacc.desired_acceleration(5.0, 24.5, ahead, leader) > 0.5
-    assert cacc.observe(honest) == pytest.approx(0.5 / vehicle.max_accel_mps2)  # no more than its cruise control asks
+    honest = Observation(24.9, 5.0, 30.0, True, 0.0, leader, ahead)  # 0.1 m/s under its target speed
+    assert cacc.desired_acceleration(5.0, 24.9, ahead, leader) > 2.0
+    assert cacc.observe(honest) == pytest.approx(0.1 / STEP / vehicle.max_accel_mps2)  # to the target speed, no faster
     assert cacc.mode == 0.0
     free = Observation(20.0, 1000.0, 20.0, False, 0.0, leader, ahead)  # nobody ahead: it cruises, at most 1.5 m/s^2
     assert cacc.observe(free) == pytest.approx(1.5 / vehicle.max_accel_mps2)
