@@ -36,6 +36,7 @@ VTYPE_ID = "d4car"
 ATTACKER_VTYPE_ID = "d4attacker"
 SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
 LANE_CHANGE_MODE_OFF = 0  # no lane change of SUMO's own; a TraCI request is carried out without regard to others
+LANE_CHANGE_MODE_SUMO = 1621  # SUMO's default: its model changes lanes, respecting others
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
 #: SUMO's default FCD attributes and the odometer, from which a position along a route of many edges
 #: comes (a lane position starts again at 0 on each edge)
@@ -471,21 +472,49 @@ MAX_JOINS = 50
 def join_traffic(api, config: EpisodeConfig, road: Road, later: int) -> list[tuple[str, ...]] | None:
     """The platoon joins the warmed-up traffic (SUMO started in `traffic_state`) ``later`` steps after its
     warm-up: its places cleared (`clear_platoon_places`), its cars inserted (`load_platoon`). A traffic car
-    that enters the road, or changes lanes, in the same step does not see the platoon and may land in its
-    places: then None, and the caller starts again a step later (the same steps in every episode of the configuration:
+    that enters the road, or changes lanes, in the same step does not see the platoon and may land within
+    ``clear_m`` of one of its cars: then None, and the caller starts again a step later (the same steps in every episode of the configuration:
     the traffic is the same). Else the platoon's vehicle ids, as `load_platoon` returns them."""
     step = simulation_step(api)
     for _ in range(later):
         step()
     clear_platoon_places(api, config, road)
+    # the traffic beside the platoon's places keeps its lane in the step the platoon joins: it would not see
+    # the platoon yet, and change into its places
+    beside = _beside_platoon(api, config, road)
+    for vid in beside:
+        api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_OFF)
     platoons = load_platoon(api, config, road)
+    for vid in beside:
+        if vid in api.vehicle.getIDList():
+            api.vehicle.setLaneChangeMode(vid, LANE_CHANGE_MODE_SUMO)
     ours = set(platoons[0])
-    zone = _platoon_zone(config, road)
-    for lane in sorted(zone[0]):  # a car that entered the road, or changed lanes, in that step
+    first = road.route_edges[0]
+    lengths = dict(zip(config.vehicle_ids, config.car_vehicles))
+    near: dict[str, list[tuple[float, float]]] = {}  # each lane's stretches within clear_m of a car of the platoon
+    for car in maneuver_of(config).cars():
+        lane = f"{first}_{road.platoon_lane + car.lane}"
+        near.setdefault(lane, []).append((car.position_m - lengths[car.id].length_m - config.traffic.clear_m,
+                                          car.position_m + config.traffic.clear_m))
+    for lane, stretches in sorted(near.items()):  # a car that entered the road, or changed lanes, in that step
         for vid in api.lane.getLastStepVehicleIDs(lane):
-            if vid not in ours and _in_zone(api, vid, zone):
+            if vid in ours:
+                continue
+            front = api.vehicle.getLanePosition(vid)
+            back = front - api.vehicle.getLength(vid)
+            if any(front > low and back < high for low, high in stretches):
                 return None
     return platoons
+
+
+def _beside_platoon(api, config: EpisodeConfig, road: Road) -> list[str]:
+    """The traffic cars in the lanes next to the platoon's, along its places (`_platoon_zone`)."""
+    lanes, rear, front = _platoon_zone(config, road)
+    first = road.route_edges[0]
+    indices = {int(lane.rpartition("_")[2]) for lane in lanes}
+    beside = sorted({f"{first}_{i + d}" for i in indices for d in (-1, 1) if 0 <= i + d < api.edge.getLaneNumber(first)} - lanes)
+    return [vid for lane in beside for vid in api.lane.getLastStepVehicleIDs(lane)
+            if _in_zone(api, vid, ({lane}, rear, front))]
 
 
 def _platoon_zone(config: EpisodeConfig, road: Road) -> tuple[set[str], float, float]:
