@@ -77,7 +77,7 @@ class RadarParams:
         return self.range_m == math.inf and not self.gap_noise_m and not self.speed_noise_mps and not self.latency_s
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)  # made for every follower at every step: not frozen, whose construction costs thrice
 class Observation:
     """What a follower's controller knows at a step: its own speed (and its acceleration over its last
     step), what its radar measures of the car ahead in its lane (``leader``: whether there is one in range;

@@ -65,7 +65,7 @@ class ChannelParams:
         return text
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)  # made for every car at every beacon: not frozen, whose construction costs thrice
 class Message:
     """A beacon: who sent it (the car's index, 0 the attacker that leads the platoon), when [s], and its
     position along the road [m], speed [m/s] and acceleration over its last step [m/s^2]."""
