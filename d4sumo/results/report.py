@@ -45,10 +45,14 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
         evaluator.plan(record.params)
     except ConfigError as exc:  # a damaged database: say which sample of which
         raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
-    evaluator.simulate(record.index, record.params, fcd_path=fcd_path)
+    episode = evaluator.simulate(record.index, record.params, fcd_path=fcd_path)
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
-    return timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
+    fcd = timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
+    said = timespace.said_track(episode.trace, fcd.get("v0"))
+    if said is not None:  # a message attack: what the attacker's beacons said, beside where it was
+        fcd[timespace.SAID_ID] = said
+    return fcd
 
 
 def collision_of(record: Record) -> dict | None:

@@ -1,6 +1,7 @@
 """Figures of one episode from SUMO's FCD: the time-space diagram (every car's position along the route over
-time, coloured by speed, a panel per lane; SUMO's traffic around the platoon in light grey) and every
-platoon car's acceleration; and the FCD read as positions along the route."""
+time, coloured by speed, a panel per lane; SUMO's traffic around the platoon in light grey; under a
+message attack, what the attacker's beacons said, dashed) and every platoon car's acceleration; and the
+FCD read as positions along the route."""
 
 from __future__ import annotations
 
@@ -14,6 +15,20 @@ from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_pat
 
 #: traffic cars: lighter than the platoon, whose speeds the colours tell
 TRAFFIC_COLOR = "0.75"
+#: under a message attack, what the attacker's beacons said, drawn dashed beside where it was
+SAID_ID = "v0 said"
+
+
+def said_track(trace, attacker: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray] | None:
+    """What the attacker's beacons said at each sample (the trace's ``sent_*_v0``, from its first beacon on),
+    as an FCD track beside the attacker's own (its lanes), or None without a message attack."""
+    if attacker is None or "sent_pos_v0" not in trace.signals:
+        return None
+    n = min(len(trace), len(attacker["time"]))
+    said = ~np.isnan(trace["sent_pos_v0"][:n])
+    return {"time": attacker["time"][:n][said], "pos": trace["sent_pos_v0"][:n][said],
+            "speed": trace["sent_speed_v0"][:n][said], "acceleration": trace["sent_accel_v0"][:n][said],
+            "lane": attacker["lane"][:n][said]}
 
 
 def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -> dict[str, dict[str, np.ndarray]]:
@@ -85,7 +100,7 @@ def _vehicle_order(vid: str):
 
 
 def _vehicle_label(vid: str) -> str:
-    return vid + " attacker" if vid == "v0" else vid
+    return vid + " attacker" if vid == "v0" else "what v0 said" if vid == SAID_ID else vid
 
 
 def lanes(fcd: dict) -> list[str]:
@@ -218,7 +233,8 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
                 points = np.column_stack([d["time"][a:b], d["pos"][a:b]]).reshape(-1, 1, 2)
                 if b - a >= 2:
                     lines = LineCollection(np.concatenate([points[:-1], points[1:]], axis=1), cmap=SPEED_CMAP, norm=norm,
-                                           linewidths=2.4 if vid == "v0" else 1.5)
+                                           linewidths=2.4 if vid == "v0" else 1.5,
+                                           linestyles="dashed" if vid == SAID_ID else "solid")
                     lines.set_array(d["speed"][a:b - 1])
                     ax.add_collection(lines)
                 else:
@@ -277,8 +293,9 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
     ax = fig.subplots()
     fcd = {vid: d for vid, d in fcd.items() if not is_traffic(vid)}  # the platoon's
     for vid, d in fcd.items():
-        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" else 1.1,
-                color="black" if vid == "v0" else None, zorder=3 if vid == "v0" else 2)
+        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid in ("v0", SAID_ID) else 1.1,
+                color="black" if vid in ("v0", SAID_ID) else None, zorder=3 if vid == "v0" else 2,
+                linestyle="--" if vid == SAID_ID else "-")
     _mark_moments(ax, attack_start_s, lane_change_s)
     if collision:
         ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")

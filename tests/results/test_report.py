@@ -7,6 +7,7 @@ import re
 from html.parser import HTMLParser
 from urllib.parse import urlparse
 
+import numpy as np
 import pytest
 
 from d4sumo.results.analysis import most_severe
@@ -177,3 +178,27 @@ def test_a_report_into_the_current_folder(small_db, tmp_path, monkeypatch):
     index = build_report([small_db], ".", severe=1)
     assert (tmp_path / "index.html").is_file() and index.resolve() == tmp_path / "index.html"
     assert not [p for p in tmp_path.parent.iterdir() if p.name.endswith(".part")]
+
+
+@pytest.mark.sumo
+def test_a_replayed_message_attack_draws_what_the_attacker_said_beside_where_it_was(tmp_path):
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+    from d4sumo.results import timespace
+    from d4sumo.results.records import load_records
+    from d4sumo.results.report import replay_to_fcd
+    from d4sumo.search.campaign import Campaign, open_store
+    from d4sumo.search.runner import run_campaign
+
+    config = EpisodeConfig(controller=ControllerConfig("cacc"), start="steady", setpoint_m=5.0, duration_s=20.0)
+    campaign = Campaign(config=config, optimizer="random", samples=2, message="offset", message_field="speed")
+    db = tmp_path / "lies.sqlite"
+    with open_store(db) as store:
+        run_campaign(campaign, store)
+    record = load_records([db])[1]
+    value, start = record.params[9], record.params[10]
+    fcd = replay_to_fcd(record, tmp_path / "fcd.xml")
+    said, truth = fcd[timespace.SAID_ID], fcd["v0"]
+    late = said["time"] >= start + 0.1
+    lie = said["speed"][late] - np.interp(said["time"][late], truth["time"], truth["speed"])
+    assert np.median(lie) == pytest.approx(value, abs=0.05)  # the beacons' speed, held between them, less the truth
+    assert timespace.accelerations_figure(fcd, "lies") is not None
