@@ -556,7 +556,6 @@ class _TrafficSense:
         self.get_leader, self.get_follower = vehicle_call(api, "getLeader"), vehicle_call(api, "getFollower")
         self.get_speed, self.get_length = vehicle_call(api, "getSpeed"), vehicle_call(api, "getLength")
         self.get_min_gap = vehicle_call(api, "getMinGap")
-        self.last_traffic: list[str] = []  # the traffic cars of the last step's pairs, by SUMO id
 
     def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
         """The step's pairs, and the extended ids (each traffic car by its SUMO id), positions (a traffic
@@ -604,7 +603,6 @@ class _TrafficSense:
             gap = behind[1] + self.get_min_gap(behind[0])
             if gap < look:
                 pairs.append((n - 1, other(behind[0], x[-1] - self.lengths[-1] - gap), gap))
-        self.last_traffic = names[n:]
         return pairs, names, xs, vs
 
 
