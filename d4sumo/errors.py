@@ -64,3 +64,18 @@ def check_int(field: str, value: object, low: int, high: int, what: str = "") ->
 def _plain(value: object) -> object:
     """numpy scalars shown as Python values in messages."""
     return value.item() if isinstance(value, np.generic) else value
+
+
+def table_of(cls, table: object, section: str):
+    """A dataclass of a config table (``[section]``) built from ``table``: a mapping of its fields only,
+    else a ConfigError naming the table or the unknown key."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    if not isinstance(table, Mapping):
+        raise ConfigError(section, table, f"a [{section}] table")
+    keys = [f.name for f in dataclasses.fields(cls)]
+    for key, value in table.items():
+        if key not in keys:
+            raise ConfigError(f"{section}.{key}", value, f"a key of [{section}]: {', '.join(keys)}")
+    return cls(**table)

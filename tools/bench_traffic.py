@@ -30,9 +30,10 @@ import libsumo
 import numpy as np
 
 from d4sumo.engine.scenarios import build_road
-from d4sumo.engine.simulation import check_episode, simulate
+from d4sumo.engine.simulation import check_episode
 from d4sumo.engine.sumo import clear_platoon_places, load_platoon, sumo_command, traffic_state
 from d4sumo.model.config import EpisodeConfig
+from bench_episode import episode  # the same episode timing: simulate, start to close
 from toolargs import Parser, run_main
 
 TARGET = 1.5  # an episode with traffic at most this many times bare libsumo stepping of the same vehicles
@@ -48,14 +49,6 @@ def bare(config: EpisodeConfig, road) -> float:
         libsumo.simulationStep()
     libsumo.close()
     return time.perf_counter() - t0
-
-
-def episode(config: EpisodeConfig, road, attack_u: np.ndarray) -> float:
-    t0 = time.perf_counter()
-    result = simulate(config, attack_u, road=road)
-    elapsed = time.perf_counter() - t0
-    assert len(result.trace) == config.steps + 1, "the benchmark attack must not crash"
-    return elapsed
 
 
 def busy_motorway_peak_mib(samples: int) -> tuple[float, int]:

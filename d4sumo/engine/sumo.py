@@ -85,13 +85,21 @@ def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
     return _checked_file(text, "vtypes", "vehicle types", ".add.xml", lambda sumo, tmp: _check_types(config, road, sumo, tmp))
 
 
+_DEMANDS: dict[tuple, str] = {}  # the traffic's demand text, by what makes it (its files by path, time and size)
+
+
 def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
     """The traffic's demand (`traffic.demand_xml`), checked by loading it in SUMO once (cached like the
     followers' types): a vehicle type SUMO refuses is a ConfigError naming its table, a demand file SUMO
     refuses (routes over edges the network lacks, say) one naming the file. None without traffic."""
     if config.traffic is None:
         return None
-    text = demand_xml(config.traffic, road.route(0), road.through_lanes, config.traffic.warmup_s + config.total_s + 1.0)
+    # the user's demand files are read and parsed once a version of them, not at every episode
+    files = tuple((p, os.stat(p).st_mtime_ns, os.stat(p).st_size) for p in config.traffic.demand if os.path.isfile(p))
+    key = (config.traffic, road.route(0), road.through_lanes, config.traffic.warmup_s + config.total_s + 1.0, files)
+    if key not in _DEMANDS:
+        _DEMANDS[key] = demand_xml(*key[:4])
+    text = _DEMANDS[key]
     return _checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: _check_demand(config, road, sumo, tmp))
 
 

@@ -22,11 +22,11 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import ConfigError, check_int, check_number
+from ..errors import ConfigError, check_int, check_number, table_of
 from .maneuvers import FREE_ROAD_GAP_M
 
 
@@ -52,13 +52,7 @@ class RadarParams:
 
     @classmethod
     def from_table(cls, table: Any) -> "RadarParams":
-        if not isinstance(table, Mapping):
-            raise ConfigError("radar", table, "a [radar] table")
-        keys = [f.name for f in dataclasses.fields(cls)]
-        for key, value in table.items():
-            if key not in keys:
-                raise ConfigError(f"radar.{key}", value, f"a key of [radar]: {', '.join(keys)}")
-        return cls(**table)
+        return table_of(cls, table, "radar")
 
     def to_dict(self) -> dict:
         """As a definition stores it: what differs from the perfect radar (an infinite range is no number TOML has)."""

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
-from ..errors import ConfigError, check_int, check_number, is_number
+from ..errors import ConfigError, check_int, check_number, is_number, table_of
 
 #: the flow per lane without a demand of the user's [vehicles per hour per lane]
 DEFAULT_VPH = 1200.0
@@ -97,13 +97,7 @@ class TrafficParams:
 
     @classmethod
     def from_table(cls, table: Any) -> "TrafficParams":
-        if not isinstance(table, Mapping):
-            raise ConfigError("traffic", table, "a [traffic] table")
-        keys = [f.name for f in dataclasses.fields(cls)]
-        for key, value in table.items():
-            if key not in keys:
-                raise ConfigError(f"traffic.{key}", value, f"a key of [traffic]: {', '.join(keys)}")
-        return cls(**table)
+        return table_of(cls, table, "traffic")
 
     def to_dict(self) -> dict:
         """As a definition stores it: every key that has an effect (the traffic is part of what identifies

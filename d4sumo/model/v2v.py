@@ -21,7 +21,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import ConfigError, check_int, check_number
+from ..errors import ConfigError, check_int, check_number, table_of
 
 
 @dataclass(frozen=True)
@@ -42,13 +42,7 @@ class ChannelParams:
 
     @classmethod
     def from_table(cls, table: Any) -> "ChannelParams":
-        if not isinstance(table, Mapping):
-            raise ConfigError("v2v", table, "a [v2v] table")
-        keys = [f.name for f in dataclasses.fields(cls)]
-        for key, value in table.items():
-            if key not in keys:
-                raise ConfigError(f"v2v.{key}", value, f"a key of [v2v]: {', '.join(keys)}")
-        return cls(**table)
+        return table_of(cls, table, "v2v")
 
     def to_dict(self) -> dict:
         """As a definition stores it: every key (the channel is part of the system under test)."""
