@@ -37,7 +37,7 @@ from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
 from .model.sensing import RadarParams
 from .model.traffic import TrafficParams
 from .model.v2v import ChannelParams
-from .model.messages import attack_box
+from .model.messages import MESSAGE_KEYS, attack_box
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
@@ -50,7 +50,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "radar": tuple(f.name for f in dataclasses.fields(RadarParams)),
     "traffic": tuple(f.name for f in dataclasses.fields(TrafficParams)),
     "v2v": tuple(f.name for f in dataclasses.fields(ChannelParams)),
-    "attack": ("family", "params", "message", "message_field", *ATTACK_OPTIONS),
+    "attack": ("family", "params", *MESSAGE_KEYS, *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
     "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
 }
@@ -202,7 +202,7 @@ def _attack_box(doc: Mapping[str, Any]) -> AttackFamily:
     maneuver changes lanes, and a message attack's parameters (`messages`)."""
     attack = doc.get("attack", {})
     return attack_box(episode_config(doc), _family(doc), attack.get("message", ""), attack.get("message_field", "accel"),
-                      _attack_options(doc))
+                      _attack_options(doc), attack.get("message_sender", 0))
 
 
 def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray | None]:
@@ -249,6 +249,7 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         optimizer_options=tuple(options.items()),
         message=doc.get("attack", {}).get("message", ""),
         message_field=doc.get("attack", {}).get("message_field", "accel"),
+        message_sender=doc.get("attack", {}).get("message_sender", 0),
     )
 
 

@@ -8,7 +8,7 @@ and mixes of car-following models and trucks drawn: who follows whom from the FC
 car in each lane a car covers, a traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one,
-SUMO's models or the cooperative ones (PATH's CACC, Ploeg's, in Python and Plexe's CACC in SUMO) over a V2V channel, half of those late or
+SUMO's models or the cooperative ones (PATH's CACC, Ploeg's and the consensus, in Python, and Plexe's CACC and CONSENSUS in SUMO) over a V2V channel, half of those late or
 lossy and half of those attacked over the air (every message attack, every field), a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
 and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
@@ -119,8 +119,9 @@ def netgenerate_grid() -> str:
 #: the systems under test drawn from: Python controllers and SUMO-driven followers
 SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("sumo:ACC"),
            ControllerConfig("sumo:ACC", (("tau", 0.5),)), ControllerConfig("sumo:IDM"), ControllerConfig("sumo:Krauss"),
-           ControllerConfig("sumo:CACC"), ControllerConfig("cacc"), ControllerConfig("ploeg"),
-           ControllerConfig("sumo:CC", (("active_controller", "CACC"),))]
+           ControllerConfig("sumo:CACC"), ControllerConfig("cacc"), ControllerConfig("ploeg"), ControllerConfig("consensus"),
+           ControllerConfig("sumo:CC", (("active_controller", "CACC"),)),
+           ControllerConfig("sumo:CC", (("active_controller", "CONSENSUS"),))]
 
 
 #: the share of in-lane episodes played among traffic (--traffic)
@@ -178,6 +179,9 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     message = {}
     if config.v2v is not None and config.maneuver == "inlane" and rng.random() < 0.5:  # the attacker lies over the air
         message = {"message": str(rng.choice(MESSAGE_ATTACKS)), "message_field": str(rng.choice(MESSAGE_FIELDS))}
+        insiders = [k for k in range(1, config.followers) if config.listening(k + 1)]
+        if insiders and rng.random() < 0.4:  # an insider follower lies to the car behind it
+            message["message_sender"] = int(rng.choice(insiders))
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, **message)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)

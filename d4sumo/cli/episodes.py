@@ -9,6 +9,7 @@ import sys
 from .. import __version__
 from ..errors import ConfigError, check_number
 from ..model.config import EpisodeConfig
+from ..model.messages import lie_label
 from ..model.sensing import RadarParams
 from ..model.traffic import TrafficParams
 from .common import EXIT_DIFFERS, check_display, check_output_file, document, note_unused_flags
@@ -171,7 +172,8 @@ def _print_summary(s: dict, road_name: str) -> None:
     attack = s["attack"]
     what = "no attack (the attacker cruises)" if attack is None else f"{attack['family']} {attack['values']}"
     if attack is not None and attack.get("message"):
-        what = f"{attack['family']} with a lie ({attack['message']} on its {attack['message_field']}) {attack['values']}"
+        lie = lie_label(attack["message"], attack["message_field"], attack.get("message_sender", 0))
+        what = f"{attack['family']} with {lie} {attack['values']}"
     maneuver = f", {sc['maneuver']}" if "maneuver" in sc else ""
     radar = s["config"].get("radar")
     sensing = f", radar {RadarParams.from_table(radar).label}" if radar else ""

@@ -11,6 +11,7 @@ remove. Many platoons share one SUMO each on its own copy of the road (`scenario
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 import subprocess
@@ -24,7 +25,7 @@ import numpy as np
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, lane_pairs, maneuver_of, occupied_lanes
-from ..model.carfollowing import beacon_parameters
+from ..model.carfollowing import beacon_parameters, vehicle_data
 from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_xml
 from ..model.vehicle import VehicleParams
@@ -703,11 +704,25 @@ class SumoWorld:
         return self.traffic[e](x, v)
 
     def feed_beacons(self, ids: tuple[str, ...], beacons) -> None:
-        """Give SUMO's cooperative followers (Plexe's CC model) the newest beacons of the platoon's leader
-        and of the car ahead of them, as Plexe's own application does: (follower, leader's, car ahead's)."""
-        for i, leader, front in beacons:
-            self.api.vehicle.setParameter(ids[i], "carFollowModel.cclsa", beacon_parameters(leader))
-            self.api.vehicle.setParameter(ids[i], "carFollowModel.ccpsa", beacon_parameters(front))
+        """Give SUMO's cooperative followers (Plexe's CC model) the newest beacons they read, as Plexe's own
+        application does: (follower, whether it reads every car ahead's, the beacons). Its CACC, Ploeg's
+        and FLATBED read the leader's and the car ahead's; CONSENSUS every car ahead's, as GPS positions,
+        laid out along the follower's heading from where it is."""
+        set_parameter = self.api.vehicle.setParameter
+        for i, every, newest in beacons:
+            vid = ids[i]
+            if not every:
+                leader, front = newest
+                set_parameter(vid, "carFollowModel.cclsa", beacon_parameters(leader))
+                set_parameter(vid, "carFollowModel.ccpsa", beacon_parameters(front))
+                continue
+            x, y = self.api.vehicle.getPosition(vid)
+            angle = math.radians(self.api.vehicle.getAngle(vid))  # SUMO's: clockwise from north
+            heading = (math.sin(angle), math.cos(angle))
+            along = self.get_position(vid)
+            for m in newest:
+                ahead = m.position_m - along
+                set_parameter(vid, "carFollowModel.ccvd", vehicle_data(m, x + heading[0] * ahead, y + heading[1] * ahead, heading))
 
     def traffic_collisions(self, e: int) -> tuple[tuple[float, str, str], ...]:
         """The collisions of two traffic cars so far (time from the platoon's insertion [s], the car that ran

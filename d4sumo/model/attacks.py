@@ -109,6 +109,17 @@ class Constant(AttackFamily):
         return np.full_like(t, x[0])
 
 
+class Cruise(AttackFamily):
+    """No pedal attack: the attacker cruises as everyone does. Alone it is no attack (refused); with a
+    message attack (`messages`) the lie over the air is the whole attack."""
+
+    name = "cruise"
+    parameters = ()
+
+    def _signal(self, x, t):
+        return np.full_like(t, np.nan)
+
+
 class Persistent(AttackFamily):
     """The paper's pi_s = (c, f, t_a): from t_a on, a square wave between +c and -c at frequency f.
 
@@ -309,6 +320,7 @@ FAMILY_CLASSES: dict[str, type[AttackFamily]] = {
     "persistent-coded": PersistentCoded,
     "intermittent-coded": IntermittentCoded,
     "knots-coded": KnotsCoded,
+    "cruise": Cruise,
 }
 FAMILIES = tuple(FAMILY_CLASSES)
 #: every family's options: the keys an [attack] table may hold besides family and params

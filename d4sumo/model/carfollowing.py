@@ -60,13 +60,31 @@ def shares_sumo(model: str, params: Mapping[str, Any]) -> bool:
 
 #: Plexe's CC model runs one of its controllers (its ACTIVE_CONTROLLER); the cooperative ones read the V2V
 #: beacons the application feeds in (d4sumo's channel, `v2v`), the others do without
-CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1, "CACC": 2, "PLOEG": 4, "FLATBED": 6}
-CC_COOPERATIVE = frozenset({"CACC", "PLOEG", "FLATBED"})
+CC_CONTROLLERS = {"DRIVER": 0, "ACC": 1, "CACC": 2, "PLOEG": 4, "CONSENSUS": 5, "FLATBED": 6}
+CC_COOPERATIVE = frozenset({"CACC", "PLOEG", "CONSENSUS", "FLATBED"})
+#: the most cars a platoon of Plexe's CONSENSUS may have (its MAX_N_CARS)
+CC_CONSENSUS_CARS = 8
 
 
 def listens(model: str, params: Mapping[str, Any]) -> bool:
     """Whether SUMO's ``model`` with ``params`` reads V2V beacons (Plexe's cooperative controllers)."""
     return model == "CC" and params.get("active_controller") in CC_COOPERATIVE
+
+
+def hears_all(model: str, params: Mapping[str, Any]) -> bool:
+    """Whether SUMO's ``model`` with ``params`` reads every car ahead's beacons (Plexe's CONSENSUS)."""
+    return model == "CC" and params.get("active_controller") == "CONSENSUS"
+
+
+def vehicle_data(message, x_m: float, y_m: float, heading: tuple[float, float]) -> str:
+    """A beacon as Plexe's CONSENSUS takes it (its CC_PAR_VEHICLE_DATA: index, speed, acceleration, x, y,
+    time, length, controller acceleration, speed x, speed y, angle, ':' between), its position and speed
+    laid out from ``(x_m, y_m)`` along ``heading`` (a unit vector): the receiver's own place, less its
+    distance along the road, so that Plexe's GPS distance is the distance along the road."""
+    m = message
+    hx, hy = heading
+    return ":".join((str(m.sender), *(repr(float(v)) for v in (
+        m.speed_mps, m.accel_mps2, x_m, y_m, m.time_s, m.length_m, m.accel_mps2, hx * m.speed_mps, hy * m.speed_mps, 0.0))))
 
 
 def beacon_parameters(message) -> dict[str, str]:
@@ -223,9 +241,13 @@ def vtype_attributes(model: str, params: Mapping[str, Any], *, lanes: int = 1) -
     return out
 
 
-def runtime_parameters(model: str, params: Mapping[str, Any], speed_mps: float) -> dict[str, str]:
-    """Per-vehicle parameters SUMO's model reads after insertion (TraCI's setParameter), by key."""
+def runtime_parameters(model: str, params: Mapping[str, Any], speed_mps: float, car: int = 1) -> dict[str, str]:
+    """Per-vehicle parameters SUMO's model reads after insertion (TraCI's setParameter), by key (``car``:
+    the follower's index, 1 for v1)."""
     if model != "CC":
         return {}
     # Plexe's CC: which of its controllers drives, and the cruise speed it holds
-    return {"carFollowModel.ccac": str(CC_CONTROLLERS[params["active_controller"]]), "carFollowModel.ccds": repr(speed_mps)}
+    out = {"carFollowModel.ccac": str(CC_CONTROLLERS[params["active_controller"]]), "carFollowModel.ccds": repr(speed_mps)}
+    if params["active_controller"] == "CONSENSUS":  # its place in the platoon, of which it reads the cars ahead
+        out.update({"carFollowModel.ccvp": str(car), "carFollowModel.ccps": str(car + 1)})
+    return out

@@ -233,6 +233,10 @@ class EpisodeConfig:
                     raise ConfigError(f"v2v.{name}", value, f"a whole number of steps of {self.step_s:g} s")
         elif any(listening):  # a cooperative controller's platoon exchanges beacons: Plexe's default channel
             fix("v2v", ChannelParams())
+        for i, c in enumerate(controllers, start=1):
+            if i >= carfollowing.CC_CONSENSUS_CARS and c.sumo_model and carfollowing.hears_all(c.sumo_model, dict(c.params)):
+                raise ConfigError("scenario.followers", self.followers, f"at most {carfollowing.CC_CONSENSUS_CARS - 1} with "
+                                                                        "SUMO's CONSENSUS (Plexe's platoons are of 8 cars at most)")
         if isinstance(self.traffic, Mapping):
             fix("traffic", TrafficParams.from_table(self.traffic))
         if self.traffic is not None:
@@ -348,6 +352,10 @@ class EpisodeConfig:
         if isinstance(self.controller, tuple):
             return self.controller
         return (self.controller,) * self.followers
+
+    def listening(self, follower: int) -> bool | None:
+        """Whether follower vI's controller reads V2V beacons (None: a user's class not imported here)."""
+        return _listens(self.controllers[follower - 1])
 
     @property
     def sumo_driven(self) -> bool:

@@ -554,6 +554,85 @@ class PloegCACC:
         raise ConfigError("controller", "ploeg", "a platoon that exchanges V2V beacons (the [v2v] table)")
 
 
+@dataclass(frozen=True)
+class ConsensusParams:
+    """Santini et al.'s consensus controller (Plexe's "CONSENSUS"; Santini, Salvi, Valente, Pescape,
+    Segata, Lo Cigno 2015), with Plexe's defaults: its gains are Plexe's divided by the 1000 its law divides
+    by, and its spacing the scenario's setpoint plus ``h_s`` times the leader's speed (Plexe fixes that
+    standstill distance at 15 m)."""
+
+    b: float = 1.8  # [1/s] on the speed error against the leader (Plexe's b, 1800)
+    k_leader_v1: float = 0.46  # [1/s^2] on v1's spacing error to the leader (Plexe's K[1][0], 460)
+    k_leader: float = 0.08  # [1/s^2] on the others' spacing error to the leader (K[i][0], 80)
+    k_front: float = 0.86  # [1/s^2] on the spacing error to the car ahead (K[i][i-1], 860)
+    h_s: float = 0.8  # the time headway of its spacing policy [s]
+    fallback_mps: float = 0.0  # the mitigation, as PathParams'
+    fallback_headway_s: float = 1.2
+
+    def __post_init__(self) -> None:
+        for name in ("b", "k_leader_v1", "k_leader", "k_front"):
+            check_number(f"controller.{name}", getattr(self, name), 0.0, 100.0)
+        check_number("controller.h_s", self.h_s, 0.0, 10.0, "seconds")
+        check_number("controller.fallback_mps", self.fallback_mps, 0.0, 50.0, "m/s")
+        check_number("controller.fallback_headway_s", self.fallback_headway_s, 0.1, 10.0, "seconds")
+
+
+class ConsensusCACC:
+    """The consensus controller, as Plexe's ``CONSENSUS`` computes it: from the positions, speeds and
+    lengths in the beacons of every car ahead (GPS, no radar), at the time its command acts (a step on:
+    its own position moved on by its speed, each beacon's by its speed since it was sent),
+
+        a = -b (v - v_leader) + (1 / |N|) sum_j k_j (|x_j - x| - d_j)   over j in N = {leader, car ahead}
+
+    with d_j the desired distance from its front bumper to car j's: for each car k from j to the one
+    ahead of it, h v_leader + length_k + d (d the scenario's setpoint). Until a beacon of every car ahead
+    has arrived it asks for nothing (0), as Plexe's. It drives no faster than the target speed
+    (`below_target`)."""
+
+    Params = ConsensusParams
+    listens = True
+    hears_all = True  # it reads every car ahead's beacons (their lengths, in the desired distances)
+
+    def __init__(self, params: ConsensusParams, *, setpoint_m: float, target_speed_mps: float, vehicle: VehicleParams,
+                 step_s: float):
+        self.params, self.setpoint_m, self.vehicle, self.step_s = params, setpoint_m, vehicle, step_s
+        self.target_speed_mps = target_speed_mps
+        self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
+
+    @property
+    def mode(self) -> float:
+        return self.fallback.mode
+
+    def desired_acceleration(self, position_m: float, speed_mps: float, time_s: float, messages) -> float:
+        """The law at the step that starts at ``time_s``, given every car ahead's newest beacon by sender."""
+        p, dt = self.params, self.step_s
+        car = len(messages)  # its place in the platoon: a beacon of every car ahead
+        leader = messages[0]
+        acting = time_s + dt
+        own = position_m + speed_mps * dt
+        spacing = p.h_s * leader.speed_mps + self.setpoint_m
+        gains = {0: p.k_leader_v1} if car == 1 else {0: p.k_leader, car - 1: p.k_front}
+        spacing_error = 0.0
+        for j, k in gains.items():
+            m = messages[j]
+            desired = sum(spacing + messages[i].length_m for i in range(j, car))
+            distance = abs(m.position_m + (acting - m.time_s) * m.speed_mps - own)
+            spacing_error += k * (distance - desired)
+        return -p.b * (speed_mps - leader.speed_mps) + spacing_error / len(gains)
+
+    def observe(self, obs) -> float:
+        if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
+            return acceleration_to_command(below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
+        messages = obs.messages
+        if messages is None or obs.front_message is None or len(messages) < obs.front_message.sender + 1:
+            return 0.0
+        a = self.desired_acceleration(obs.position_m, obs.speed_mps, obs.time_s, messages)
+        return acceleration_to_command(below_target(a, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
+
+    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        raise ConfigError("controller", "consensus", "a platoon that exchanges V2V beacons (the [v2v] table)")
+
+
 # --- registry of follower controllers ------------------------------------------------------------
 
 _REGISTRY: dict[str, type] = {}
@@ -570,6 +649,7 @@ register_controller("switching", SwitchingController)
 register_controller("timegap", TimeGapController)
 register_controller("cacc", PathCACC)
 register_controller("ploeg", PloegCACC)
+register_controller("consensus", ConsensusCACC)
 
 
 def registered_controllers() -> tuple[str, ...]:

@@ -140,6 +140,7 @@ class PythonFollower:
         #: what it does with the truth (gap, own speed, speed ahead): through its radar, to its controller
         self.command = sensed_command(command, observe, episode.radar, episode.step_s, car, beacons=episode.v2v is not None)
         self.has_mode = hasattr(self.controller, "mode")
+        self.hears_all = bool(getattr(self.controller, "hears_all", False))
 
 
 #: the time gap the attacker keeps to traffic ahead of it where it does not attack [s]: a careful driver's
@@ -169,6 +170,8 @@ class SumoFollower:
         self.episode = episode
         #: whether it reads V2V beacons (Plexe's cooperative controllers): the world feeds them to SUMO
         self.listens = carfollowing.listens(self.model, self.params)
+        self.hears_all = carfollowing.hears_all(self.model, self.params)
+        self.car = car
         #: whether its platoon may share one SUMO with others: not when its model draws random numbers
         self.shares_sumo = carfollowing.shares_sumo(self.model, self.params)
 
@@ -194,7 +197,7 @@ class SumoFollower:
 
     def parameters(self) -> dict[str, str]:
         """Per-vehicle parameters its model reads after insertion."""
-        return carfollowing.runtime_parameters(self.model, self.params, self.episode.speed_mps)
+        return carfollowing.runtime_parameters(self.model, self.params, self.episode.speed_mps, self.car)
 
 
 def make_follower(controller: ControllerConfig, config: EpisodeConfig, car: int) -> PythonFollower | SumoFollower:
@@ -248,13 +251,15 @@ class Platoon:
                           *(i for i, _, _, _ in self._others))
         self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         #: the platoon's V2V channel (`v2v`), and each car's speed a step ago (the accelerations its beacons carry)
-        self.channel = Channel(config.v2v, dt, n, beacons) if config.v2v is not None else None
+        hear_all = frozenset(i for i, f in enumerate(self.followers, start=1) if f.hears_all)
+        self.channel = (Channel(config.v2v, dt, n, beacons, [config.vehicle_of(i).length_m for i in range(n)], hear_all)
+                        if config.v2v is not None else None)
         self._last_speeds: list[float] | None = None
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
-        #: the leader's newest, the car ahead's newest), where either is new
-        self._sumo_listening = [i for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]
+        #: whether it reads every car ahead's, the newest beacon of each car it reads), where one is new
+        self._sumo_listening = [(i, f.hears_all) for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]
         self._fed: dict[int, tuple] = {}
-        self.beacons_for_sumo: list[tuple[int, object, object]] = []
+        self.beacons_for_sumo: list[tuple[int, bool, tuple]] = []
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         self._attacking = False
         self.commands: list[list[float]] = []
@@ -291,21 +296,22 @@ class Platoon:
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
         if self.channel is not None:
-            accels = self._accelerations(speeds)
+            accels, now = self._accelerations(speeds), k * self.config.step_s
             self.channel.send(k, positions, speeds, accels)
             self.beacons_for_sumo = []
-            for i in self._sumo_listening:
+            for i, every in self._sumo_listening:
                 inbox = self.channel.inbox(i)
-                newest = (inbox.get(0), inbox.get(i - 1))
-                if newest[0] is not None and newest[1] is not None and newest != self._fed.get(i):
+                newest = tuple(inbox.get(j) for j in (range(i) if every else (0, i - 1)))
+                if None not in newest and newest != self._fed.get(i):
                     self._fed[i] = newest
-                    self.beacons_for_sumo.append((i, *newest))
+                    self.beacons_for_sumo.append((i, every, newest))
         for i, follower in self._python:
             leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
             if self.channel is None:
                 c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
             else:
-                c = checked_command(follower.command(gap, speeds[i], speeds[leader], accels[i], self.channel.inbox(i)), i, k)
+                c = checked_command(follower.command(gap, speeds[i], speeds[leader], accels[i], self.channel.inbox(i),
+                                                     positions[i], now), i, k)
             commands.append(c)
             new_speeds.append(follower.actuator.apply(c, speeds[i]))
         for i, cruise, actuator, vehicle in self._others:
@@ -338,21 +344,24 @@ class Platoon:
         trace, min_gaps, warmup_min_gaps = assemble_trace(self.config, self.followers, self.commanded, times_s, positions,
                                                           speeds, commands, modes, self.pairs, lateral_m)
         if self.channel is not None and self.channel.falsify is not None:
-            trace.signals.update(sent_signals(self.channel.sent, times_s.size))
+            trace.signals.update(sent_signals(self.channel.sent, times_s.size, self.channel.liar))
         return trace, min_gaps, warmup_min_gaps
 
 
-def sent_signals(sent: list, n_samples: int) -> dict[str, np.ndarray]:
-    """Under a message attack, what the attacker's beacons said at each sample, beside the truth (``pos_v0``,
-    ``speed_v0``, ``accel_v0``): the newest beacon it sent at or before it (NaN before the first; a beacon
-    it did not send leaves the one before), ``sent_pos_v0``, ``sent_speed_v0``, ``sent_accel_v0``."""
-    out = {name: np.full(n_samples, np.nan) for name in ("sent_pos_v0", "sent_speed_v0", "sent_accel_v0")}
+def sent_signals(sent: list, n_samples: int, liar: int = 0) -> dict[str, np.ndarray]:
+    """Under a message attack, what the liar's beacons (car ``liar``: 0 the attacker) said at each sample,
+    beside the truth (``pos_vK``, ``speed_vK``, ``accel_vK``): the newest beacon it sent at or before it (NaN
+    before the first; a beacon it did not send leaves the one before), ``sent_pos_vK``, ``sent_speed_vK``,
+    ``sent_accel_vK``."""
+    names = [f"sent_{field}_v{liar}" for field in ("pos", "speed", "accel")]
+    out = {name: np.full(n_samples, np.nan) for name in names}
+    pos, speed, accel = (out[name] for name in names)
     for k, message in sent:
         if message is None or k >= n_samples:
             continue
-        out["sent_pos_v0"][k:] = message.position_m
-        out["sent_speed_v0"][k:] = message.speed_mps
-        out["sent_accel_v0"][k:] = message.accel_mps2
+        pos[k:] = message.position_m
+        speed[k:] = message.speed_mps
+        accel[k:] = message.accel_mps2
     return out
 
 

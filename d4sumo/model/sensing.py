@@ -77,7 +77,10 @@ class Observation:
     step), what its radar measures of the car ahead in its lane (``leader``: whether there is one in range;
     without, the gap is a free road's and the speed ahead the car's own), and, in a platoon that exchanges
     V2V beacons (`v2v`), the newest beacon it received from the platoon's leader and from the car ahead of
-    it in the platoon (None until one has arrived; for v1 both are the leader's)."""
+    it in the platoon (None until one has arrived; for v1 both are the leader's), every newest beacon it
+    received by sender (``messages``), and where and when it is (its GPS: ``position_m`` along the road,
+    its front bumper's, and ``time_s``, the step's start), which a controller that places itself among
+    the beacons' positions reads."""
 
     speed_mps: float
     gap_m: float
@@ -86,6 +89,9 @@ class Observation:
     accel_mps2: float = 0.0
     leader_message: Any = None
     front_message: Any = None
+    messages: Any = None
+    position_m: float = 0.0
+    time_s: float = 0.0
 
     @property
     def relative_speed_mps(self) -> float:
@@ -125,13 +131,13 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
     the perfect one, to the controller's ``observe`` (given an `Observation`) where it has one, else to its
     ``command`` (gap, own speed, speed ahead, as measured). The perfect radar and a controller without
     ``observe``: the command itself, untouched. With ``beacons`` (a platoon that exchanges V2V beacons) the
-    command also takes the car's own acceleration and its inbox (`v2v.Channel.inbox`), which ``observe``
-    is given."""
+    command also takes the car's own acceleration, its inbox (`v2v.Channel.inbox`), its position and the
+    time, which ``observe`` is given."""
     radar = Radar(params, step_s, car) if params is not None and not params.perfect else None
     if beacons:
         front = car - 1
 
-        def listening(gap: float, own: float, lead: float, accel: float, inbox) -> float:
+        def listening(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float) -> float:
             if radar is not None:
                 o = radar.observe(gap, own, lead)
                 gap, lead, seen = o.gap_m, o.lead_speed_mps, o.leader
@@ -139,7 +145,7 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
                 seen = gap < FREE_ROAD_GAP_M
             if observe is None:
                 return command(gap, own, lead)
-            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front)))
+            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front), inbox, position, time))
 
         return listening
     if radar is None and observe is None:

@@ -1,9 +1,10 @@
 """What the platoon's cars tell each other: V2V beacons over a channel, the [v2v] table. Pure code, no SUMO.
 
 Every car of the platoon (the attacker v0 leads it) broadcasts a beacon of its state every
-``beacon_interval_s``: who sent it, when, its position along the road, its speed and its acceleration
-over the last step. A follower receives the beacons of the platoon's leader and of the car ahead of it in
-the platoon (the topology of Plexe's cooperative controllers), each ``latency_s`` after it was sent
+``beacon_interval_s``: who sent it, when, its position along the road, its speed, its acceleration
+over the last step and its length. A follower receives the beacons of the platoon's leader and of the car
+ahead of it in the platoon (the topology of Plexe's CACC and Ploeg's), or of every car ahead of it (a
+consensus controller's, which sums over them), each ``latency_s`` after it was sent
 (a whole number of steps), and loses each with probability ``loss``, drawn from a generator seeded by
 the table's seed and the pair of cars: every episode of a configuration loses the same beacons, and a
 replay loses them again. A cooperative controller reads the newest beacon of each (`Observation`).
@@ -62,42 +63,51 @@ class ChannelParams:
 @dataclass(slots=True)  # made for every car at every beacon: not frozen, whose construction costs thrice
 class Message:
     """A beacon: who sent it (the car's index, 0 the attacker that leads the platoon), when [s], and its
-    position along the road [m], speed [m/s] and acceleration over its last step [m/s^2]."""
+    position along the road [m] (its front bumper's), speed [m/s], acceleration over its last step
+    [m/s^2] and length [m] (as Plexe's beacons carry it)."""
 
     sender: int
     time_s: float
     position_m: float
     speed_mps: float
     accel_mps2: float
+    length_m: float = 0.0
 
 
 class Channel:
     """One episode's V2V channel: ``send(k, positions, speeds, accelerations)`` at each step's start, then
     ``inbox(i)``, the newest beacon follower ``i`` received from each of its sources (the platoon's leader
-    and the car ahead of it)."""
+    and the car ahead of it; every car ahead for the followers in ``hear_all``). ``lengths``: each car's."""
 
-    def __init__(self, params: ChannelParams, step_s: float, cars: int, falsify=None):
+    def __init__(self, params: ChannelParams, step_s: float, cars: int, falsify=None, lengths=None,
+                 hear_all: frozenset[int] = frozenset()):
         self.params = params
-        #: a message attack's falsifier of the attacker's beacons (`messages.BeaconFalsifier`), or None
+        #: a message attack's falsifier of one car's beacons (`messages.BeaconFalsifier`: the attacker's, or an
+        #: insider's), or None
         self.falsify = falsify
+        self.liar = falsify.sender if falsify is not None else None
         self.step_s = step_s
         self.every = max(1, int(round(params.beacon_interval_s / step_s)))
         self.delay = int(round(params.latency_s / step_s))
-        self.sources = {i: tuple(dict.fromkeys((0, i - 1))) for i in range(1, cars)}  # the leader, the car ahead
+        self.lengths = [float(x) for x in lengths] if lengths is not None else [0.0] * cars
+        self.sources = {i: tuple(range(i)) if i in hear_all else tuple(dict.fromkeys((0, i - 1)))  # the leader, the car ahead
+                        for i in range(1, cars)}
         self.senders = sorted({s for sources in self.sources.values() for s in sources})
         self.rngs = {(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
         self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
         self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
-        self.sent: list[tuple[int, Message | None]] = []  # under a message attack: the attacker's beacons as sent
+        self.sent: list[tuple[int, Message | None]] = []  # under a message attack: the liar's beacons as sent
 
     def send(self, k: int, positions, speeds, accelerations) -> None:
         """Step ``k``'s beacons (every ``beacon_interval_s``), and the deliveries due at it."""
         if k % self.every == 0:
-            beacons = {s: Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]))
+            lengths = self.lengths
+            beacons = {s: Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]), lengths[s])
                        for s in self.senders}
-            if self.falsify is not None:  # the attacker's, as it chooses to send it (None: not at all)
-                beacons[0] = self.falsify(k, beacons[0])
-                self.sent.append((k, beacons[0]))
+            if self.falsify is not None:  # the liar's, as it chooses to send it (None: not at all)
+                liar = self.liar
+                beacons[liar] = self.falsify(k, beacons[liar])
+                self.sent.append((k, beacons[liar]))
             for i, sources in self.sources.items():
                 for s in sources:
                     if self.params.loss and self.rngs[s, i].random() < self.params.loss:

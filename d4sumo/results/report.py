@@ -49,9 +49,9 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
     fcd = timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
-    said = timespace.said_track(episode.trace, fcd.get("v0"))
-    if said is not None:  # a message attack: what the attacker's beacons said, beside where it was
-        fcd[timespace.SAID_ID] = said
+    said = timespace.said_track(episode.trace, fcd)
+    if said is not None:  # a message attack: what the liar's beacons said, beside where it was
+        fcd[said[0]] = said[1]
     return fcd
 
 

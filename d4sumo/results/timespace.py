@@ -1,6 +1,6 @@
 """Figures of one episode from SUMO's FCD: the time-space diagram (every car's position along the route over
 time, coloured by speed, a panel per lane; SUMO's traffic around the platoon in light grey; under a
-message attack, what the attacker's beacons said, dashed) and every platoon car's acceleration; and the
+message attack, what the lying car's beacons said, dashed) and every platoon car's acceleration; and the
 FCD read as positions along the route."""
 
 from __future__ import annotations
@@ -15,20 +15,23 @@ from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_pat
 
 #: traffic cars: lighter than the platoon, whose speeds the colours tell
 TRAFFIC_COLOR = "0.75"
-#: under a message attack, what the attacker's beacons said, drawn dashed beside where it was
-SAID_ID = "v0 said"
+#: under a message attack, what the liar's beacons said (``vK said``), drawn dashed beside where it was
+SAID = " said"
 
 
-def said_track(trace, attacker: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray] | None:
-    """What the attacker's beacons said at each sample (the trace's ``sent_*_v0``, from its first beacon on),
-    as an FCD track beside the attacker's own (its lanes), or None without a message attack."""
-    if attacker is None or "sent_pos_v0" not in trace.signals:
+def said_track(trace, fcd: Mapping[str, Mapping[str, np.ndarray]]) -> tuple[str, dict[str, np.ndarray]] | None:
+    """What the liar's beacons said at each sample (the trace's ``sent_*_vK``, from its first beacon on), as
+    an FCD track beside the liar's own (its lanes), with its id (``vK said``); None without a message attack."""
+    sent = next((name for name in trace.signals if name.startswith("sent_pos_v")), None)
+    liar = sent and sent[len("sent_pos_"):]
+    if sent is None or liar not in fcd:
         return None
-    n = min(len(trace), len(attacker["time"]))
-    said = ~np.isnan(trace["sent_pos_v0"][:n])
-    return {"time": attacker["time"][:n][said], "pos": trace["sent_pos_v0"][:n][said],
-            "speed": trace["sent_speed_v0"][:n][said], "acceleration": trace["sent_accel_v0"][:n][said],
-            "lane": attacker["lane"][:n][said]}
+    own = fcd[liar]
+    n = min(len(trace), len(own["time"]))
+    said = ~np.isnan(trace[sent][:n])
+    return liar + SAID, {"time": own["time"][:n][said], "pos": trace[sent][:n][said],
+                         "speed": trace[f"sent_speed_{liar}"][:n][said], "acceleration": trace[f"sent_accel_{liar}"][:n][said],
+                         "lane": own["lane"][:n][said]}
 
 
 def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -> dict[str, dict[str, np.ndarray]]:
@@ -100,7 +103,7 @@ def _vehicle_order(vid: str):
 
 
 def _vehicle_label(vid: str) -> str:
-    return vid + " attacker" if vid == "v0" else "what v0 said" if vid == SAID_ID else vid
+    return vid + " attacker" if vid == "v0" else "what " + vid if vid.endswith(SAID) else vid
 
 
 def lanes(fcd: dict) -> list[str]:
@@ -234,7 +237,7 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
                 if b - a >= 2:
                     lines = LineCollection(np.concatenate([points[:-1], points[1:]], axis=1), cmap=SPEED_CMAP, norm=norm,
                                            linewidths=2.4 if vid == "v0" else 1.5,
-                                           linestyles="dashed" if vid == SAID_ID else "solid")
+                                           linestyles="dashed" if vid.endswith(SAID) else "solid")
                     lines.set_array(d["speed"][a:b - 1])
                     ax.add_collection(lines)
                 else:
@@ -293,9 +296,10 @@ def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *
     ax = fig.subplots()
     fcd = {vid: d for vid, d in fcd.items() if not is_traffic(vid)}  # the platoon's
     for vid, d in fcd.items():
-        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid in ("v0", SAID_ID) else 1.1,
-                color="black" if vid in ("v0", SAID_ID) else None, zorder=3 if vid == "v0" else 2,
-                linestyle="--" if vid == SAID_ID else "-")
+        said = vid.endswith(SAID)
+        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" or said else 1.1,
+                color="black" if vid == "v0" or said else None, zorder=3 if vid == "v0" else 2,
+                linestyle="--" if said else "-")
     _mark_moments(ax, attack_start_s, lane_change_s)
     if collision:
         ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")

@@ -19,7 +19,7 @@ from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_
 from ..model.config import EpisodeConfig
 from ..model.control import user_module
 from ..model.plugins import ControllerImportError, names_only
-from ..model.messages import attack_box
+from ..model.messages import MESSAGE_KEYS, attack_box
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
@@ -48,6 +48,7 @@ class Campaign:
     #: pedals; "": it tells the truth
     message: str = ""
     message_field: str = "accel"  # the field of the beacons it falsifies (accel, speed, position)
+    message_sender: int = 0  # whose beacons lie: 0 the attacker, K an insider follower vK
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -78,7 +79,7 @@ class Campaign:
         """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes,
         plus a message attack's parameters (`messages`)."""
         return attack_box(self.config, make_attack(self.attack, dict(self.attack_options)), self.message,
-                          self.message_field, dict(self.attack_options))
+                          self.message_field, dict(self.attack_options), self.message_sender)
 
     def specification(self) -> Specification:
         c = self.config
@@ -92,6 +93,8 @@ class Campaign:
         attack: dict[str, Any] = {"family": self.attack, **dict(self.attack_options)}
         if self.message:  # stored where there is one: earlier campaigns keep their identity
             attack.update(message=self.message, message_field=self.message_field)
+            if self.message_sender:
+                attack.update(message_sender=self.message_sender)
         return {
             "config": self.config.to_dict(),
             "attack": attack,
@@ -134,9 +137,10 @@ class Campaign:
                 seed=definition["seed"],
                 d_safe_m=definition["spec"]["d_safe_m"],
                 formula=definition["spec"]["formula"],
-                attack_options=tuple((k, v) for k, v in attack.items() if k not in ("family", "message", "message_field")),
+                attack_options=tuple((k, v) for k, v in attack.items() if k not in ("family", *MESSAGE_KEYS)),
                 message=attack.get("message", ""),
                 message_field=attack.get("message_field", "accel"),
+                message_sender=attack.get("message_sender", 0),
                 optimizer_options=tuple({**OPTIONS_SINCE.get(definition["optimizer"], {}),
                                          **definition.get("optimizer_options", {})}.items()),
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),

@@ -46,7 +46,7 @@ def test_a_sumo_controller_resolves_its_table_with_d4sumos_defaults():
     ("sumo:W99", (("cc1", "abc"),), "controller.cc1", "a number"),
     ("sumo:ACC", (("speed_mode", 31),), "controller.speed_mode", "an attribute SUMO's ACC model reads"),
     ("sumo:ACC", (("sigma", 0.5),), "controller.sigma", "an attribute SUMO's ACC model reads"),
-    ("sumo:CC", (("active_controller", "CONSENSUS"),), "controller.active_controller", "DRIVER, ACC, CACC, PLOEG, FLATBED"),
+    ("sumo:CC", (("active_controller", "FAKED_CACC"),), "controller.active_controller", "DRIVER, ACC, CACC, PLOEG, CONSENSUS, FLATBED"),
     ("sumo:ACC", (("active_controller", "ACC"),), "controller.active_controller", "an attribute"),
 ])
 def test_what_sumo_would_ignore_or_refuse_is_a_clear_error(cls, params, field, allowed):

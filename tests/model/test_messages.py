@@ -66,6 +66,41 @@ def test_a_message_attack_adds_its_parameters_after_the_pedals_and_plans_its_lie
     assert "message" not in Campaign(config=COOPERATIVE).definition()["attack"]  # earlier campaigns keep their identity
 
 
+def test_an_insider_lies_in_its_own_beacons_and_its_campaign_stores_who_it_is():
+    box = attack_box(COOPERATIVE, make_attack("knots"), "offset", "speed", sender=2)
+    x = np.zeros(box.dimension)
+    x[9], x[10] = 4.0, 0.0
+    plan = attack_plan(box, x, COOPERATIVE)
+    assert plan.beacons.sender == 2 and box.describe()["message_sender"] == 2
+    insider = Message(2, 2.0, 50.0, 25.0, 0.0)
+    assert plan.beacons(40, insider).speed_mps == 29.0
+    campaign = Campaign(config=COOPERATIVE, message="offset", message_field="speed", message_sender=2, optimizer="random")
+    stored = campaign.definition()
+    assert stored["attack"]["message_sender"] == 2 and Campaign.from_definition(stored) == campaign
+    leader = Campaign(config=COOPERATIVE, message="offset", message_field="speed", optimizer="random").definition()
+    assert "message_sender" not in leader["attack"]  # the attacker's lies keep their campaigns' identity
+
+
+@pytest.mark.parametrize("sender, allowed", [
+    (3, "an insider follower 1 .. 2"),  # v3 is the last: nobody reads its beacons
+    (-1, "an insider follower 1 .. 2"),
+    (True, "an insider follower 1 .. 2"),
+])
+def test_an_insider_that_nobody_hears_gets_one_line(sender, allowed):
+    with pytest.raises(ConfigError) as info:
+        attack_box(COOPERATIVE, make_attack("knots"), "offset", "speed", sender=sender)
+    assert info.value.field == "attack.message_sender" and allowed in info.value.allowed
+
+
+def test_an_insider_whose_follower_reads_no_beacons_gets_one_line():
+    mixed = EpisodeConfig(controller=(ControllerConfig("cacc"), ControllerConfig("cacc"), ControllerConfig("switching")),
+                          start="steady", duration_s=20.0)
+    attack_box(mixed, make_attack("knots"), "offset", "speed", sender=1)
+    with pytest.raises(ConfigError) as info:
+        attack_box(mixed, make_attack("knots"), "offset", "speed", sender=2)
+    assert info.value.field == "attack.message_sender" and "v3" in info.value.allowed
+
+
 @pytest.mark.parametrize("config, message, field, where", [
     (EpisodeConfig(), "offset", "accel", "attack.message"),  # nobody listens: no beacons to falsify
     (COOPERATIVE, "spoof", "accel", "attack.message"),

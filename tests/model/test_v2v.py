@@ -9,7 +9,7 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.control import PathCACC, PathParams, PloegCACC, PloegParams
+from d4sumo.model.control import ConsensusCACC, ConsensusParams, PathCACC, PathParams, PloegCACC, PloegParams
 from d4sumo.model.sensing import Observation
 from d4sumo.model.v2v import Channel, ChannelParams, Message
 from d4sumo.model.vehicle import VehicleParams
@@ -90,6 +90,33 @@ def test_ploeg_integrates_its_command_as_plexe_does():
     assert math.isclose(ploeg.observe(Observation(25.0, 14.0, 24.0, True)), 0.0)
 
 
+def test_a_consensus_follower_hears_every_car_ahead_and_the_others_the_leader_and_the_car_ahead():
+    channel = Channel(ChannelParams(), STEP, 4, lengths=[5.0, 4.0, 12.0, 5.0], hear_all=frozenset({3}))
+    channel.send(0, [100.0, 90.0, 80.0, 60.0], [25.0] * 4, [0.0] * 4)
+    assert sorted(channel.inbox(3)) == [0, 1, 2] and sorted(channel.inbox(2)) == [0, 1]
+    assert channel.inbox(3)[2].length_m == 12.0
+
+
+def test_the_consensus_law_is_plexe_with_its_gains_and_positions_predicted_to_when_it_acts():
+    """v2 of a platoon whose cars are 4 m long, the leader at 25 m/s, beacons 0.1 s old; Plexe's law
+    (MSCFModel_CC::_consensus) with b 1800, K[2][0] 80, K[2][1] 860, h 0.8 s, divided by 1000."""
+    vehicle = VehicleParams()
+    law = ConsensusCACC(ConsensusParams(), setpoint_m=15.0, target_speed_mps=30.0, vehicle=vehicle, step_s=STEP)
+    leader, ahead = Message(0, 1.0, 200.0, 25.0, 0.0, 4.0), Message(1, 1.0, 160.0, 24.0, 0.0, 4.0)
+    own_x, own_v, now = 120.0, 26.0, 1.1
+    acting, x = now + STEP, own_x + own_v * STEP
+    spacing = 0.8 * 25.0 + 15.0
+    to_leader = (200.0 + (acting - 1.0) * 25.0 - x) - 2 * (spacing + 4.0)
+    to_ahead = (160.0 + (acting - 1.0) * 24.0 - x) - (spacing + 4.0)
+    expected = -1.8 * (own_v - 25.0) + (0.08 * to_leader + 0.86 * to_ahead) / 2
+    assert law.desired_acceleration(own_x, own_v, now, {0: leader, 1: ahead}) == pytest.approx(expected)
+    obs = Observation(own_v, 35.0, 24.0, True, 0.0, leader, ahead, {0: leader, 1: ahead}, own_x, now)
+    assert law.observe(obs) == pytest.approx(max(-1.0, expected / vehicle.max_decel_mps2))
+    assert law.observe(Observation(own_v, 35.0, 24.0, True, 0.0, leader, None, {0: leader}, own_x, now)) == 0.0  # not all yet
+    v1 = law.desired_acceleration(own_x, own_v, now, {0: leader})  # v1: the leader alone, with K[1][0] 460
+    assert v1 == pytest.approx(-1.8 * (own_v - 25.0) + 0.46 * ((200.0 + (acting - 1.0) * 25.0 - x) - (spacing + 4.0)))
+
+
 def test_the_fallback_takes_over_while_the_car_ahead_beacon_and_the_radar_disagree():
     vehicle = VehicleParams()
     cacc = PathCACC(PathParams(fallback_mps=1.0), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)
@@ -104,3 +131,11 @@ def test_the_fallback_takes_over_while_the_car_ahead_beacon_and_the_radar_disagr
     free = Observation(20.0, 1000.0, 20.0, False, 0.0, leader, ahead)  # nobody ahead: it cruises, at most 1.5 m/s^2
     assert cacc.observe(free) == pytest.approx(1.5 / vehicle.max_accel_mps2)
     assert not hasattr(PathCACC(PathParams(), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP), "mode")
+
+
+def test_a_sumo_consensus_platoon_of_more_cars_than_plexe_holds_gets_one_line():
+    consensus = ControllerConfig("sumo:CC", (("active_controller", "CONSENSUS"),))
+    EpisodeConfig(controller=consensus, followers=7)
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(controller=consensus, followers=8)
+    assert info.value.field == "scenario.followers" and "at most 7" in info.value.allowed

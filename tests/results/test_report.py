@@ -197,7 +197,7 @@ def test_a_replayed_message_attack_draws_what_the_attacker_said_beside_where_it_
     record = load_records([db])[1]
     value, start = record.params[9], record.params[10]
     fcd = replay_to_fcd(record, tmp_path / "fcd.xml")
-    said, truth = fcd[timespace.SAID_ID], fcd["v0"]
+    said, truth = fcd["v0" + timespace.SAID], fcd["v0"]
     late = said["time"] >= start + 0.1
     lie = said["speed"][late] - np.interp(said["time"][late], truth["time"], truth["speed"])
     assert np.median(lie) == pytest.approx(value, abs=0.05)  # the beacons' speed, held between them, less the truth
