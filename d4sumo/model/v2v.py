@@ -96,6 +96,7 @@ class Channel:
         self.rngs = {(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
         self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
         self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
+        self.direct = not self.delay and not params.loss
         self.sent: list[tuple[int, Message | None]] = []  # under a message attack: the liar's beacons as sent
 
     def send(self, k: int, positions, speeds, accelerations) -> None:
@@ -108,6 +109,13 @@ class Channel:
                 liar = self.liar
                 beacons[liar] = self.falsify(k, beacons[liar])
                 self.sent.append((k, beacons[liar]))
+            if self.direct:  # no latency, no loss: every beacon arrives as it is sent
+                for i, sources in self.sources.items():
+                    newest = self.newest[i]
+                    for s in sources:
+                        if beacons[s] is not None:
+                            newest[s] = beacons[s]
+                return
             for i, sources in self.sources.items():
                 for s in sources:
                     if self.params.loss and self.rngs[s, i].random() < self.params.loss:
