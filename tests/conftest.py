@@ -78,3 +78,13 @@ def small_db(tmp_path_factory):
     db = folder / "results.sqlite"
     run_sweep(Sweep.load(path), db, workers=1)
     return db
+
+
+@pytest.fixture(scope="session")
+def switching_fmus(tmp_path_factory) -> dict:
+    """The paper's switching controller as d4sumo ships it, built as FMUs for this machine: {2: FMI 2.0's
+    path, 3: FMI 3.0's}."""
+    from d4sumo.fmus import build_switching_fmu
+
+    folder = tmp_path_factory.mktemp("fmus")
+    return {v: build_switching_fmu(folder / f"switching{v}.fmu", v) for v in (2, 3)}

@@ -72,6 +72,10 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     episode = run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json")
     assert episode.returncode == 0, episode.stderr
     assert json.loads(episode.stdout)["outcome"] == "attacker_crash"
+    built = run("-m", "d4sumo.cli", "build-fmu", "--fmi", "3", "--out", "acc.fmu")  # its C sources ship in the wheel
+    assert built.returncode == 0, built.stderr
+    episode = run("-m", "d4sumo.cli", "simulate", "--controller", "fmu:acc.fmu", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json")
+    assert episode.returncode == 0 and json.loads(episode.stdout)["outcome"] == "attacker_crash", episode.stderr
 
 
 def test_toml_is_read_through_one_import_that_falls_back_on_python_3_10():

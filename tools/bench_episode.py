@@ -6,7 +6,10 @@ Both sides are timed the same way, start to close, interleaved in one run so mac
   episode  d4sumo.engine.simulation.simulate: controllers, actuators, speed commands, sensing, collision
            checks and the Trace, for an attack that never crashes (so every step runs)
 
-Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC]
+With --fmu, the paper's controller also as the FMUs d4sumo ships (FMI 2.0 and 3.0, built here), and the
+ratio of their episodes to the Python controller's (the target: at most 2).
+
+Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC] [--fmu]
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from toolargs import Parser, run_main
 
 
 TARGET = 1.5  # an episode at most this many times bare libsumo stepping of the same steps and cars
+FMU_TARGET = 2.0  # an episode with the shipped FMU at most this many times the same with the Python controller
 
 def bare(config: EpisodeConfig, road) -> float:
     t0 = time.perf_counter()
@@ -49,7 +53,17 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--followers", type=int, default=3)
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
+    parser.add_argument("--fmu", action="store_true", help="also the shipped FMUs of the paper's controller")
     args = parser.parse_args()
+    fmus = {}
+    if args.fmu:
+        import tempfile
+
+        from d4sumo.fmus import build_switching_fmu
+
+        folder = tempfile.mkdtemp(prefix="bench-fmu-")
+        fmus = {f"fmu:{build_switching_fmu(f'{folder}/switching{v}.fmu', v)}": f"FMI {v}.0" for v in (2, 3)}
+        args.systems = list(dict.fromkeys(["switching", *args.systems, *fmus]))
     parser.check_counts({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
     configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
     road = build_road(configs[0].network)
@@ -72,6 +86,11 @@ def main() -> None:
     for name in args.systems:
         print(f"ratio episode / bare, followers {name:<10}: {ratios[name]:5.2f}   (target <= {TARGET}: "
               + ("met)" if ratios[name] <= TARGET else f"{ratios[name] / TARGET:.2f} times it)"))
+    python = statistics.median(times["switching"][1]) if fmus else None
+    for name, label in fmus.items():
+        ratio = statistics.median(times[name][1]) / python
+        print(f"ratio episode with the shipped FMU ({label}) / with the Python controller: {ratio:5.2f}   (target <= "
+              f"{FMU_TARGET}: " + ("met)" if ratio <= FMU_TARGET else f"{ratio / FMU_TARGET:.2f} times it)"))
 
 
 if __name__ == "__main__":

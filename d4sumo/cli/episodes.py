@@ -29,6 +29,15 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_build_fmu(args: argparse.Namespace) -> int:
+    from ..fmus import build_switching_fmu
+
+    out = build_switching_fmu(args.out, args.fmi)
+    print(f"{out}: the paper's switching controller, FMI {args.fmi}.0 co-simulation, built for this machine; "
+          f"d4sumo simulate --controller fmu:{out}")
+    return 0
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from ..engine.scenarios import build_road
     from ..engine.simulation import simulate

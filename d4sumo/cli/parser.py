@@ -12,7 +12,7 @@ from ..model.config import MANEUVERS, START_MODES
 from ..search.optimizers import OPTIMIZERS
 from .campaigns import cmd_falsify, cmd_sweep
 from .common import EXIT_USAGE
-from .episodes import cmd_replay, cmd_scenarios, cmd_simulate
+from .episodes import cmd_build_fmu, cmd_replay, cmd_scenarios, cmd_simulate
 from .reading import cmd_export, cmd_plot, cmd_report
 
 
@@ -48,7 +48,7 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--length", type=float, help="vehicle length in m [4.5]")
     g.add_argument("--controller",
                    help="follower controller: switching, timegap, a SUMO car-following model as sumo:MODEL (sumo:ACC, "
-                        "sumo:CACC, sumo:IDM, ...) or package.module:ClassName; a comma-separated list gives one per "
+                        "sumo:CACC, sumo:IDM, ...), an FMU as fmu:PATH or package.module:ClassName; a comma-separated list gives one per "
                         "follower, v1 first [switching]")
     g.add_argument(
         "--set",
@@ -166,4 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="CSV file [standard output]")
     p.add_argument("--campaign", type=int, help="only this campaign id")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("build-fmu", help="build the paper's switching controller as an FMU for this machine (CMake, a C compiler)")
+    p.add_argument("--fmi", type=int, default=2, help="FMI version: 2 or 3 [2]")
+    p.add_argument("--out", type=Path, default=Path("switching.fmu"), help="the FMU file to write [switching.fmu]")
+    p.set_defaults(func=cmd_build_fmu)
     return parser

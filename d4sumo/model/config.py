@@ -21,6 +21,7 @@ else:  # Python 3.10: the same parser, published as tomli
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
+from .fmu import SHA_KEY, is_fmu
 from .plugins import ControllerImportError, NotImported, build_params
 from .sensing import RadarParams
 from .traffic import TrafficParams
@@ -97,6 +98,9 @@ class ControllerConfig:
         """A short name for reports: the class and the parameters that differ from its defaults."""
         if self.sumo_model:
             defaults = dict(carfollowing.check_params(self.cls, {}))
+        elif is_fmu(self.cls):  # its content, not its defaults (which its file holds): a short hash
+            sha = dict(self.params).get(SHA_KEY, "")
+            return f"{self.cls}({sha[:8]})" if sha else self.cls
         elif user_module(self.cls) is None:
             defaults = dataclasses.asdict(self.controller_class().Params())
         else:  # a user's class is not imported for a name: every parameter is shown

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..errors import ConfigError, check_number
+from .fmu import PREFIX as FMU_PREFIX, fmu_controller, is_fmu
 from .plugins import import_controller
 from .vehicle import VehicleParams, acceleration_to_command
 
@@ -657,8 +658,15 @@ def registered_controllers() -> tuple[str, ...]:
 
 
 def user_module(name: str) -> str | None:
-    """The module a controller name imports: None for a registered controller or a SUMO model."""
-    return name.partition(":")[0] if name not in _REGISTRY and ":" in name and not name.startswith("sumo:") else None
+    """The module a controller name imports: None for a registered controller, a SUMO model or an FMU."""
+    return (name.partition(":")[0] if name not in _REGISTRY and ":" in name and not name.startswith(("sumo:", FMU_PREFIX))
+            else None)
+
+
+def user_code(name: str) -> str | None:
+    """The user's code a controller name runs, as said when it is loaded: its module, or its FMU (the name
+    itself, ``fmu:PATH``); None for a registered controller or a SUMO model."""
+    return name if is_fmu(name) else user_module(name)
 
 
 def resolve_controller(name: str) -> type:
@@ -667,7 +675,9 @@ def resolve_controller(name: str) -> type:
     (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
     if name in _REGISTRY:
         return _REGISTRY[name]
+    if is_fmu(name):
+        return fmu_controller(name)
     if ":" not in name:
         raise ConfigError("controller.class", name, f"one of {', '.join(registered_controllers())}, a SUMO model as "
-                                                    "'sumo:MODEL' or 'package.module:ClassName'")
+                                                    "'sumo:MODEL', an FMU as 'fmu:PATH' or 'package.module:ClassName'")
     return import_controller(name)

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
-from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_module
+from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
@@ -123,7 +123,7 @@ class PythonFollower:
     def __init__(self, config: ControllerConfig, episode: EpisodeConfig, car: int):
         self.config = config
         self.vehicle = episode.vehicle_of(car)
-        users = user_module(config.cls) is not None
+        users = user_code(config.cls) is not None
         try:
             self.controller = config.controller_class()(config.build_params(), setpoint_m=episode.setpoint_m,
                                                         target_speed_mps=episode.speed_mps, vehicle=self.vehicle,

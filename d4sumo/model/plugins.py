@@ -64,6 +64,11 @@ def names_only():
         _IMPORTS.reset(token)
 
 
+def may_import() -> bool:
+    """Whether a user's code (a module, an FMU) may be loaded here: not within `names_only`."""
+    return _IMPORTS.get()
+
+
 def import_controller(name: str) -> type:
     """The class a user's "package.module:ClassName" names, checked to be a controller (a Params
     dataclass and a command method)."""

@@ -17,7 +17,7 @@ from typing import Any
 from ..errors import ConfigError, D4sumoError, check_int, check_number
 from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig
-from ..model.control import user_module
+from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
@@ -122,7 +122,8 @@ class Campaign:
         for module in named.user_modules:
             if module not in _ANNOUNCED:  # once a process: a report replays many samples
                 _ANNOUNCED.add(module)
-                log.warning("importing %s (a follower controller of %s) to simulate it", module, where)
+                log.warning("%s %s (a follower controller of %s) to simulate it",
+                            "loading" if module.startswith("fmu:") else "importing", module, where)
         return cls._from_definition(definition, samples, where)
 
     @classmethod
@@ -154,8 +155,8 @@ class Campaign:
 
     @property
     def user_modules(self) -> list[str]:
-        """The modules of users' follower controllers this campaign imports to be simulated."""
-        return sorted({m for c in self.config.controllers if (m := user_module(c.cls))})
+        """The users' code its follower controllers run (modules it imports, FMUs it loads) to be simulated."""
+        return sorted({m for c in self.config.controllers if (m := user_code(c.cls))})
 
     def replace(self, **changes: Any) -> "Campaign":
         if "optimizer" in changes and "optimizer_options" not in changes:  # another optimiser: its own defaults

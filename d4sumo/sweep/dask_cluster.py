@@ -113,7 +113,7 @@ def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) 
         for a in gang:  # the same points again after a failure: nothing was told
             for first, xs in runners[id(a)].pending():
                 owners.append(a)
-                plays.append(Play(a.campaign, a.network, first, tuple(xs)))
+                plays.append(Play(a.campaign, a.network, first, tuple(xs), a.fmus))
         return play_chunks, (tuple(plays), gang[0].batch), owners
 
     def accept(gang: list[_Active], owners: list[_Active], result) -> list[_Active]:

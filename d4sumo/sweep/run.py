@@ -18,6 +18,7 @@ from typing import Callable
 from ..engine.scenarios import NetworkSource, network_source
 from ..errors import ConfigError
 from ..model.batch import DEFAULT_BATCH
+from ..model.fmu import shipment
 from ..search.campaign import SampleResult, open_store
 from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import numerics_note, stored_results
@@ -133,7 +134,8 @@ def run_sweep(
                 key = c.config.network, c.config.route, c.config.whole_network
                 if key not in sources:
                     sources[key] = network_source(c.config.network, route=() if c.config.whole_network else c.config.route)
-                todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch))
+                fmus = shipment(c.config) if client is not None else ()  # local workers see the client's files
+                todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch, fmus=fmus))
         total = sweep.samples
         counts = list(store.sweep_counts(sweep.name))
 

@@ -13,6 +13,7 @@ import numpy as np
 from ..engine.scenarios import NetworkSource
 from ..errors import D4sumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
+from ..model.fmu import receive
 from ..search.campaign import Campaign, SampleResult
 from ..search.runner import CampaignRunner, Evaluator, campaign_road, play_pending, step_together
 from ..search.store import campaign_key
@@ -44,12 +45,14 @@ class Chunk:
     stored: tuple[SampleResult, ...]
     state: tuple | None
     batch: int = DEFAULT_BATCH  # episodes side by side in one SUMO, at most
+    fmus: tuple[tuple[str, bytes], ...] = ()  # its followers' FMUs, by value, for workers that cannot see the client's disk
 
 
 _EVALUATORS: dict[str, Evaluator] = {}  # per worker process: roads built and formulas parsed once
 
 
 def _evaluator(chunk: Chunk | Play) -> Evaluator:
+    receive(chunk.fmus)
     key = campaign_key(chunk.campaign.definition())
     evaluator = _EVALUATORS.get(key)
     if evaluator is None:
@@ -94,6 +97,7 @@ class Play:
     network: NetworkSource
     first: int
     points: tuple[np.ndarray, ...]
+    fmus: tuple[tuple[str, bytes], ...] = ()
 
 
 def play_chunks(plays: tuple[Play, ...], batch: int = DEFAULT_BATCH) -> list[list[SampleResult]]:
@@ -117,10 +121,12 @@ class _Active:
     added: set = field(default_factory=set)  # indices stored by this sweep run (a stored campaign may have gaps)
     #: the first stored sample whose point this machine's model proposes otherwise (`CampaignRunner`)
     numerics_differ_at: int | None = None
+    fmus: tuple[tuple[str, bytes], ...] = ()  # its followers' FMUs, for a Dask cluster's workers
 
     def chunk(self) -> Chunk:
         # the stored samples travel only until a state exists
-        return Chunk(self.campaign, self.network, self.stored if self.state is None else (), self.state, self.batch)
+        return Chunk(self.campaign, self.network, self.stored if self.state is None else (), self.state, self.batch,
+                     self.fmus)
 
 
 def _accept(active: _Active, chunk_result: tuple[list[SampleResult], tuple], store_results) -> bool:
