@@ -40,6 +40,7 @@ non-zero.
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 import tempfile
 import time
@@ -447,7 +448,11 @@ def main(argv=None) -> int:
                              "arrays command it) [8]; 0: not")
     parser.add_argument("--traffic", type=float, default=TRAFFIC_SHARE[0],
                         help=f"the share of in-lane episodes played among SUMO's traffic [{TRAFFIC_SHARE[0]}]")
+    parser.add_argument("--only", default="", help="check only these episodes of the seed's draw (comma-separated "
+                                                   "indices, as --examples records them)")
+    parser.add_argument("--examples", type=Path, help="write every disagreeing episode here, whole (JSON lines)")
     args = parser.parse_args(argv)
+    only = {int(i) for i in args.only.split(",") if i.strip().isdigit()}
     parser.check_counts({"n": (args.n, 1), "--seed": (args.seed, 0), "--batch": (args.batch, 0, MAX_COPIES)})
     if not 0.0 <= args.traffic <= 1.0:
         parser.error(f"--traffic: got {args.traffic}; allowed: a share in [0, 1]")
@@ -472,6 +477,8 @@ def main(argv=None) -> int:
                     break
                 except ConfigError:
                     continue
+            if only and index not in only:  # (its batch partners are drawn from a generator of its own index)
+                continue
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
             outcome = store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"
@@ -483,6 +490,10 @@ def main(argv=None) -> int:
             for p in problems:
                 broken[p] += 1
                 examples.setdefault(p, f"{campaign.definition()} params {list(params)}")
+                if args.examples:
+                    with open(args.examples, "a") as f:
+                        f.write(json.dumps({"index": index, "problem": p, "definition": campaign.definition(),
+                                            "params": [float(x) for x in params]}) + "\n")
             if (index + 1) % 100 == 0:
                 print(f"{index + 1} episodes, {sum(broken.values())} disagreements, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr)

@@ -54,8 +54,12 @@ SHARE_SUMO = frozenset({"ACC", "CACC", "CC", "Daniel1", "IDM", "IDMM", "Krauss",
 
 
 def shares_sumo(model: str, params: Mapping[str, Any]) -> bool:
-    """Whether a follower driven by ``model`` with ``params`` drives alike whatever else SUMO simulates."""
-    return model in SHARE_SUMO and float(params.get("sigma", DEFAULTS["sigma"])) == 0.0
+    """Whether a follower driven by ``model`` with ``params`` drives alike whatever else SUMO simulates. Not
+    Plexe's CONSENSUS: it reads GPS positions, whose rounding depends on where on the map its road is (a
+    batch's copies of the road lie elsewhere), so on a curving road a batch would drift from alone by
+    1e-13 m and, in time, change a verdict."""
+    return (model in SHARE_SUMO and float(params.get("sigma", DEFAULTS["sigma"])) == 0.0
+            and not hears_all(model, params))
 
 
 #: Plexe's CC model runs one of its controllers (its ACTIVE_CONTROLLER); the cooperative ones read the V2V

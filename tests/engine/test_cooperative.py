@@ -47,6 +47,24 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
             assert_same_episode(together, simulate(c, plan))
 
 
+def test_sumo_consensus_on_a_curving_motorway_batches_equal_alone_bit_for_bit():
+    """Regression: Plexe's CONSENSUS reads GPS positions, whose rounding depends on where its road lies on the
+    map; a batch's copies of SUMO's Bremen motorway lie elsewhere, and its speeds drifted from alone's by
+    1e-13 m/s until a verdict changed. Such a platoon now plays in a SUMO of its own."""
+    from pathlib import Path
+
+    from conftest import random_plans
+    from d4sumo.sumohome import sumo_home
+
+    bremen = Path(sumo_home()) / "tools" / "game" / "highway" / "highway.net.xml"
+    config = EpisodeConfig(network=str(bremen), route=("145354574", "189597495", "E0", "191842213"), start="steady",
+                           setpoint_m=15.0, duration_s=20.0, followers=4,
+                           controller=ControllerConfig("sumo:CC", (("active_controller", "CONSENSUS"),)))
+    plans = random_plans(config, 4, seed=1)
+    for plan, together in zip(plans, simulate_batch(config, plans)):
+        assert_same_episode(together, simulate(config, plan))
+
+
 @pytest.mark.parametrize("cls, plexe, setpoint", [("cacc", "CACC", 5.0), ("ploeg", "PLOEG", 2.0), ("consensus", "CONSENSUS", 15.0)])
 def test_the_python_cacc_agrees_with_plexe_in_sumo_fed_the_same_beacons(cls, plexe, setpoint):
     """SUMO's CC model (Plexe's) with its CACC or Ploeg's, fed the channel's beacons as Plexe's application
