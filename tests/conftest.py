@@ -88,3 +88,37 @@ def switching_fmus(tmp_path_factory) -> dict:
 
     folder = tmp_path_factory.mktemp("fmus")
     return {v: build_switching_fmu(folder / f"switching{v}.fmu", v) for v in (2, 3)}
+
+
+@pytest.fixture(scope="session")
+def asam_opendrive_checker():
+    """ASAM's OpenDRIVE checker (asam-qc-opendrive), in an environment of its own: it pins numpy < 2, which
+    d4sumo's FMU library cannot share. Made once a machine, in d4sumo's cache; returns check(xodr) -> the
+    issues it found, by checker."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    from xml.etree import ElementTree as ET
+
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    env = base / "d4sumo" / "checkers" / "asam-qc-opendrive-1.0.0"
+    checker = env / "bin" / "qc_opendrive"
+    if not checker.is_file():
+        subprocess.run([sys.executable, "-m", "venv", str(env)], check=True)
+        made = subprocess.run([str(env / "bin" / "pip"), "install", "-q", "asam-qc-opendrive==1.0.0"], capture_output=True, text=True)
+        if made.returncode != 0:
+            pytest.fail(f"ASAM's OpenDRIVE checker could not be installed (pip: {made.stderr.strip()[-500:]})")
+
+    def check(xodr: Path, tmp: Path) -> dict[str, list[str]]:
+        result, config = tmp / "xodr.xqar", tmp / "xodr-config.xml"
+        config.write_text(f'<?xml version="1.0" encoding="UTF-8"?><Config><Param name="InputFile" value="{xodr}"/>'
+                          f'<CheckerBundle application="xodrBundle"><Param name="resultFile" value="{result}"/>'
+                          "</CheckerBundle></Config>")
+        subprocess.run([str(checker), "-c", str(config)], check=True, capture_output=True, cwd=tmp)
+        found = {c.get("checkerId"): [i.get("description") for i in c.iter("Issue")]
+                 for c in ET.parse(result).getroot().iter("Checker")}
+        assert "check_asam_xodr_xml_valid_schema" in found  # it ran its checks
+        return found
+
+    return check

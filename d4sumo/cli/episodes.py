@@ -76,6 +76,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
+    if args.network is not None and args.openscenario is None:
+        raise ConfigError("--network", str(args.network), "a road for an exported scenario's replay (with --openscenario)")
     with open_store(args.db, create=False) as store:
         row = store.sample(args.sample)
         stored_campaign = store.campaign(row.campaign_id)
@@ -83,6 +85,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                                             imports=True)
     if row.outcome == "error":
         print(f"d4sumo: note: sample {row.id} was stored as errored ({row.error}); replaying it", file=sys.stderr)
+    if args.openscenario is not None:
+        return _replay_openscenario(args, row, campaign, fcd)
     evaluator = Evaluator(campaign)
     plan = evaluator.plan(row.params)
     episode = evaluator.simulate(row.index, row.params, fcd_path=fcd, gui=args.gui)
@@ -107,6 +111,54 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print("reproduces the stored sample exactly" if not differs else
               "differs from the stored sample: " + "; ".join(f"{k}: stored {stored[k]}, replayed {replayed[k]}" for k in differs))
     return 0 if not differs else EXIT_DIFFERS
+
+
+def _replay_openscenario(args, row, campaign, fcd) -> int:
+    """The stored sample with the attacker driving the exported scenario's trajectory (on ``--network``, the
+    exported road.xodr imported back, or any road): the same crash, pair and time within a step, or exit 1."""
+    import dataclasses
+
+    import numpy as np
+
+    from ..engine.networks import opendrive_network
+    from ..results.openscenario import read_motion
+    from ..search.runner import Evaluator
+
+    config = campaign.config
+    if config.maneuver_class.lateral or config.traffic is not None:
+        raise ConfigError("--openscenario", str(args.openscenario), "a sample of an in-lane campaign without [traffic] "
+                                                                    "(this version replays the attacker's motion along its lane)")
+    stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
+    if args.network is not None:
+        network = opendrive_network(args.network) if args.network.suffix == ".xodr" else args.network
+        config = dataclasses.replace(config, network=str(network), route=(), lane=None)
+        campaign = campaign.replace(config=config)
+    evaluator = Evaluator(campaign)
+    plan = dataclasses.replace(evaluator.plan(row.params),
+                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps))
+    from ..engine.simulation import simulate
+
+    episode = simulate(config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)
+    first, was = episode.first_collision, row.collision
+    same = ((first is None and was is None) or (first is not None and was is not None and first.pair == was["pair"]
+                                                 and abs(first.time_s - was["time_s"]) <= config.step_s + 1e-9))
+    original = stored.simulate(row.index, row.params)
+    n = min(len(original.trace), len(episode.trace))
+    moved = {f"v{i}": float(np.max(np.abs(original.trace[f"pos_v{i}"][:n] - episode.trace[f"pos_v{i}"][:n])))
+             for i in range(config.followers + 1)}
+    summary = {"sample_id": row.id, "network": config.network, "outcome": episode.outcome,
+               "collision": episode.first_collision_record(), "stored_collision": was, "reproduced": same,
+               "largest_position_difference_m": moved}
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        said = lambda c: "no collision" if c is None else f"{c['pair']} at {c['time_s']:.2f} s"  # noqa: E731
+        print(f"sample {row.id}, the attacker driving {args.openscenario} on {evaluator.road.name}: "
+              f"{said(episode.first_collision_record())} (stored: {said(was)})")
+        print(f"positions along the road against the stored episode's, at most: "
+              + ", ".join(f"{k} {v:.3g} m" for k, v in moved.items()))
+        print("reproduces the stored crash" if same else "does not reproduce the stored crash")
+    return 0 if same else EXIT_DIFFERS
 
 
 def _version(text: str) -> tuple[int, ...]:

@@ -159,12 +159,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fcd", type=Path, help="write SUMO's FCD output to this file")
     p.add_argument("--gui", action="store_true", help="watch it in sumo-gui (needs a display)")
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
+    p.add_argument("--openscenario", type=Path, metavar="XOSC",
+                   help="play the attacker's motion from a scenario.xosc `export --openscenario` wrote, and check that "
+                        "the same crash comes (pair, and time within a step)")
+    p.add_argument("--network", type=Path, help="with --openscenario: on this road instead (a network file, or the "
+                                                "exported road.xodr, which netconvert imports)")
     p.set_defaults(func=cmd_replay)
 
-    p = sub.add_parser("export", help="write stored samples to CSV")
+    p = sub.add_parser("export", help="write stored samples to CSV, or one as OpenSCENARIO and OpenDRIVE")
     p.add_argument("db", type=Path, help="results database")
+    p.add_argument("sample", type=int, nargs="?", help="a sample id (with --openscenario)")
     p.add_argument("--out", type=Path, help="CSV file [standard output]")
     p.add_argument("--campaign", type=int, help="only this campaign id")
+    p.add_argument("--openscenario", type=Path, metavar="DIR",
+                   help="write the sample's road (DIR/road.xodr) and episode (DIR/scenario.xosc, OpenSCENARIO 1.2)")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("build-fmu", help="build the paper's switching controller as an FMU for this machine (CMake, a C compiler)")

@@ -7,6 +7,7 @@ import argparse
 import os
 import sys
 import tempfile
+from pathlib import Path
 
 from ..errors import ConfigError, D4sumoError
 from ..files import part_of, remove_stale_parts
@@ -16,6 +17,9 @@ from .common import check_distinct, check_output_file
 def cmd_export(args: argparse.Namespace) -> int:
     from ..results.export import write_csv
     from ..search.campaign import open_store
+
+    if args.openscenario is not None or args.sample is not None:
+        return _export_openscenario(args)
 
     with open_store(args.db, create=False) as store:
         known = [c.id for c in store.campaigns()]
@@ -36,6 +40,31 @@ def cmd_export(args: argparse.Namespace) -> int:
         finally:
             tmp.unlink(missing_ok=True)
     print(f"{rows} samples written to {args.out}", file=sys.stderr)
+    return 0
+
+
+def _export_openscenario(args: argparse.Namespace) -> int:
+    from ..results.openscenario import export_openscenario
+    from ..results.records import load_records
+
+    if args.sample is None:
+        raise ConfigError("sample", None, "the id of the sample to write as OpenSCENARIO (d4sumo export DB SAMPLE --openscenario DIR)")
+    if args.openscenario is None:
+        raise ConfigError("--openscenario", None, "a folder to write the sample's road.xodr and scenario.xosc into "
+                                                  "(a sample alone is exported as OpenSCENARIO)")
+    if args.out is not None or args.campaign is not None:
+        raise ConfigError("--out" if args.out is not None else "--campaign", str(args.out or args.campaign),
+                          "no CSV flag beside --openscenario")
+    out = args.openscenario
+    if out.exists() and not out.is_dir():
+        raise ConfigError("--openscenario", str(out), "a folder (this is a file)")
+    if not (out if out.exists() else out.parent if str(out.parent) else Path(".")).is_dir():
+        raise ConfigError("--openscenario", str(out), "a folder, or a new one in an existing folder")
+    records = {r.sample_id: r for r in load_records([args.db])}
+    if args.sample not in records:
+        raise ConfigError("sample", args.sample, f"a sample id of {args.db} (1 .. {max(records, default=0)})")
+    road, scenario = export_openscenario(records[args.sample], out)
+    print(f"sample {args.sample}: {road} (OpenDRIVE, netconvert's) and {scenario} (OpenSCENARIO 1.2)")
     return 0
 
 

@@ -64,6 +64,24 @@ def plain_xml(net_file: Path, name: str) -> tuple[bytes, bytes, bytes, bytes]:
         return read(".nod.xml"), read(".edg.xml"), read(".con.xml"), read(".typ.xml")
 
 
+def opendrive_output(net_file: Path, out: Path, name: str) -> None:
+    """The network as OpenDRIVE, written by netconvert itself (``--opendrive-output``)."""
+    binary = sumo_binary("netconvert")
+    result = _run(binary, [binary, "--sumo-net-file", str(net_file), "--opendrive-output", str(out)], timeout_s=300)
+    if result.returncode != 0:
+        raise ConfigError("scenario.network", name, "a network netconvert writes as OpenDRIVE (netconvert: "
+                          f"{_errors(result.stderr or result.stdout, {str(net_file): net_file.name})})")
+
+
+def opendrive_input(xodr: Path, out: Path) -> None:
+    """An OpenDRIVE road as SUMO's network (``--opendrive-files``): the way back of `opendrive_output`."""
+    binary = sumo_binary("netconvert")
+    result = _run(binary, [binary, "--opendrive-files", str(xodr), "--output-file", str(out)], timeout_s=300)
+    if result.returncode != 0:
+        raise ConfigError("--network", str(xodr), "an OpenDRIVE file netconvert imports (netconvert: "
+                          f"{_errors(result.stderr or result.stdout, {str(xodr): xodr.name})})")
+
+
 def _run(binary: str, cmd: list[str], timeout_s: float) -> subprocess.CompletedProcess:
     try:
         return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)

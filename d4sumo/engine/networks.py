@@ -209,3 +209,21 @@ def _plain_source(net_file: Path, name: str, stem: str) -> NetworkSource:
     if key not in _PLAIN:
         _PLAIN[key] = NetworkSource(name, stem, *plain_xml(net_file, name))
     return dataclasses.replace(_PLAIN[key], name=name, stem=stem)
+
+
+def opendrive_network(xodr: Path) -> Path:
+    """An OpenDRIVE road (an exported scenario's road.xodr) as SUMO's network, imported by netconvert once
+    (kept in the network cache by its content)."""
+    from .netconvert import opendrive_input
+    from .scenarios import default_cache_dir
+
+    xodr = Path(xodr)
+    if not xodr.is_file():
+        raise ConfigError("--network", str(xodr), "an OpenDRIVE file (no file there)")
+    net = default_cache_dir() / f"opendrive-{hashlib.sha256(xodr.read_bytes()).hexdigest()[:16]}.net.xml"
+    if not net.is_file():
+        net.parent.mkdir(parents=True, exist_ok=True)
+        partial = net.with_name(f"{net.name}.{os.getpid()}.partial")
+        opendrive_input(xodr, partial)
+        os.replace(partial, net)
+    return net

@@ -418,6 +418,9 @@ class AttackPlan:
     lane_changes: tuple[tuple[int, int], ...] = ()
     #: a message attack's falsifier of the attacker's V2V beacons (`messages.BeaconFalsifier`); None: it tells the truth
     beacons: object = None
+    #: the attacker's speed at each step's end as another run drove it (an exported scenario's trajectory,
+    #: `results.openscenario`): it then drives exactly so, whatever its pedals; None: its pedals drive it
+    motion: np.ndarray | None = None
 
 
 def lane_changes(plan: AttackPlan, maneuver: Maneuver) -> list[tuple[int, int]]:

@@ -215,7 +215,7 @@ class Platoon:
     lead that cruises at the target speed, or an obstacle at its constant speed)."""
 
     def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float,
-                 followers: list[PythonFollower | SumoFollower] | None = None, beacons=None):
+                 followers: list[PythonFollower | SumoFollower] | None = None, beacons=None, motion=None):
         attack_u = np.asarray(attack_u, dtype=float)
         if attack_u.shape != (config.steps,):
             raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
@@ -223,6 +223,8 @@ class Platoon:
         self.maneuver = maneuver_of(config)
         self.ids = config.vehicle_ids
         self.attack_u = attack_u.tolist()  # plain floats: fast in the step loop
+        #: the attacker's speed at each step's end, where it replays a motion (`AttackPlan.motion`)
+        self._motion = None if motion is None else [float(v) for v in motion]
         vehicle, dt = config.vehicle_of(0), config.step_s  # the attacker's
         self.attacker_vehicle = vehicle
         self.followers = followers or followers_of(config)  # given: an episode carried on from a batch
@@ -295,6 +297,10 @@ class Platoon:
             self._attacking = True
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
+        if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
+            v = self._motion[k]
+            commands[0] = acceleration_to_command((v - speeds[0]) / self.config.step_s, self.attacker_vehicle)
+            new_speeds[0] = v
         if self.channel is not None:
             accels, now = self._accelerations(speeds), k * self.config.step_s
             self.channel.send(k, positions, speeds, accels)

@@ -245,7 +245,7 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         acc = _sample_figure(r, "accel", fcd, out / f"accel_{stem(r)}.png")
         parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
                      f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; FCD: "
-                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; "
+                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; {_openscenario_links(r, out, stem(r))}"
                      f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
                      f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
 
@@ -277,6 +277,20 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
     (out / "index.html").write_text(page, encoding="utf-8")
+
+
+def _openscenario_links(record: Record, out: Path, name: str) -> str:
+    """The sample as OpenSCENARIO on its road as OpenDRIVE (`openscenario`), written beside the report, as links;
+    a sample this version does not export (among traffic) says so."""
+    from .openscenario import export_openscenario
+
+    folder = f"openscenario/{name}"
+    try:
+        export_openscenario(record, out / folder)
+    except ConfigError as exc:
+        return f"not exported as OpenSCENARIO ({html.escape(exc.allowed)}); "
+    return (f"OpenSCENARIO: <a href='{folder}/scenario.xosc'><code>{folder}/scenario.xosc</code></a> on "
+            f"<a href='{folder}/road.xodr'><code>road.xodr</code></a>; ")
 
 
 def severe_rule(records: Sequence[Record], top: Sequence[Record], severe: int) -> str:

@@ -128,6 +128,16 @@ def test_the_reports_fcd_files_name_themselves_where_they_are(report):
         assert f'<fcd-output value="{fcd}"/>' in head and ".part" not in head, fcd
 
 
+def test_each_most_severe_attack_links_its_openscenario_on_its_opendrive_road(report):
+    index, text, page = report
+    scenarios = [ref for ref in page.links if ref.endswith("scenario.xosc")]
+    assert len(scenarios) == len(list((index.parent / "fcd").glob("*.xml"))) == 3
+    for ref in scenarios:
+        xosc = (index.parent / ref).read_text()
+        assert (index.parent / ref).with_name("road.xodr").is_file() and '<LogicFile filepath="road.xodr"/>' in xosc
+        assert 'name="d4sumo.outcome" value="success"' in xosc and "<CollisionCondition>" in xosc
+
+
 def test_the_report_never_says_one_of_something_in_the_plural(report):
     _, text, _ = report
     assert re.search(r"\b1 (attacks|clusters|noise points|successes|samples|panels)\b", text) is None

@@ -1,0 +1,216 @@
+"""A stored counterexample out to other simulators: its road as OpenDRIVE and its episode as OpenSCENARIO 1.2.
+
+``d4sumo export DB SAMPLE --openscenario DIR`` replays the sample through SUMO (its FCD: where each car
+was, every step) and writes
+
+- ``DIR/road.xodr``: the network the episode ran on, as netconvert's own ``--opendrive-output`` writes it;
+- ``DIR/scenario.xosc``: OpenSCENARIO 1.2, written with scenariogeneration. Each car is an entity whose
+  reference point is its front bumper (SUMO's position; its bounding box lies behind it). The attacker
+  (and a maneuver's other car) follows the trajectory it drove, a polyline of timed world positions, one a
+  step. The followers start where they were, at their speed, and carry their controller as the system
+  under test: a controller named by its class, its parameters (and the scenario's setpoint and target
+  speed) as properties, so that another simulator can put its own ACC in their place. The storyboard
+  stops at the collision that ended the episode (the pair that collided), or at its end.
+
+The file header's properties say what d4sumo found: the outcome, the pair, the time of the collision.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+
+from ..engine.netconvert import opendrive_output
+from ..errors import ConfigError
+from ..model.maneuvers import CAR_WIDTH_M
+from .records import Record
+
+CAR_HEIGHT_M = 1.5
+#: OpenSCENARIO's minor version the export writes (1.2)
+OSC_MINOR = 2
+ROAD_FILE, SCENARIO_FILE = "road.xodr", "scenario.xosc"
+
+
+def read_fcd_xy(path: str | Path) -> dict[str, dict[str, list[float]]]:
+    """SUMO's FCD as {vehicle: {time, x, y, angle, speed}}, every step it was there."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for _, element in ET.iterparse(path, events=("end",)):
+        if element.tag != "timestep":
+            continue
+        t = float(element.get("time"))
+        for v in element.iter("vehicle"):
+            d = out.setdefault(v.get("id"), {"time": [], "x": [], "y": [], "angle": [], "speed": []})
+            d["time"].append(t)
+            for key in ("x", "y", "angle", "speed"):
+                d[key].append(float(v.get(key)))
+        element.clear()
+    return out
+
+
+def heading_rad(sumo_angle_deg: float) -> float:
+    """SUMO's angle (degrees, clockwise from north) as OpenSCENARIO's heading (radians, counterclockwise
+    from the x axis), in [0, 2 pi)."""
+    return math.radians(90.0 - sumo_angle_deg) % (2.0 * math.pi)
+
+
+def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int) -> np.ndarray:
+    """The speed at each step's end of ``vehicle`` as an exported scenario has it, what `AttackPlan.motion`
+    replays: from its initial speed, and the distance between two of its trajectory's timed positions,
+    which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that stops
+    within a step ends it at 0). Past the trajectory's end it holds its last speed."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported ({exc})") from None
+    trajectory = next((t for t in root.iter("Trajectory") if t.get("name") == f"{vehicle}_as_played"), None)
+    vertices = trajectory.findall("./Shape/Polyline/Vertex") if trajectory is not None else []
+    if len(vertices) < 2:
+        raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s trajectory "
+                                                       "(a polyline of timed world positions)")
+    t = np.array([float(v.get("time")) for v in vertices])
+    xy = np.array([[float(v.find("./Position/WorldPosition").get(k)) for k in ("x", "y")] for v in vertices])
+    if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
+        raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")
+    start = next((p for p in root.iter("Private") if p.get("entityRef") == vehicle), None)
+    target = start.find(".//AbsoluteTargetSpeed") if start is not None else None
+    if target is None:
+        raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s initial speed")
+    v = float(target.get("value"))
+    speeds = []
+    for d, dt in zip(np.hypot(*np.diff(xy, axis=0).T), np.diff(t)):
+        v = max(0.0, 2.0 * d / dt - v)
+        speeds.append(v)
+    speeds = np.array(speeds)
+    return np.concatenate([speeds, np.full(max(0, steps - speeds.size), speeds[-1])])[:steps]
+
+
+def export_openscenario(record: Record, out_dir: str | Path) -> tuple[Path, Path]:
+    """Write the sample's ``road.xodr`` and ``scenario.xosc`` into ``out_dir`` (created; files already there
+    are replaced whole, never half-written)."""
+    from ..search.campaign import Campaign, open_store
+    from ..search.runner import Evaluator
+
+    out_dir = Path(out_dir)
+    with open_store(record.db, create=False) as store:
+        definition = store.campaign(record.campaign_id).definition
+    campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
+    config = campaign.config
+    if config.traffic is not None:
+        raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without [traffic] (this version writes "
+                                                          "the platoon, not the traffic around it)")
+    evaluator = Evaluator(campaign)
+    with tempfile.TemporaryDirectory(prefix="d4sumo-xosc-") as tmp:
+        fcd = Path(tmp) / "fcd.xml"
+        episode = evaluator.simulate(record.index, record.params, fcd_path=fcd)
+        tracks = read_fcd_xy(fcd)
+        opendrive_output(evaluator.road.net_file, Path(tmp) / ROAD_FILE, config.network)
+        scenario = _scenario(record, campaign, tracks, episode)
+        scenario.write_xml(str(Path(tmp) / SCENARIO_FILE))
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for name in (ROAD_FILE, SCENARIO_FILE):  # each replaced whole: a reader never sees half a file
+            part = out_dir / f".{name}.part"
+            shutil.copyfile(Path(tmp) / name, part)
+            os.replace(part, out_dir / name)
+    return out_dir / ROAD_FILE, out_dir / SCENARIO_FILE
+
+
+def _vehicle(xosc, name: str, vehicle, max_speed_mps: float):
+    category = {"truck": xosc.VehicleCategory.truck, "bus": xosc.VehicleCategory.bus,
+                "motorcycle": xosc.VehicleCategory.motorbike}.get(vehicle.vclass, xosc.VehicleCategory.car)
+    length = vehicle.length_m
+    # the reference point is the front bumper, as SUMO's position: the box lies behind it
+    box = xosc.BoundingBox(CAR_WIDTH_M, length, CAR_HEIGHT_M, -length / 2.0, 0.0, CAR_HEIGHT_M / 2.0)
+    front = xosc.Axle(0.5, 0.6, 1.6, -0.2 * length, 0.3)
+    rear = xosc.Axle(0.0, 0.6, 1.6, -0.8 * length, 0.3)
+    return xosc.Vehicle(name, category, box, front, rear, max_speed_mps, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+
+
+def _controller(xosc, follower: int, controller, config):
+    """The follower's controller as the system under test: its class, its parameters as properties."""
+    properties = xosc.Properties()
+    properties.add_property("system_under_test", "true")
+    properties.add_property("class", controller.cls)
+    properties.add_property("setpoint_m", repr(config.setpoint_m))
+    properties.add_property("target_speed_mps", repr(config.speed_mps))
+    for key, value in controller.params:
+        properties.add_property(str(key), repr(value) if isinstance(value, float) else str(value))
+    return xosc.Controller(f"v{follower}_{controller.cls}", properties)
+
+
+def _position(xosc, track: dict, i: int):
+    return xosc.WorldPosition(track["x"][i], track["y"][i], 0.0, heading_rad(track["angle"][i]), 0.0, 0.0)
+
+
+def _scenario(record: Record, campaign, tracks: dict, episode):
+    from scenariogeneration import xosc
+
+    config = campaign.config
+    ids = config.vehicle_ids
+    n = config.followers + 1
+    entities = xosc.Entities()
+    init = xosc.Init()
+    t0 = min(tracks[v]["time"][0] for v in ids if v in tracks)
+    for i, vid in enumerate(ids):
+        if vid not in tracks:
+            continue
+        vehicle = _vehicle(xosc, vid, config.vehicle_of(i), max(config.speed_mps, 70.0))
+        if 1 <= i < n:
+            entities.add_scenario_object(vid, vehicle, controller=_controller(xosc, i, config.controllers[i - 1], config))
+        else:
+            entities.add_scenario_object(vid, vehicle)
+        track = tracks[vid]
+        init.add_init_action(vid, xosc.TeleportAction(_position(xosc, track, 0)))
+        init.add_init_action(vid, xosc.AbsoluteSpeedAction(track["speed"][0], xosc.TransitionDynamics(
+            xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)))
+    story = xosc.Story("attack")
+    act = xosc.Act("as_played", xosc.ValueTrigger("at_start", 0.0, xosc.ConditionEdge.none,
+                                                  xosc.SimulationTimeCondition(t0, xosc.Rule.greaterOrEqual)))
+    for i, vid in enumerate(ids):  # the cars d4sumo commands, not the systems under test: as they drove
+        if (1 <= i < n) or vid not in tracks:
+            continue
+        track = tracks[vid]
+        polyline = xosc.Polyline([t - t0 for t in track["time"]], [_position(xosc, track, k) for k in range(len(track["time"]))])
+        trajectory = xosc.Trajectory(f"{vid}_as_played", False)
+        trajectory.add_shape(polyline)
+        action = xosc.FollowTrajectoryAction(trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.relative, 1.0, 0.0)
+        event = xosc.Event(f"{vid}_drives", xosc.Priority.override)
+        event.add_action(f"{vid}_follows_its_trajectory", action)
+        event.add_trigger(xosc.ValueTrigger(f"{vid}_at_start", 0.0, xosc.ConditionEdge.none,
+                                            xosc.SimulationTimeCondition(t0, xosc.Rule.greaterOrEqual)))
+        maneuver = xosc.Maneuver(f"{vid}_maneuver")
+        maneuver.add_event(event)
+        group = xosc.ManeuverGroup(f"{vid}_group")
+        group.add_actor(vid)
+        group.add_maneuver(maneuver)
+        act.add_maneuver_group(group)
+    story.add_act(act)
+    end = max(tracks[v]["time"][-1] for v in ids if v in tracks)
+    stop = xosc.ConditionGroup("stop")
+    stop.add_condition(xosc.ValueTrigger("episode_end", 0.0, xosc.ConditionEdge.rising,
+                                         xosc.SimulationTimeCondition(end + config.step_s, xosc.Rule.greaterThan), "stop"))
+    stops = xosc.Trigger("stop")
+    stops.add_conditiongroup(stop)
+    first = episode.first_collision
+    if first is not None:  # the expected end: the collision d4sumo found
+        collided = xosc.ConditionGroup("stop")
+        collided.add_condition(xosc.EntityTrigger("expected_collision", 0.0, xosc.ConditionEdge.rising,
+                                                  xosc.CollisionCondition(first.follower), first.leader, triggeringpoint="stop"))
+        stops.add_conditiongroup(collided)
+    storyboard = xosc.StoryBoard(init, stops)
+    storyboard.add_story(story)
+    header = xosc.Properties()
+    header.add_property("d4sumo.database", str(record.db))
+    header.add_property("d4sumo.sample", str(record.sample_id))
+    header.add_property("d4sumo.outcome", episode.outcome)
+    if first is not None:
+        header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")
+        header.add_property("d4sumo.collision_time_s", repr(first.time_s))
+    return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", xosc.ParameterDeclarations(), entities, storyboard,
+                         xosc.RoadNetwork(ROAD_FILE), xosc.Catalog(), osc_minor_version=OSC_MINOR,
+                         header_properties=header)

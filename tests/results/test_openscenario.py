@@ -1,0 +1,110 @@
+"""A stored counterexample out as OpenDRIVE and OpenSCENARIO 1.2 (results/openscenario.py), checked by
+ASAM's own checkers, and back: netconvert imports the road, d4sumo plays the exported attacker motion on
+it, and the same crash comes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from d4sumo.errors import ConfigError
+from d4sumo.results.openscenario import heading_rad, read_motion
+
+SUCCESS_KNOTS = "0.46,-0.65,0.73,0.08,-0.4,-0.15,-0.94,-0.75,0.34"
+
+
+def run(*argv, cwd=None):
+    return subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True, timeout=300, cwd=cwd)
+
+
+def xosc_issues(path: Path, tmp: Path) -> dict[str, list[str]]:
+    """ASAM's OpenSCENARIO checker (asam-qc-openscenarioxml) on a file: the issues of each of its checks."""
+    from qc_baselib import Configuration, Result
+    from qc_openscenario import constants
+    from qc_openscenario.main import run_checks
+
+    config_file = tmp / "xosc-config.xml"
+    config_file.write_text(f'<?xml version="1.0" encoding="UTF-8"?><Config><Param name="InputFile" value="{path}"/>'
+                           f'<CheckerBundle application="{constants.BUNDLE_NAME}"><Param name="resultFile" '
+                           f'value="{tmp / "xosc.xqar"}"/></CheckerBundle></Config>')
+    config = Configuration()
+    config.load_from_file(str(config_file))
+    result = Result()
+    result.register_checker_bundle(name=constants.BUNDLE_NAME, description="", version=constants.BUNDLE_VERSION, summary="")
+    result.set_result_version(version=constants.BUNDLE_VERSION)
+    run_checks(config, result)
+    checkers = {c.checker_id: c for b in result.get_checker_bundle_results() for c in b.checkers}
+    assert checkers["check_asam_xosc_xml_valid_schema"].status.name == "COMPLETED"  # against OpenSCENARIO 1.2's schema
+    return {k: [i.description for i in c.issues] for k, c in checkers.items()}
+
+
+def test_the_heading_is_openscenarios_and_a_ballistic_trajectory_gives_back_its_speeds(tmp_path):
+    assert heading_rad(90.0) == 0.0 and heading_rad(0.0) == pytest.approx(np.pi / 2) and heading_rad(180.0) == pytest.approx(1.5 * np.pi)
+    dt, v = 0.05, [20.0, 21.0, 19.5, 0.3, 0.0, 0.0]  # then it stops within a step (at 8 m/s^2: in 0.0375 s), and stands
+    x = [0.0]
+    for a, b in zip(v, v[1:]):
+        x.append(x[-1] + ((a + b) / 2 * dt if b > 0 else a * a / (2 * 8.0)))  # stopping within the step at 8 m/s^2
+    vertices = "".join(f'<Vertex time="{k * dt!r}"><Position><WorldPosition x="{xi!r}" y="5.0"/></Position></Vertex>'
+                       for k, xi in enumerate(x))
+    path = tmp_path / "s.xosc"
+    path.write_text(f'<OpenSCENARIO><Storyboard><Init><Actions><Private entityRef="v0"><PrivateAction><LongitudinalAction>'
+                    f'<SpeedAction><SpeedActionTarget><AbsoluteTargetSpeed value="20.0"/></SpeedActionTarget></SpeedAction>'
+                    f'</LongitudinalAction></PrivateAction></Private></Actions></Init></Storyboard>'
+                    f'<Trajectory name="v0_as_played"><Shape><Polyline>{vertices}</Polyline></Shape></Trajectory></OpenSCENARIO>')
+    assert read_motion(path, "v0", dt, 7) == pytest.approx([21.0, 19.5, 0.3, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
+    with pytest.raises(ConfigError) as info:
+        read_motion(path, "v9", dt, 6)
+    assert info.value.field == "--openscenario"
+
+
+@pytest.mark.sumo
+def test_an_exported_counterexample_passes_asams_checkers_and_replays_to_the_same_crash_on_its_road_imported_back(
+        tmp_path, asam_opendrive_checker):
+    db = tmp_path / "c.sqlite"
+    assert run("falsify", "--start", "steady", "--setpoint", "5", "--optimizer", "random", "--samples", "4", "--seed", "2",
+               "--db", str(db), "--quiet").returncode == 0
+    from d4sumo.search.campaign import open_store
+
+    with open_store(db, create=False) as store:
+        samples = store.samples()
+    crashed = [s for s in samples if s.outcome != "no_crash"]
+    assert {s.outcome for s in crashed} >= {"success", "attacker_crash"} or len(crashed) >= 2
+    for s in crashed:
+        out = tmp_path / f"sample{s.id}"
+        exported = run("export", str(db), str(s.id), "--openscenario", str(out))
+        assert exported.returncode == 0, exported.stderr
+        assert not any(issues for issues in xosc_issues(out / "scenario.xosc", tmp_path).values())
+        assert not any(issues for issues in asam_opendrive_checker(out / "road.xodr", tmp_path).values())
+        back = run("replay", str(db), str(s.id), "--openscenario", str(out / "scenario.xosc"), "--network",
+                   str(out / "road.xodr"), "--json")
+        assert back.returncode == 0, back.stderr
+        summary = json.loads(back.stdout)
+        assert summary["reproduced"] and summary["collision"]["pair"] == s.collision["pair"]
+        assert abs(summary["collision"]["time_s"] - s.collision["time_s"]) <= 0.05
+        assert max(summary["largest_position_difference_m"].values()) < 1e-3  # measured: 2e-5 m
+
+
+@pytest.mark.sumo
+def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tmp_path):
+    db = tmp_path / "c.sqlite"
+    assert run("falsify", "--start", "steady", "--optimizer", "random", "--samples", "2", "--db", str(db), "--quiet").returncode == 0
+    afile = tmp_path / "a.txt"
+    afile.write_text("x")
+    cases = [
+        (("export", str(db), "1"), "--openscenario"),
+        (("export", str(db), "9", "--openscenario", str(tmp_path / "o")), "sample: got 9"),
+        (("export", str(db), "1", "--openscenario", str(afile)), "a folder (this is a file)"),
+        (("export", str(db), "1", "--openscenario", str(tmp_path / "no" / "o")), "a new one in an existing folder"),
+        (("replay", str(db), "1", "--network", "road.xodr"), "with --openscenario"),
+        (("replay", str(db), "1", "--openscenario", str(afile)), "an OpenSCENARIO file d4sumo exported"),
+    ]
+    for argv, said in cases:
+        result = run(*argv)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and said in lines[0] and "Traceback" not in result.stderr, (argv, result.stderr)
+    assert not (tmp_path / "o").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.sqlite"]
