@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -122,3 +124,44 @@ def asam_opendrive_checker():
         return found
 
     return check
+
+
+@contextlib.contextmanager
+def dask_elsewhere(tmp_path, workers: int = 1):
+    """A Dask scheduler and ``workers`` workers started as their own processes, each in a folder of its own
+    under ``tmp_path`` (scheduler, worker1, ...) with a cache of its own: they see nothing of the client's
+    folder. Yields (the scheduler's address, the workers' processes); all are killed on the way out."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    dask = str(Path(sys.executable).parent / "dask")
+    scheduler_file = tmp_path / "scheduler.json"
+    procs = []
+
+    def spawn(args, folder):
+        folder.mkdir()
+        env = {**os.environ, "XDG_CACHE_HOME": str(folder / "cache")}
+        procs.append(subprocess.Popen([dask, *args], cwd=folder, env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL, start_new_session=True))
+        return procs[-1]
+
+    try:
+        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+              tmp_path / "scheduler")
+        deadline = time.time() + 60
+        while not scheduler_file.exists() and time.time() < deadline:
+            time.sleep(0.2)
+        address = json.loads(scheduler_file.read_text())["address"]
+        yield address, [spawn(["worker", address, "--nthreads", "1", "--no-dashboard"], tmp_path / f"worker{i}")
+                        for i in range(1, workers + 1)]
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass

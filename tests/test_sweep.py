@@ -214,28 +214,9 @@ def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_o
     """Regression: Dask workers wrote into a database on their own side and the client reported
     '0 samples'. Now the workers (started elsewhere, with their own cache) only compute; the client
     stores everything, and a worker killed mid-sweep loses nothing finished."""
-    import json as json_module
-    from pathlib import Path
+    from conftest import dask_elsewhere
 
-    dask = Path(sys.executable).parent / "dask"
-    scheduler_file = tmp_path / "scheduler.json"
-    procs = []
-
-    def spawn(args, folder):
-        folder.mkdir()
-        env = {**os.environ, "XDG_CACHE_HOME": str(folder / "cache")}
-        procs.append(subprocess.Popen([str(dask), *args], cwd=folder, env=env, stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.DEVNULL, start_new_session=True))
-        return procs[-1]
-
-    try:
-        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
-              tmp_path / "scheduler")
-        deadline = time.time() + 60
-        while not scheduler_file.exists() and time.time() < deadline:
-            time.sleep(0.2)
-        address = json_module.loads(scheduler_file.read_text())["address"]
-        workers = [spawn(["worker", address, "--nthreads", "1", "--no-dashboard"], tmp_path / f"worker{i}") for i in (1, 2)]
+    with dask_elsewhere(tmp_path, workers=2) as (address, workers):
         path = write(tmp_path, TINY.replace("samples = 6", "samples = 30"))
         db = tmp_path / "client" / "r.sqlite"
         db.parent.mkdir()
@@ -248,12 +229,6 @@ def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_o
         assert "4 campaigns, 120 samples" in out
         for i in (1, 2):  # the workers wrote nothing of the results on their side
             assert not list((tmp_path / f"worker{i}").rglob("*.sqlite"))
-    finally:
-        for p in procs:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
     rows = outcomes(db)
     assert len(rows) == 120 and len({(r[0], r[1]) for r in rows}) == 120
     run_sweep(Sweep.load(path), tmp_path / "local.sqlite", workers=1)

@@ -167,11 +167,7 @@ def test_a_dask_sweep_ships_the_fmu_to_workers_that_cannot_see_the_clients_disk(
     """A scheduler and a worker started in folders of their own, with caches of their own: the sweep names
     the FMU by a path relative to the client's folder, which the worker does not have. The samples equal
     a local sweep's."""
-    import json
-    import os
-    import signal
-    import time
-
+    from conftest import dask_elsewhere
     from d4sumo.search.store import Store
 
     client = tmp_path / "client"
@@ -179,36 +175,14 @@ def test_a_dask_sweep_ships_the_fmu_to_workers_that_cannot_see_the_clients_disk(
     shutil.copy(switching_fmus[2], client / "acc.fmu")
     (client / "sweep.toml").write_text('name = "fmu"\n[grid]\nsetpoint_m = [5.0, 7.0]\noptimizer = ["random"]\n'
                                        '[controller]\nclass = "fmu:acc.fmu"\n[scenario]\nstart = "steady"\n[search]\nsamples = 6\n')
-    dask = os.path.join(os.path.dirname(sys.executable), "dask")
-    procs = []
-
-    def spawn(args, folder):
-        folder.mkdir()
-        env = {**os.environ, "XDG_CACHE_HOME": str(folder / "cache")}
-        procs.append(subprocess.Popen([dask, *args], cwd=folder, env=env, stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.DEVNULL, start_new_session=True))
 
     def rows(db):
         with Store(db, create=False) as store:
             return sorted((s.campaign_id, s.index, s.params, s.robustness, s.outcome) for s in store.samples())
 
-    scheduler_file = tmp_path / "scheduler.json"
-    try:
-        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
-              tmp_path / "scheduler")
-        deadline = time.time() + 60
-        while not scheduler_file.exists() and time.time() < deadline:
-            time.sleep(0.2)
-        address = json.loads(scheduler_file.read_text())["address"]
-        spawn(["worker", address, "--nthreads", "1", "--no-dashboard"], tmp_path / "worker")
+    with dask_elsewhere(tmp_path) as (address, _):
         swept = run("sweep", "sweep.toml", "--db", "dask.sqlite", "--dask", address, "--quiet", cwd=client)
         assert swept.returncode == 0, swept.stderr
-    finally:
-        for p in procs:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-    assert list((tmp_path / "worker" / "cache" / "d4sumo" / "fmus" / "shipped").glob("*.fmu"))  # it came by value
+    assert list((tmp_path / "worker1" / "cache" / "d4sumo" / "fmus" / "shipped").glob("*.fmu"))  # it came by value
     assert run("sweep", "sweep.toml", "--db", "local.sqlite", "--workers", "1", "--quiet", cwd=client).returncode == 0
     assert rows(client / "dask.sqlite") == rows(client / "local.sqlite") and len(rows(client / "local.sqlite")) == 12
