@@ -15,6 +15,7 @@ Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems s
 from __future__ import annotations
 
 import statistics
+import tempfile
 import time
 
 import libsumo
@@ -55,16 +56,19 @@ def main() -> None:
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
     parser.add_argument("--fmu", action="store_true", help="also the shipped FMUs of the paper's controller")
     args = parser.parse_args()
-    fmus = {}
-    if args.fmu:
-        import tempfile
-
-        from d4sumo.fmus import build_switching_fmu
-
-        folder = tempfile.mkdtemp(prefix="bench-fmu-")
-        fmus = {f"fmu:{build_switching_fmu(f'{folder}/switching{v}.fmu', v)}": f"FMI {v}.0" for v in (2, 3)}
-        args.systems = list(dict.fromkeys(["switching", *args.systems, *fmus]))
     parser.check_counts({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
+    with tempfile.TemporaryDirectory(prefix="bench-fmu-") as folder:
+        fmus = {}
+        if args.fmu:
+            from d4sumo.fmus import build_switching_fmu
+
+            fmus = {f"fmu:{build_switching_fmu(f'{folder}/switching{v}.fmu', v)}": f"FMI {v}.0" for v in (2, 3)}
+            args.systems = list(dict.fromkeys(["switching", *args.systems, *fmus]))
+        measure(args, fmus)
+
+
+def measure(args, fmus: dict) -> None:
+    """Time each system's episodes against bare stepping, interleaved, and print the ratios."""
     configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
     road = build_road(configs[0].network)
     attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length
@@ -78,13 +82,14 @@ def main() -> None:
     steps, cars = configs[0].steps, args.followers + 1
     print(f"{steps} steps, {cars} cars, {args.repeats} repeats (median, start to close)")
     ratios = {}
+    shown = {name: fmus.get(name, name) for name in args.systems}  # the shipped FMUs by their FMI version
     for name in args.systems:
         mb, me = statistics.median(times[name][0]), statistics.median(times[name][1])
         ratios[name] = me / mb
-        print(f"followers {name:<10} bare libsumo stepping : {mb * 1e3:7.2f} ms  ({mb / steps * 1e6:.1f} us/step)")
-        print(f"followers {name:<10} d4sumo episode        : {me * 1e3:7.2f} ms  ({me / steps * 1e6:.1f} us/step)")
+        print(f"followers {shown[name]:<10} bare libsumo stepping : {mb * 1e3:7.2f} ms  ({mb / steps * 1e6:.1f} us/step)")
+        print(f"followers {shown[name]:<10} d4sumo episode        : {me * 1e3:7.2f} ms  ({me / steps * 1e6:.1f} us/step)")
     for name in args.systems:
-        print(f"ratio episode / bare, followers {name:<10}: {ratios[name]:5.2f}   (target <= {TARGET}: "
+        print(f"ratio episode / bare, followers {shown[name]:<10}: {ratios[name]:5.2f}   (target <= {TARGET}: "
               + ("met)" if ratios[name] <= TARGET else f"{ratios[name] / TARGET:.2f} times it)"))
     python = statistics.median(times["switching"][1]) if fmus else None
     for name, label in fmus.items():
