@@ -55,6 +55,13 @@ def _cache_dir() -> Path:
 
 
 def file_sha256(path: Path) -> str:
+    """The file's content hash, read once a version of it (an FMU of megabytes is named every episode)."""
+    stat = os.stat(path)
+    return _sha256(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=64)
+def _sha256(path: str, mtime_ns: int, size: int) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
