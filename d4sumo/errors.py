@@ -31,6 +31,11 @@ class SumoError(D4sumoError):
     """SUMO could not be found, could not build a network, or failed during an episode."""
 
 
+class NotSimulable(D4sumoError):
+    """A stored campaign whose follower controller cannot be had here (a module that does not import, an
+    FMU that is missing or has changed): its samples can be read, not replayed."""
+
+
 class WarmupCollision(D4sumoError):
     """Cars collided in the warm-up, before the attack started: the episode scores no attack. The warm-up
     is the same whatever the attack, so every episode of that configuration ends so."""

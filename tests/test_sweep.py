@@ -95,7 +95,7 @@ def test_a_sweep_grid_ranges_over_radars_each_a_whole_table_the_empty_one_perfec
         ("name = 'x'\n", "[grid]"),
         ("[grid\n", "valid TOML"),
         (TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC", {class = "sumo:ACC", tau = 0}]\n'), "Must be greater than 0"),
-        (TINY.replace("[grid]\n", '[grid]\ncontroller = [["sumo:ACC", "switching"]]\n'), "one [[controller]] table per follower"),
+        (TINY.replace("[grid]\n", '[grid]\ncontroller = [["sumo:ACC", "switching"]]\n'), "one per follower (3: --controller A,B,C or [[controller]] tables)"),
         # a table every campaign shares that one grid point cannot take: the point is named
         (TINY.replace("[grid]\n", '[grid]\ncontroller = ["switching", "sumo:ACC"]\n') + "\n[radar]\ngap_noise_m = 0.5\n",
          "grid point {'controller': 'sumo:ACC'"),

@@ -135,7 +135,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
         campaign = campaign.replace(config=config)
     evaluator = Evaluator(campaign)
     plan = dataclasses.replace(evaluator.plan(row.params),
-                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps))
+                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id))
     from ..engine.simulation import simulate
 
     episode = simulate(config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)

@@ -193,8 +193,9 @@ class EpisodeConfig:
             raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
         if isinstance(self.controller, (list, tuple)):
             if len(self.controller) != self.followers:
-                raise ConfigError("controller", f"{len(self.controller)} tables",
-                                  f"one [[controller]] table per follower ({self.followers}), or one [controller] for all")
+                raise ConfigError("controller", f"{len(self.controller)} controllers",
+                                  f"one per follower ({self.followers}: --controller A,B,C or [[controller]] tables), or one "
+                                  "for all (--followers sets how many)")
             fix("controller", tuple(self.controller))
         controllers = self.controllers
         if not all(isinstance(c, ControllerConfig) for c in controllers):

@@ -155,7 +155,7 @@ def attack_box(config, longitudinal: AttackFamily, message: str = "", field: str
         raise ConfigError("attack.message", kind, f"one of {', '.join(MESSAGE_ATTACKS)}")
     if config.v2v is None:
         raise ConfigError("attack.message", kind, "a platoon that exchanges V2V beacons (a follower whose controller "
-                                                  "reads them: cacc, ploeg, or sumo:CC with a cooperative active_controller)")
+                                                  "reads them: cacc, ploeg, consensus, or sumo:CC with a cooperative active_controller)")
     if config.maneuver_class.lateral:
         raise ConfigError("attack.message", kind, "the in-lane attacker (scenario.maneuver inlane)")
     if isinstance(sender, bool) or not isinstance(sender, int) or not 0 <= sender < config.followers:

@@ -59,11 +59,12 @@ def heading_rad(sumo_angle_deg: float) -> float:
     return math.radians(90.0 - sumo_angle_deg) % (2.0 * math.pi)
 
 
-def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int) -> np.ndarray:
+def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sample: int | None = None) -> np.ndarray:
     """The speed at each step's end of ``vehicle`` as an exported scenario has it, what `AttackPlan.motion`
     replays: from its initial speed, and the distance between two of its trajectory's timed positions,
     which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that stops
-    within a step ends it at 0). Past the trajectory's end it holds its last speed."""
+    within a step ends it at 0). Past the trajectory's end it holds its last speed. ``sample``: the sample it
+    must be the export of (its header says so), if it says."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
@@ -74,6 +75,10 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int) -> np
         raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s trajectory "
                                                        "(a polyline of timed world positions)")
     t = np.array([float(v.get("time")) for v in vertices])
+    if sample is not None:  # the header says which sample it is: another's motion would replay another attack
+        said = next((p.get("value") for p in root.iter("Property") if p.get("name") == "d4sumo.sample"), None)
+        if said is not None and said != str(sample):
+            raise ConfigError("--openscenario", str(path), f"the export of sample {sample} (this one is sample {said}'s)")
     xy = np.array([[float(v.find("./Position/WorldPosition").get(k)) for k in ("x", "y")] for v in vertices])
     if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
         raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")

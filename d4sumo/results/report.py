@@ -17,7 +17,7 @@ from typing import Callable, Sequence
 
 from .. import __version__
 from ..engine.simulation import name_fcd
-from ..errors import ConfigError
+from ..errors import ConfigError, NotSimulable
 from ..files import part_of, remove_stale_parts
 from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
@@ -227,7 +227,12 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
                              f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
                 continue
             r = worst[0]
-            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml", final / "fcd" / f"worst_{stem(r)}.xml")
+            try:
+                fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml", final / "fcd" / f"worst_{stem(r)}.xml")
+            except NotSimulable as exc:  # read, not replayed: the page says why
+                parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; not replayed here: "
+                             f"{html.escape(str(exc))}</p>")
+                continue
             ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
             parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
                          f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
@@ -238,9 +243,14 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         f"<p>{html.escape(severe_rule(records, top, severe))} Each is replayed through SUMO; its time-space diagram "
         "shows every car's position over time coloured by speed (one scale for all diagrams), and beside it (below it "
         "in a narrow window) every car's acceleration.</p>" if top else "<p>No successful attack.</p>"))
-    fcds = [replay_to_fcd(r, out / "fcd" / f"{stem(r)}.xml", final / "fcd" / f"{stem(r)}.xml") for r in top]
-    speed_max_mps = max((float(d["speed"].max()) for fcd in fcds for d in fcd.values() if len(d["speed"])), default=None)
+    fcds = [_replayed(r, out / "fcd" / f"{stem(r)}.xml", final / "fcd" / f"{stem(r)}.xml") for r in top]
+    speed_max_mps = max((float(d["speed"].max()) for fcd in fcds if isinstance(fcd, dict) for d in fcd.values()
+                         if len(d["speed"])), default=None)
     for r, fcd in zip(top, fcds):
+        if not isinstance(fcd, dict):  # read, not replayed (its controller cannot be had here): the page says why
+            parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
+                         f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; not replayed here: {html.escape(fcd)}</p>")
+            continue
         ts = _sample_figure(r, "time-space", fcd, out / f"time_space_{stem(r)}.png", speed_max_mps)
         acc = _sample_figure(r, "accel", fcd, out / f"accel_{stem(r)}.png")
         parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
@@ -277,6 +287,15 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
     (out / "index.html").write_text(page, encoding="utf-8")
+
+
+def _replayed(record: Record, fcd_path: Path, name: Path) -> dict | str:
+    """`replay_to_fcd`, or why it cannot be (a controller that cannot be had here: a module that does not
+    import, an FMU missing or changed), for a report that shows what it can of the rest."""
+    try:
+        return replay_to_fcd(record, fcd_path, name)
+    except NotSimulable as exc:
+        return str(exc)
 
 
 def _openscenario_links(record: Record, out: Path, name: str) -> str:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, D4sumoError, check_int, check_number
+from ..errors import ConfigError, NotSimulable, check_int, check_number
 from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig
 from ..model.control import user_code
@@ -147,7 +147,7 @@ class Campaign:
                 score_from_attack_start=definition["spec"].get("from_attack_start", False),
             )
         except ControllerImportError as exc:  # not damage: the database is fine, this machine lacks the module
-            raise D4sumoError(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None
+            raise NotSimulable(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None
         except ConfigError as exc:
             raise DefinitionError(f"{where}: damaged results database (a campaign definition: {exc})", exc.field) from None
         except (KeyError, TypeError, AttributeError) as exc:

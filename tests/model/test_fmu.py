@@ -110,6 +110,12 @@ def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading
     assert db.read_bytes() != stored  # (the second campaign's samples) ...
     with open_store(db, create=False) as store:
         assert len(store.samples(1)) == 3 and len(store.campaigns()) == 2  # ... the first's kept
+    # Regression: a report of campaigns whose FMU is gone (or has changed) failed whole; it now shows what
+    # it can read and says why it replays none of them
+    reported = run("report", str(db), "--out", "rep", cwd=tmp_path)
+    assert reported.returncode == 0, reported.stderr
+    page = (tmp_path / "rep" / "index.html").read_text()
+    assert "not replayed here" in page and "no file acc.fmu here" in page
 
 
 @pytest.mark.parametrize("kind", ["fails", "nan"])

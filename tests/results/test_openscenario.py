@@ -102,9 +102,11 @@ def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tm
         (("export", str(db), "1", "--openscenario", str(tmp_path / "no" / "o")), "a new one in an existing folder"),
         (("replay", str(db), "1", "--network", "road.xodr"), "with --openscenario"),
         (("replay", str(db), "1", "--openscenario", str(afile)), "an OpenSCENARIO file d4sumo exported"),
+        (("replay", str(db), "1", "--openscenario", str(tmp_path / "s2" / "scenario.xosc")), "the export of sample 1 (this one is sample 2's)"),
     ]
+    assert run("export", str(db), "2", "--openscenario", str(tmp_path / "s2")).returncode == 0
     for argv, said in cases:
         result = run(*argv)
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and said in lines[0] and "Traceback" not in result.stderr, (argv, result.stderr)
-    assert not (tmp_path / "o").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.sqlite"]
+    assert not (tmp_path / "o").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.sqlite", "s2"]
