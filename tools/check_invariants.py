@@ -8,7 +8,8 @@ and mixes of car-following models and trucks drawn: who follows whom from the FC
 car in each lane a car covers, a traffic car included); one in five with the paper-as-run preset, its controllers (a third of them with other systems), families and scenario,
 some with a coasting car; every attack family, every start mode, setpoints with and without fractional
 metres, 1-10 followers, three target speeds; followers run the paper's controller, the time-gap one,
-SUMO's models or the cooperative ones (PATH's CACC, Ploeg's and the consensus, in Python, and Plexe's CACC and CONSENSUS in SUMO) over a V2V channel, half of those late or
+SUMO's models, the paper's controller as the FMU d4sumo ships, or the cooperative ones (PATH's CACC, Ploeg's and the
+consensus, in Python, and Plexe's CACC and CONSENSUS in SUMO) over a V2V channel, half of those late or
 lossy and half of those attacked over the air (every message attack, every field), a quarter of the platoons mixed, some Python followers behind a radar with a range, noise
 and latency; one episode in four a cut-in, a cut-out or a swerving
 attacker with a random target follower, offset, obstacle, lane knots, lanes and lane change duration), each scored and stored exactly as a
@@ -468,6 +469,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         store = open_store(Path(tmp) / "invariants.sqlite")
         fcd = Path(tmp) / "fcd.xml"
+        from d4sumo.fmus import build_switching_fmu
+
+        SYSTEMS.append(ControllerConfig(f"fmu:{build_switching_fmu(Path(tmp) / 'switching.fmu', 2)}"))  # the shipped FMU
         for index in range(args.n):
             while True:  # a draw its road refuses (a platoon longer than the sharp turns' first edge) is drawn again
                 campaign, params = random_episode(rng)
