@@ -68,7 +68,7 @@ def test_a_mixed_platoon_has_one_controller_per_follower():
     assert mixed.sumo_driven
     assert mixed.system_label == "sumo:ACC(tau=0.8) / switching / sumo:IDM"
     assert EpisodeConfig.from_dict(mixed.to_dict()) == mixed
-    with pytest.raises(ConfigError, match="one \\[\\[controller\\]\\] table per follower"):
+    with pytest.raises(ConfigError, match="one per follower \\(3: --controller A,B,C or \\[\\[controller\\]\\] tables\\)"):
         EpisodeConfig.from_dict({"controller": ["sumo:ACC", "switching"]})
     with pytest.raises(ConfigError) as err:
         EpisodeConfig.from_dict({"controller": ["sumo:ACC", {"class": "sumo:IDM", "bogus": 1}, "switching"]})
