@@ -125,9 +125,9 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     from ..search.runner import Evaluator
 
     config = campaign.config
-    if config.maneuver_class.lateral or config.traffic is not None:
-        raise ConfigError("--openscenario", str(args.openscenario), "a sample of an in-lane campaign without [traffic] "
-                                                                    "(this version replays the attacker's motion along its lane)")
+    if config.traffic is not None:
+        raise ConfigError("--openscenario", str(args.openscenario), "a sample of a campaign without [traffic] "
+                                                                    "(its traffic is not exported)")
     stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
     if args.network is not None:
         network = opendrive_network(args.network) if args.network.suffix == ".xodr" else args.network
@@ -155,7 +155,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
         said = lambda c: "no collision" if c is None else f"{c['pair']} at {c['time_s']:.2f} s"  # noqa: E731
         print(f"sample {row.id}, the attacker driving {args.openscenario} on {evaluator.road.name}: "
               f"{said(episode.first_collision_record())} (stored: {said(was)})")
-        print(f"positions along the road against the stored episode's, at most: "
+        print("positions along the road against the stored episode's, at most: "
               + ", ".join(f"{k} {v:.3g} m" for k, v in moved.items()))
         print("reproduces the stored crash" if same else "does not reproduce the stored crash")
     return 0 if same else EXIT_DIFFERS

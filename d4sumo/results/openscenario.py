@@ -87,8 +87,12 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
     if target is None:
         raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s initial speed")
     v = float(target.get("value"))
+    # the distance along the car's heading: a lane change, which SUMO makes within a step, moves it across
+    heading = np.array([float(v_.find("./Position/WorldPosition").get("h", 0.0)) for v_ in vertices])
+    step = np.diff(xy, axis=0)
+    along = np.abs(step[:, 0] * np.cos(heading[:-1]) + step[:, 1] * np.sin(heading[:-1]))
     speeds = []
-    for d, dt in zip(np.hypot(*np.diff(xy, axis=0).T), np.diff(t)):
+    for d, dt in zip(along, np.diff(t)):
         v = max(0.0, 2.0 * d / dt - v)
         speeds.append(v)
     speeds = np.array(speeds)
