@@ -29,6 +29,7 @@ import numpy as np
 from ..engine.netconvert import opendrive_output
 from ..errors import ConfigError
 from ..model.maneuvers import CAR_WIDTH_M
+from ..model.trace import Collision
 from .records import Record
 
 CAR_HEIGHT_M = 1.5
@@ -99,27 +100,31 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
     return np.concatenate([speeds, np.full(max(0, steps - speeds.size), speeds[-1])])[:steps]
 
 
-def export_openscenario(record: Record, out_dir: str | Path) -> tuple[Path, Path]:
+def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | None = None) -> tuple[Path, Path]:
     """Write the sample's ``road.xodr`` and ``scenario.xosc`` into ``out_dir`` (created; files already there
-    are replaced whole, never half-written)."""
-    from ..search.campaign import Campaign, open_store
-    from ..search.runner import Evaluator
+    are replaced whole, never half-written). ``fcd``: its replay's FCD where one was written already (its
+    verdict is then the stored one, which a replay reproduces); else it is replayed here."""
+    from .report import evaluator_of
 
     out_dir = Path(out_dir)
-    with open_store(record.db, create=False) as store:
-        definition = store.campaign(record.campaign_id).definition
-    campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
+    evaluator = evaluator_of(record)
+    campaign = evaluator.campaign
     config = campaign.config
     if config.traffic is not None:
         raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without [traffic] (this version writes "
                                                           "the platoon, not the traffic around it)")
-    evaluator = Evaluator(campaign)
     with tempfile.TemporaryDirectory(prefix="d4sumo-xosc-") as tmp:
-        fcd = Path(tmp) / "fcd.xml"
-        episode = evaluator.simulate(record.index, record.params, fcd_path=fcd)
+        if fcd is None:
+            fcd = Path(tmp) / "fcd.xml"
+            episode = evaluator.simulate(record.index, record.params, fcd_path=fcd)
+            outcome, first = episode.outcome, episode.first_collision
+        else:
+            outcome = record.outcome
+            first = Collision(*record.pair.split("-", 1), record.time_s, record.position_m, record.speed_diff_kmh) \
+                if record.pair else None
         tracks = read_fcd_xy(fcd)
         opendrive_output(evaluator.road.net_file, Path(tmp) / ROAD_FILE, config.network)
-        scenario = _scenario(record, campaign, tracks, episode)
+        scenario = _scenario(record, campaign, tracks, outcome, first)
         scenario.write_xml(str(Path(tmp) / SCENARIO_FILE))
         out_dir.mkdir(parents=True, exist_ok=True)
         for name in (ROAD_FILE, SCENARIO_FILE):  # each replaced whole: a reader never sees half a file
@@ -156,7 +161,7 @@ def _position(xosc, track: dict, i: int):
     return xosc.WorldPosition(track["x"][i], track["y"][i], 0.0, heading_rad(track["angle"][i]), 0.0, 0.0)
 
 
-def _scenario(record: Record, campaign, tracks: dict, episode):
+def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
     from scenariogeneration import xosc
 
     config = campaign.config
@@ -205,7 +210,6 @@ def _scenario(record: Record, campaign, tracks: dict, episode):
                                          xosc.SimulationTimeCondition(end + config.step_s, xosc.Rule.greaterThan), "stop"))
     stops = xosc.Trigger("stop")
     stops.add_conditiongroup(stop)
-    first = episode.first_collision
     if first is not None:  # the expected end: the collision d4sumo found
         collided = xosc.ConditionGroup("stop")
         collided.add_condition(xosc.EntityTrigger("expected_collision", 0.0, xosc.ConditionEdge.rising,
@@ -216,7 +220,7 @@ def _scenario(record: Record, campaign, tracks: dict, episode):
     header = xosc.Properties()
     header.add_property("d4sumo.database", str(record.db))
     header.add_property("d4sumo.sample", str(record.sample_id))
-    header.add_property("d4sumo.outcome", episode.outcome)
+    header.add_property("d4sumo.outcome", outcome)
     if first is not None:
         header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")
         header.add_property("d4sumo.collision_time_s", repr(first.time_s))

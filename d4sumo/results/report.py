@@ -34,9 +34,9 @@ PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
 SEVERITY = "largest speed difference between the colliding cars at the first collision"
 
 
-def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None = None) -> dict:
-    """Re-simulate a stored sample into an FCD file; returns the parsed FCD. ``name``: where the file will
-    be once moved (a report's, built in a folder beside its own), for its header to name."""
+def evaluator_of(record: Record) -> Evaluator:
+    """The evaluator of a stored sample's campaign, ready to replay it (its controllers loaded, its
+    parameters checked: a damaged row says which sample of which database)."""
     with open_store(record.db, create=False) as store:
         definition = store.campaign(record.campaign_id).definition
     campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
@@ -45,6 +45,13 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
         evaluator.plan(record.params)
     except ConfigError as exc:  # a damaged database: say which sample of which
         raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
+    return evaluator
+
+
+def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None = None) -> dict:
+    """Re-simulate a stored sample into an FCD file; returns the parsed FCD. ``name``: where the file will
+    be once moved (a report's, built in a folder beside its own), for its header to name."""
+    evaluator = evaluator_of(record)
     episode = evaluator.simulate(record.index, record.params, fcd_path=fcd_path)
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
@@ -255,7 +262,7 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         acc = _sample_figure(r, "accel", fcd, out / f"accel_{stem(r)}.png")
         parts.append(f"<h3>{html.escape(describe(r))}</h3><p>attack parameters: "
                      f"{html.escape(', '.join(f'{v:.3f}' for v in r.params))}; FCD: "
-                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; {_openscenario_links(r, out, stem(r))}"
+                     f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; {_openscenario_links(r, out, stem(r), out / 'fcd' / f'{stem(r)}.xml')}"
                      f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
                      f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
 
@@ -298,14 +305,14 @@ def _replayed(record: Record, fcd_path: Path, name: Path) -> dict | str:
         return str(exc)
 
 
-def _openscenario_links(record: Record, out: Path, name: str) -> str:
+def _openscenario_links(record: Record, out: Path, name: str, fcd: Path) -> str:
     """The sample as OpenSCENARIO on its road as OpenDRIVE (`openscenario`), written beside the report, as links;
     a sample this version does not export (among traffic) says so."""
     from .openscenario import export_openscenario
 
     folder = f"openscenario/{name}"
     try:
-        export_openscenario(record, out / folder)
+        export_openscenario(record, out / folder, fcd)  # from the FCD the report replayed it into
     except ConfigError as exc:
         return f"not exported as OpenSCENARIO ({html.escape(exc.allowed)}); "
     return (f"OpenSCENARIO: <a href='{folder}/scenario.xosc'><code>{folder}/scenario.xosc</code></a> on "
