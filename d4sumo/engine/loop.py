@@ -21,7 +21,7 @@ from ..model.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, lane_changes, maneuver_of
 from ..model.platoon import Platoon, collisions_at
-from ..model.trace import Episode
+from ..model.trace import Episode, rows_array
 
 #: episodes go on one at a time once this few are left: the arrays' fixed cost per step then exceeds
 #: what they save (measured with tools/bench_batch.py)
@@ -127,7 +127,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             results[e] = error
         elif alone is not None:
             alone.platoon.pairs = recorded[e]
-            x, v = np.array(alone.xs), np.array(alone.vs)
+            x, v = rows_array(alone.xs, n), rows_array(alone.vs, n)
             if alone.start:  # carried on from the arrays: the samples before are theirs
                 x = np.concatenate([rows_x[:alone.start, e], x])
                 v = np.concatenate([rows_v[:alone.start, e], v])
@@ -173,8 +173,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             except Exception as exc:  # a user's controller: as alone, the episode ends with its error
                 end(alone.e, k, (), exc)
                 continue
-            for vid, s in zip(alone.commanded, out):
-                set_speed(vid, s)
+            for _ in map(set_speed, alone.commanded, out):  # map: no Python frame per car
+                pass
             if alone.platoon.beacons_for_sumo:  # SUMO's cooperative followers read the channel's beacons too
                 world.feed_beacons(alone.ids, alone.platoon.beacons_for_sumo)
         if not live:
@@ -183,7 +183,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         time_s = (k + 1) * dt
         for alone in solo:
             ids = alone.ids
-            x, v = [get_position(vid) for vid in ids], [get_speed(vid) for vid in ids]
+            x, v = list(map(get_position, ids)), list(map(get_speed, ids))
             alone.xs.append(x)
             alone.vs.append(v)
             alone.x, alone.v = x, v

@@ -10,6 +10,7 @@ remove. Many platoons share one SUMO each on its own copy of the road (`scenario
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
@@ -308,7 +309,7 @@ def vehicle_call(api, name: str):
 def simulation_step(api):
     """``api.simulationStep``; for libsumo its C function (d4sumo registers no step listeners)."""
     raw = getattr(getattr(api, "_libsumo", None), "simulation_step", None)
-    return (lambda: raw(0.0)) if raw else api.simulationStep
+    return functools.partial(raw, 0.0) if raw else api.simulationStep  # a partial: no Python frame a step
 
 
 def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> Callable[[str], float]:

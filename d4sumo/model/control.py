@@ -488,8 +488,9 @@ class PathCACC:
             return acceleration_to_command(below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
         if ahead is None or leader is None:
             return 0.0
-        a = self.desired_acceleration(obs.gap_m, obs.speed_mps, ahead, leader)
-        return acceleration_to_command(below_target(a, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
+        speed = obs.speed_mps
+        a = self.desired_acceleration(obs.gap_m, speed, ahead, leader)
+        return acceleration_to_command(min(a, (self.target_speed_mps - speed) / self.step_s), self.vehicle)  # below_target, inlined
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         raise ConfigError("controller", "cacc", "a platoon that exchanges V2V beacons (the [v2v] table)")
@@ -548,8 +549,9 @@ class PloegCACC:
         spacing_error = obs.gap_m - (self.setpoint_m + p.h_s * obs.speed_mps)
         speed_error = obs.lead_speed_mps - obs.speed_mps - p.h_s * obs.accel_mps2
         self.u += (-self.u + p.kp * spacing_error + p.kd * speed_error + ahead.accel_mps2) / p.h_s * self.step_s
-        self.u = below_target(self.u, obs.speed_mps, self.target_speed_mps, self.step_s)  # nor does the integrator wind up
-        return acceleration_to_command(self.u, self.vehicle)
+        # below_target, inlined: nor does the integrator wind up
+        self.u = u = min(self.u, (self.target_speed_mps - obs.speed_mps) / self.step_s)
+        return acceleration_to_command(u, self.vehicle)
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         raise ConfigError("controller", "ploeg", "a platoon that exchanges V2V beacons (the [v2v] table)")
@@ -599,6 +601,7 @@ class ConsensusCACC:
         self.params, self.setpoint_m, self.vehicle, self.step_s = params, setpoint_m, vehicle, step_s
         self.target_speed_mps = target_speed_mps
         self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
+        self._gains: dict[int, tuple] = {}  # by its place in the platoon: (car j, its gain) for j in N
 
     @property
     def mode(self) -> float:
@@ -612,11 +615,13 @@ class ConsensusCACC:
         acting = time_s + dt
         own = position_m + speed_mps * dt
         spacing = p.h_s * leader.speed_mps + self.setpoint_m
-        gains = {0: p.k_leader_v1} if car == 1 else {0: p.k_leader, car - 1: p.k_front}
+        gains = self._gains.get(car)
+        if gains is None:  # N and its gains, the same at every step once every car ahead was heard
+            gains = self._gains[car] = ((0, p.k_leader_v1),) if car == 1 else ((0, p.k_leader), (car - 1, p.k_front))
         spacing_error = 0.0
-        for j, k in gains.items():
+        for j, k in gains:
             m = messages[j]
-            desired = sum(spacing + messages[i].length_m for i in range(j, car))
+            desired = sum([spacing + messages[i].length_m for i in range(j, car)])
             distance = abs(m.position_m + (acting - m.time_s) * m.speed_mps - own)
             spacing_error += k * (distance - desired)
         return -p.b * (speed_mps - leader.speed_mps) + spacing_error / len(gains)
@@ -627,8 +632,9 @@ class ConsensusCACC:
         messages = obs.messages
         if messages is None or obs.front_message is None or len(messages) < obs.front_message.sender + 1:
             return 0.0
-        a = self.desired_acceleration(obs.position_m, obs.speed_mps, obs.time_s, messages)
-        return acceleration_to_command(below_target(a, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
+        speed = obs.speed_mps
+        a = self.desired_acceleration(obs.position_m, speed, obs.time_s, messages)
+        return acceleration_to_command(min(a, (self.target_speed_mps - speed) / self.step_s), self.vehicle)  # below_target, inlined
 
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
         raise ConfigError("controller", "consensus", "a platoon that exchanges V2V beacons (the [v2v] table)")

@@ -147,6 +147,8 @@ class Maneuver:
         self.config = config
         self.ids = config.vehicle_ids
         self.lengths_m = [v.length_m for v in config.car_vehicles]  # by index into ids
+        #: each pair of the column (leader, follower, the leader's length): `pairs` runs at every step
+        self._column = [(i, i + 1, self.lengths_m[i]) for i in range(len(self.lengths_m) - 1)]
 
     @classmethod
     def check(cls, config: EpisodeSettings) -> None:
@@ -180,8 +182,10 @@ class Maneuver:
 
     def pairs(self, positions: Sequence[float], lanes: Sequence[tuple[int, ...]] | None = None) -> list[Pair]:
         """(leader, follower, gap) of the cars next to each other in a lane, frontmost first."""
-        lengths = self.lengths_m
-        return [(i, i + 1, positions[i] - lengths[i] - positions[i + 1]) for i in range(len(positions) - 1)]
+        if len(positions) != len(self.lengths_m):
+            lengths = self.lengths_m
+            return [(i, i + 1, positions[i] - lengths[i] - positions[i + 1]) for i in range(len(positions) - 1)]
+        return [(a, b, positions[a] - length - positions[b]) for a, b, length in self._column]
 
 
 class LaneChange(Maneuver):

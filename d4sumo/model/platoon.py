@@ -23,7 +23,7 @@ from .control import CautiousDriver, CruiseControl, SwitchingController, Switchi
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
-from .trace import Collision, Trace
+from .trace import Collision, Trace, rows_array
 from .traffic import TRAFFIC_ID
 from .v2v import Channel
 
@@ -110,6 +110,11 @@ def collisions_at(time_s: float, pairs: list[Pair], positions: list[float], spee
     collision record and the trace's minimum gaps always agree. The position is the follower's front
     bumper, where it hit.
     """
+    for _, _, gap in pairs:  # none, at nearly every step: said without building anything
+        if gap < collision_gap_m:
+            break
+    else:
+        return ()
     return tuple(Collision(ids[a], ids[b], time_s, positions[b], (speeds[b] - speeds[a]) * 3.6)
                  for a, b, gap in pairs if gap < collision_gap_m)
 
@@ -251,12 +256,17 @@ class Platoon:
         #: returns their speeds
         self.commanded = (0, *(i for i, f in enumerate(self.followers, start=1) if not f.sumo_driven),
                           *(i for i, _, _, _ in self._others))
-        self._python = [(i, f) for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         #: the platoon's V2V channel (`v2v`), and each car's speed a step ago (the accelerations its beacons carry)
         hear_all = frozenset(i for i, f in enumerate(self.followers, start=1) if f.hears_all)
         self.channel = (Channel(config.v2v, dt, n, beacons, [config.vehicle_of(i).length_m for i in range(n)], hear_all)
                         if config.v2v is not None else None)
         self._last_speeds: list[float] | None = None
+        self._cars = n  # the platoon's (the maneuver's other car is not one of it)
+        #: each Python follower, as the step loop calls it: its index, its command, its actuator, its inbox
+        self._python = [(i, f.command, f.actuator.apply, self.channel.inbox(i) if self.channel is not None else None)
+                        for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
+        #: whether each car has one pair at most with a car ahead (no car covers two lanes, no traffic)
+        self._one_ahead = not self.maneuver.lateral and config.traffic is None
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
         #: whether it reads every car ahead's, the newest beacon of each car it reads), where one is new
         self._sumo_listening = [(i, f.hears_all) for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]
@@ -273,53 +283,61 @@ class Platoon:
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
         u = self.attack_u[k]
-        ahead: dict[int, tuple[int, float]] = {}
-        for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
-            if b not in ahead or gap < ahead[b][1]:
-                ahead[b] = (a, gap)
+        if not self._python and self._attacker_driver is None:  # nobody Python commands reads who is ahead
+            ahead = None
+        elif self._one_ahead:
+            ahead = {b: (a, gap) for a, b, gap in pairs}
+        else:
+            ahead = {}
+            for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
+                if b not in ahead or gap < ahead[b][1]:
+                    ahead[b] = (a, gap)
+        speed = speeds[0]
         if self._attacker_driver is not None and u != u:  # in traffic, between attacks: it follows what is ahead
             if self._attacking:
                 self._attacker_driver.cruise.reset()
                 self._attacking = False
             leader, gap = ahead.get(0, (0, FREE_ROAD_GAP_M))
-            u = self._attacker_driver.command(gap, speeds[0], speeds[leader])
+            u = self._attacker_driver.command(gap, speed, speeds[leader])
         elif self._attacker_as_run is not None:  # the authors' attacker: their controller on a free road, or its attack
             attack = self.attack_u[k - k % self._attacker_every]  # the attack's pedal at this control period's start
-            u = self._attacker_as_run.command_as_run(FREE_ROAD_GAP_M, speeds[0], speeds[0], act=attack != attack)
+            u = self._attacker_as_run.command_as_run(FREE_ROAD_GAP_M, speed, speed, act=attack != attack)
             if u is None:  # attacking: the attack sets the pedal, and holds it for the period
                 u = self._attacker_as_run.held = attack
         elif u != u:  # NaN: no attack here, the attacker cruises like everyone else
             if self._attacking:  # a new cruise window: the PID starts afresh (no kick, no stale integral)
                 self.attacker_cruise.reset()
                 self._attacking = False
-            u = acceleration_to_command(self.attacker_cruise.acceleration(speeds[0]), self.attacker_vehicle)
+            u = acceleration_to_command(self.attacker_cruise.acceleration(speed), self.attacker_vehicle)
         else:
             self._attacking = True
         commands = [u]
-        new_speeds = [self.attacker_actuator.apply(u, speeds[0])]
+        new_speeds = [self.attacker_actuator.apply(u, speed)]
         if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
             v = self._motion[k]
-            commands[0] = acceleration_to_command((v - speeds[0]) / self.config.step_s, self.attacker_vehicle)
+            commands[0] = acceleration_to_command((v - speed) / self.config.step_s, self.attacker_vehicle)
             new_speeds[0] = v
-        if self.channel is not None:
-            accels, now = self._accelerations(speeds), k * self.config.step_s
-            self.channel.send(k, positions, speeds, accels)
-            self.beacons_for_sumo = []
-            for i, every in self._sumo_listening:
-                inbox = self.channel.inbox(i)
-                newest = tuple(inbox.get(j) for j in (range(i) if every else (0, i - 1)))
-                if None not in newest and newest != self._fed.get(i):
-                    self._fed[i] = newest
-                    self.beacons_for_sumo.append((i, every, newest))
-        for i, follower in self._python:
-            leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
-            if self.channel is None:
-                c = checked_command(follower.command(gap, speeds[i], speeds[leader]), i, k)
-            else:
-                c = checked_command(follower.command(gap, speeds[i], speeds[leader], accels[i], self.channel.inbox(i),
-                                                     positions[i], now), i, k)
-            commands.append(c)
-            new_speeds.append(follower.actuator.apply(c, speeds[i]))
+        channel = self.channel
+        if channel is None:
+            for i, command, apply, _ in self._python:
+                leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
+                c = command(gap, speeds[i], speeds[leader])
+                if type(c) is not float or not -1.0 <= c <= 1.0:  # not a plain command: say why, or take the float it is
+                    c = checked_command(c, i, k)
+                commands.append(c)
+                new_speeds.append(apply(c, speeds[i]))
+        else:
+            accels, now = self._accelerations(speeds), k * channel.step_s
+            channel.send(k, positions, speeds, accels)
+            if self._sumo_listening:
+                self._feed_sumo()
+            for i, command, apply, inbox in self._python:
+                leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))
+                c = command(gap, speeds[i], speeds[leader], accels[i], inbox, positions[i], now)
+                if type(c) is not float or not -1.0 <= c <= 1.0:
+                    c = checked_command(c, i, k)
+                commands.append(c)
+                new_speeds.append(apply(c, speeds[i]))
         for i, cruise, actuator, vehicle in self._others:
             if cruise is None:  # the obstacle holds its speed
                 commands.append(0.0)
@@ -333,19 +351,30 @@ class Platoon:
             self.modes.append([c.mode for c in self._with_mode])
         return new_speeds
 
+    def _feed_sumo(self) -> None:
+        """The step's beacons for SUMO's cooperative followers: the newest of each car each reads, where one is new."""
+        self.beacons_for_sumo = []
+        for i, every in self._sumo_listening:
+            inbox = self.channel.inbox(i)
+            newest = tuple(inbox.get(j) for j in (range(i) if every else (0, i - 1)))
+            if None not in newest and newest != self._fed.get(i):
+                self._fed[i] = newest
+                self.beacons_for_sumo.append((i, every, newest))
+
     def _accelerations(self, speeds: list[float]) -> list[float]:
         """Each car of the platoon's acceleration over its last step [m/s^2] (0 at the first)."""
-        n = len(self.ids)
-        last = self._last_speeds or speeds[:n]
-        self._last_speeds = list(speeds[:n])
-        return [(v - w) / self.config.step_s for v, w in zip(speeds[:n], last)]
+        current = speeds[:len(self.ids)]
+        last = self._last_speeds or current
+        self._last_speeds = current
+        dt = self.config.step_s
+        return [(v - w) / dt for v, w in zip(current, last)]
 
     def trace(self, times_s: np.ndarray, positions: np.ndarray, speeds: np.ndarray,
               lateral_m: np.ndarray | None = None) -> tuple[Trace, dict[str, float], dict[str, float] | None]:
         """Assemble the Trace from the sensed rows (samples x cars) and the recorded commands (and, for a
         lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
         gaps (`assemble_trace`)."""
-        commands = np.array(self.commands, dtype=float).reshape(-1, len(self.commanded))
+        commands = rows_array(self.commands, len(self.commanded))
         modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
         trace, min_gaps, warmup_min_gaps = assemble_trace(self.config, self.followers, self.commanded, times_s, positions,
                                                           speeds, commands, modes, self.pairs, lateral_m)

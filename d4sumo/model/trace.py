@@ -19,11 +19,18 @@ and the lane-changing ones (`cutin`, `cutout`)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import chain
 from typing import Mapping
 
 import numpy as np
 
 OUTCOMES = ("success", "attacker_crash", "no_crash")
+
+
+def rows_array(rows: list[list[float]], width: int) -> np.ndarray:
+    """Rows of ``width`` floats each (one a sample or a step) as a (rows, width) array: np.array(rows), at
+    half its cost (it does not look into each row for its shape), which every episode pays at its end."""
+    return np.fromiter(chain.from_iterable(rows), dtype=float, count=len(rows) * width).reshape(len(rows), width)
 
 
 @dataclass(frozen=True)

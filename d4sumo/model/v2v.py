@@ -97,24 +97,31 @@ class Channel:
         self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
         self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
         self.direct = not self.delay and not params.loss
+        #: with no latency and no loss, each beacon straight into its receivers' inboxes: (sender, their inboxes)
+        self._routes = [(s, [self.newest[i] for i, srcs in self.sources.items() if s in srcs]) for s in self.senders]
         self.sent: list[tuple[int, Message | None]] = []  # under a message attack: the liar's beacons as sent
 
     def send(self, k: int, positions, speeds, accelerations) -> None:
         """Step ``k``'s beacons (every ``beacon_interval_s``), and the deliveries due at it."""
         if k % self.every == 0:
-            lengths = self.lengths
-            beacons = {s: Message(s, k * self.step_s, float(positions[s]), float(speeds[s]), float(accelerations[s]), lengths[s])
+            lengths, time_s = self.lengths, k * self.step_s
+            if self.direct and self.falsify is None:  # no latency, no loss, no lie: every beacon arrives as it is sent
+                for s, inboxes in self._routes:
+                    beacon = Message(s, time_s, float(positions[s]), float(speeds[s]), float(accelerations[s]), lengths[s])
+                    for inbox in inboxes:
+                        inbox[s] = beacon
+                return
+            beacons = {s: Message(s, time_s, float(positions[s]), float(speeds[s]), float(accelerations[s]), lengths[s])
                        for s in self.senders}
             if self.falsify is not None:  # the liar's, as it chooses to send it (None: not at all)
                 liar = self.liar
                 beacons[liar] = self.falsify(k, beacons[liar])
                 self.sent.append((k, beacons[liar]))
-            if self.direct:  # no latency, no loss: every beacon arrives as it is sent
-                for i, sources in self.sources.items():
-                    newest = self.newest[i]
-                    for s in sources:
-                        if beacons[s] is not None:
-                            newest[s] = beacons[s]
+            if self.direct:
+                for s, inboxes in self._routes:
+                    if beacons[s] is not None:
+                        for inbox in inboxes:
+                            inbox[s] = beacons[s]
                 return
             for i, sources in self.sources.items():
                 for s in sources:
