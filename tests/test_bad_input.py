@@ -124,6 +124,8 @@ FALSIFY = [
     ["--set", "search.ce.batch_size=0"], ["--set", "search.bo.xi=nan"], ["--set", "search.random.x=1"],
     ["--set", "search.samples=-3"], ["--formula", "eventually[0:99](gap_1 <= 0)"], ["--followers", "1"],
     ["--db", "/nonexistent/folder/r.sqlite"],
+    # traffic SUMO cannot insert: refused by its warm-up, before a sample is stored
+    ["--network", "highway_4lane", "--start", "steady", "--set", "traffic.vehicles_per_hour=3600", "--set", "traffic.warmup_s=40"],
 ]
 
 
@@ -156,6 +158,8 @@ SWEEPS = {
     "name not a string": b"name = 5\n[grid]\nsetpoint_m = [5.0]\n",
     "reversed formula bounds": b"[grid]\nsetpoint_m = [5.0]\n[spec]\nformula = 'eventually[3:1](gap_1 <= 0)'\n",
     "bad spec key": b"[grid]\nsetpoint_m = [5.0]\n[spec]\nd_safe = 1\n",
+    "traffic sumo cannot insert": b"[grid]\ntraffic = [{vehicles_per_hour = 3600, warmup_s = 40}]\n"
+                                  b"[scenario]\nnetwork = 'highway_4lane'\nstart = 'steady'\n",
 }
 
 

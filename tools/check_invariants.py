@@ -53,6 +53,7 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.scenarios import MAX_COPIES, build_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
+from d4sumo.engine.sumo import traffic_state
 from d4sumo.errors import ConfigError
 from d4sumo.inputs import campaign_of
 from d4sumo.model.attacks import FAMILIES
@@ -478,6 +479,8 @@ def main(argv=None) -> int:
                 road = roads[campaign.config.network, campaign.config.lane]
                 try:
                     evaluator = Evaluator(campaign, road=road)
+                    if campaign.config.traffic is not None:  # a density SUMO cannot insert is refused by its warm-up
+                        traffic_state(campaign.config, road)
                     break
                 except ConfigError:
                     continue

@@ -17,6 +17,7 @@ from .episodes import collision_text
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from ..engine.simulation import check_traffic
     from ..inputs import campaign_of
     from ..search.campaign import open_store
     from ..search.runner import Evaluator, run_campaign
@@ -24,6 +25,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     doc, _ = document(args)
     campaign = campaign_of(doc)
     evaluator = Evaluator(campaign)  # parses the formula and builds the road: fail before writing anything
+    check_traffic(campaign.config, evaluator.road)
     note_unused_flags(args, campaign.config, evaluator.family, campaign.formula)
     unused = sorted(k for k in doc.get("search", {}) if k in OPTIMIZERS and k != campaign.optimizer)
     if unused:  # e.g. --set search.bo.x with no --optimizer, since the default became auto

@@ -27,7 +27,7 @@ from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, build_road
-from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_file
+from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_file, traffic_state
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +92,12 @@ def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
     check_road(config, road)
     traffic_file(config, road)  # a demand SUMO refuses is refused before any episode runs
     return followers_file(config, road)
+
+
+def check_traffic(config: EpisodeConfig, road: Road) -> None:
+    """Traffic SUMO cannot warm up (a density it cannot insert, traffic that crashes on its own), refused
+    before a campaign stores anything: its first sample's warm-up, which that sample plays anyway (cached)."""
+    traffic_state(config.for_sample(0), road)
 
 
 def simulate(

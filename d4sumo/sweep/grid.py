@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..engine.scenarios import build_road
-from ..engine.simulation import check_episode
+from ..engine.simulation import check_episode, check_traffic
 from ..errors import ConfigError
 from ..inputs import campaign_of, check_document, with_overrides
 from ..model.config import read_toml
@@ -134,6 +134,7 @@ class Sweep:
                 roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane,
                                          whole=c.config.whole_network)
             check_episode(c.config, roads[key])
+            check_traffic(c.config, roads[key])
         seen = set()
         for c in self.campaigns:
             key = (c.config.followers, c.config.step_s, c.config.total_s, c.formula, c.d_safe_m, c.config.maneuver)
