@@ -95,8 +95,9 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         rows_x = np.zeros((steps + 1, m, n))  # an ended episode's rows stay 0: computed along, never used
         rows_v = np.zeros_like(rows_x)
         sensed = [vid for ids in platoons for vid in ids]
-        rows_x[0] = np.array([get_position(v) for v in sensed]).reshape(m, n)
-        rows_v[0] = np.array([get_speed(v) for v in sensed]).reshape(m, n)
+        commanding = [vid for ids in commanded_ids for vid in ids]  # the arrayed episodes' cars Python commands
+        rows_x[0] = _read(get_position, sensed).reshape(m, n)
+        rows_v[0] = _read(get_speed, sensed).reshape(m, n)
         pairs = [sense_pairs(e, rows_x[0, e].tolist()) for e in range(m)] if lateral else None
         lead, gap = batch.leaders(rows_x[0], pairs)
     else:
@@ -107,7 +108,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             solo.append(_Alone(e, Platoon(c, plan.u, max_speed, beacons=plan.beacons, motion=plan.motion), ids, 0, x, v, pairs, sensed))
 
     def end(e: int, steps_done: int, collisions: tuple, error: Exception | None = None) -> None:
-        nonlocal solo, sensed
+        nonlocal solo, sensed, commanding
         live.discard(e)
         if live:  # its cars cost the world nothing more
             world.remove(e)
@@ -118,6 +119,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             arrayed.remove(e)
             active[e] = False
             sensed = [vid for i in arrayed for vid in platoons[i]]
+            commanding = [vid for i in arrayed for vid in commanded_ids[i]]
         if batch is not None:  # as alone: a failure, else an untraceable mode
             error = error or batch.failed.get(e) or batch.bad_modes.get(e)
         if error is None and collisions and steps_done <= configs[e].attack_start_step:
@@ -145,13 +147,13 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
 
     def detach(k: int) -> None:
         """Every episode the arrays command goes on alone from sample k, in the state it has."""
-        nonlocal arrayed, sensed
+        nonlocal arrayed, sensed, commanding
         for e in arrayed:
             x, v = rows_x[k, e].tolist(), rows_v[k, e].tolist()
             solo.append(_Alone(e, batch.detach(e, k), platoons[e], k, x, v, pairs[e] if lateral else pairs_at(x)))
             active[e] = False
         solo.sort(key=lambda a: a.e)
-        arrayed, sensed = [], []
+        arrayed, sensed, commanding = [], [], []
 
     for k in range(steps):
         if arrayed and (len(arrayed) <= detach_at or k == detach_at_step):
@@ -163,10 +165,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             speeds = batch.advance(k, rows_x[k], rows_v[k], lead, gap, active)
             for e in sorted(batch.failed.keys() & set(arrayed)):  # a user's controller failed: it ends with its error
                 end(e, k, ())
-            rows = speeds.tolist()
-            for e in arrayed:
-                for vid, s in zip(commanded_ids[e], rows[e]):
-                    set_speed(vid, s)
+            for _ in map(set_speed, commanding, (speeds if len(arrayed) == m else speeds[arrayed]).ravel().tolist()):
+                pass
         for alone in solo:
             try:
                 out = alone.platoon.advance(k, alone.x, alone.sensed[2] if traffic else alone.v, alone.pairs)
@@ -199,11 +199,11 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
                 end(alone.e, k + 1, ())
         if arrayed:
             if len(arrayed) == m:
-                rows_x[k + 1] = np.array([get_position(v) for v in sensed]).reshape(m, n)
-                rows_v[k + 1] = np.array([get_speed(v) for v in sensed]).reshape(m, n)
+                rows_x[k + 1] = _read(get_position, sensed).reshape(m, n)
+                rows_v[k + 1] = _read(get_speed, sensed).reshape(m, n)
             else:
-                rows_x[k + 1, arrayed] = np.array([get_position(v) for v in sensed]).reshape(len(arrayed), n)
-                rows_v[k + 1, arrayed] = np.array([get_speed(v) for v in sensed]).reshape(len(arrayed), n)
+                rows_x[k + 1, arrayed] = _read(get_position, sensed).reshape(len(arrayed), n)
+                rows_v[k + 1, arrayed] = _read(get_speed, sensed).reshape(len(arrayed), n)
             if lateral:
                 pairs = [sense_pairs(e, rows_x[k + 1, e].tolist()) if e in arrayed else None for e in range(m)]
             lead, gap = batch.leaders(rows_x[k + 1], pairs)
@@ -217,6 +217,11 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     for e in sorted(live):
         end(e, steps, ())
     return results
+
+
+def _read(getter: Callable[[str], float], ids: list[str]) -> np.ndarray:
+    """Each car's value, as np.array([getter(vid) for vid in ids]) does, without a Python frame per car."""
+    return np.fromiter(map(getter, ids), dtype=float, count=len(ids))
 
 
 def _warmup_collision(config: EpisodeConfig, collision) -> WarmupCollision:

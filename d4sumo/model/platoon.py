@@ -261,7 +261,6 @@ class Platoon:
         self.channel = (Channel(config.v2v, dt, n, beacons, [config.vehicle_of(i).length_m for i in range(n)], hear_all)
                         if config.v2v is not None else None)
         self._last_speeds: list[float] | None = None
-        self._cars = n  # the platoon's (the maneuver's other car is not one of it)
         #: each Python follower, as the step loop calls it: its index, its command, its actuator, its inbox
         self._python = [(i, f.command, f.actuator.apply, self.channel.inbox(i) if self.channel is not None else None)
                         for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
