@@ -10,7 +10,6 @@ import sys
 from ..errors import ConfigError, check_number
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS, OPTIMIZERS, as_set_flags
 from .common import check_batch, document, note_unused_flags
-from ..model.messages import lie_label
 from .episodes import collision_text
 
 
@@ -100,8 +99,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         return 0
     config = campaign.config
     attack = f"{config.maneuver}, {campaign.attack}" if config.maneuver_class.lateral else campaign.attack
-    if campaign.message:
-        attack += " with " + lie_label(campaign.message, campaign.message_field, campaign.message_sender)
+    if campaign.lie:
+        attack += " with " + campaign.lie
     where = f"lane {config.lane}, " if config.lane is not None else ""
     sensing = f"radar {config.radar.label}, " if config.radar else ""
     sensing += f"{config.world_label}, " if config.traffic else ""

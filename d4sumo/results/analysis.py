@@ -52,12 +52,26 @@ def _value_text(value) -> str:
 
 def runs(records: Sequence[Record], *fields: str) -> tuple[tuple[str, ...], dict[tuple, list[Record]]]:
     """Group by ``fields``, led by the scenario (by its name in `scenario_labels`) and the system under test
-    when the records hold more than one: campaigns on two roads, routes or durations are never pooled."""
+    when the records hold more than one: campaigns on two roads, routes or durations are never pooled. An
+    attack is its family with its lie, if any ("knots with a lie (offset on its speed)"): nor are campaigns
+    with and without one."""
     labels = scenario_labels(records)
     lead = (("scenario",) if len(set(labels.values())) > 1 else ()) + (
         ("system",) if len({r.system for r in records}) > 1 else ())
-    return lead + fields, _grouped(records, lambda r: tuple(
-        labels[r.scenario] if f == "scenario" else getattr(r, f) for f in (*lead, *fields)))
+
+    def value(r: Record, f: str):
+        if f == "scenario":
+            return labels[r.scenario]
+        if f == "attack":
+            return attack_label(r)
+        return getattr(r, f)
+
+    return lead + fields, _grouped(records, lambda r: tuple(value(r, f) for f in (*lead, *fields)))
+
+
+def attack_label(record: Record) -> str:
+    """The attack of a record's campaign: its family, with its lie where it has one."""
+    return f"{record.attack} with {record.lie}" if record.lie else record.attack
 
 
 def run_label(key: tuple) -> str:

@@ -17,8 +17,8 @@ from .records import system_label
 #: (warmup_s, the maneuver's settings, collision_gap_m, ...) gets a column of its own after them, empty
 #: for a campaign where it has no effect
 SCENARIO = ["network", "followers", "setpoint_m", "speed_mps", "start", "maneuver", "route", "step_s", "duration_s"]
-#: the columns after the scenario's: the campaign's system, attack and search, the sample's result
-RESULT = ["system", "attack", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m",
+#: the columns after the scenario's: the campaign's system, attack (and its lie, `messages.lie_label`) and search, the sample's result
+RESULT = ["system", "attack", "lie", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m",
           "speed_diff_kmh", "wall_s", "error"]
 _SCENARIO_KEYS = [f.name for f in dataclasses.fields(EpisodeConfig)]  # in the order of the config
 
@@ -54,7 +54,7 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
         scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id]}
         params = dict(zip(names[s.campaign_id], s.params))
         writer.writerow([s.id, s.campaign_id, s.index, *(_cell(scenario.get(k, "")) for k in (*SCENARIO, *own)),
-                         systems[s.campaign_id], c.attack, c.optimizer, c.seed, s.robustness, s.outcome, s.pair, s.time_s,
+                         systems[s.campaign_id], c.attack, c.lie, c.optimizer, c.seed, s.robustness, s.outcome, s.pair, s.time_s,
                          s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]
                         + [s.min_gaps.get(p, "") for p in pairs] + [params.get(n, "") for n in columns])
         rows += 1

@@ -113,6 +113,9 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
     if config.traffic is not None:
         raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without [traffic] (this version writes "
                                                           "the platoon, not the traffic around it)")
+    if campaign.message:  # another simulator would see the attacker's motion, and none of its lies
+        raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without a message attack (OpenSCENARIO "
+                                                          "carries the cars' motion, not what their V2V beacons said)")
     with tempfile.TemporaryDirectory(prefix="d4sumo-xosc-") as tmp:
         if fcd is None:
             fcd = Path(tmp) / "fcd.xml"
@@ -152,7 +155,10 @@ def _controller(xosc, follower: int, controller, config):
     properties.add_property("class", controller.cls)
     properties.add_property("setpoint_m", repr(config.setpoint_m))
     properties.add_property("target_speed_mps", repr(config.speed_mps))
-    for key, value in controller.params:
+    sensing = [*controller.params,  # what it senses and hears is part of the system under test too
+               *((f"radar.{k}", v) for k, v in (config.radar.to_dict() if config.radar is not None else {}).items()),
+               *((f"v2v.{k}", v) for k, v in (config.v2v.to_dict() if config.v2v is not None else {}).items())]
+    for key, value in sensing:
         properties.add_property(str(key), repr(value) if isinstance(value, float) else str(value))
     return xosc.Controller(f"v{follower}_{controller.cls}", properties)
 
@@ -223,7 +229,7 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
     header.add_property("d4sumo.outcome", outcome)
     if first is not None:
         header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")
-        header.add_property("d4sumo.collision_time_s", repr(first.time_s))
+        header.add_property("d4sumo.collision_time_s", repr(round(first.time_s, 9)))  # a whole step: 3.4, not 3.4000000000000004
     return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", xosc.ParameterDeclarations(), entities, storyboard,
                          xosc.RoadNetwork(ROAD_FILE), xosc.Catalog(), osc_minor_version=OSC_MINOR,
                          header_properties=header)

@@ -59,6 +59,9 @@ class Record:
     scenario: tuple[tuple[str, Any], ...] = ()
     #: the sample's place in its campaign (0 the first): where each sample meets traffic of its own, its traffic
     index: int = 0
+    #: the campaign's message attack in a few words (`messages.lie_label`: "a lie (offset on its speed)"), or
+    #: "": the pedals alone; campaigns with and without a lie are never pooled
+    lie: str = ""
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -94,7 +97,7 @@ class Record:
         """What makes two campaigns different experiments (the seed does not): the scenario, the grid's
         point in it, the system under test, the attack and the optimiser."""
         return (self.scenario, self.network, self.followers, self.setpoint_m, self.speed_mps, self.start,
-                self.attack_start_s, self.system, self.maneuver, self.attack, self.optimizer)
+                self.attack_start_s, self.system, self.maneuver, self.attack, self.lie, self.optimizer)
 
 
 def system_label(config: dict) -> str:
@@ -152,6 +155,7 @@ def _campaign_settings(campaign) -> dict[str, Any]:
         maneuver=cfg.maneuver, step_s=cfg.step_s, end_s=start_s + cfg.duration_s, param_names=campaign.family().names,
         signal_parameters=len(getattr(campaign.family(), "longitudinal", campaign.family()).parameters),
         scenario=scenario_of(cfg),
+        lie=campaign.lie,
     )
 
 

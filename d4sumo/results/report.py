@@ -23,8 +23,8 @@ from ..search.campaign import Campaign, open_store
 from ..search.runner import Evaluator
 from ..search.store import collision_dict
 from . import figures, paper, timespace
-from .analysis import (Table, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes, table_by_speed,
-                       table_crash_kinds, table_success_statistics, table_systems)
+from .analysis import (Table, attack_label, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes,
+                       table_by_speed, table_crash_kinds, table_success_statistics, table_systems)
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records
 
@@ -78,7 +78,7 @@ def describe(record: Record) -> str:
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
     system = f"{record.system}, " if record.system != "switching" else ""
     maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""
-    head = (f"sample {record.sample_id}: {system}{maneuver}{record.attack} {record.optimizer}, {where}{start}, "
+    head = (f"sample {record.sample_id}: {system}{maneuver}{attack_label(record)} {record.optimizer}, {where}{start}, "
             f"setpoint {record.setpoint_m:g} m, {record.speed_mps:g} m/s")
     if record.pair is None:
         return f"{head}; {record.outcome.replace('_', ' ')}"

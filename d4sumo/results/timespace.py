@@ -217,7 +217,9 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
 
     lane_ids = lanes(fcd)
     vmax = speed_max_mps or max((float(d["speed"].max()) for d in fcd.values() if len(d["speed"])), default=0.0) or 1.0
-    norm = Normalize(0.0, vmax)
+    # the scale starts at 0, or lower where a liar said it drove backwards (else its lie would be clipped)
+    vmin = min((float(d["speed"].min()) for vid, d in fcd.items() if vid.endswith(SAID) and len(d["speed"])), default=0.0)
+    norm = Normalize(min(0.0, vmin), vmax)
     fig = _figure(figsize=(8.0, 1.6 + 3.0 * len(lane_ids)) if len(lane_ids) > 1 else (8.0, 4.6))
     axes = fig.subplots(len(lane_ids), 1, sharex=True, sharey=True, squeeze=False)[:, 0]
     crash_lane = _collision_lane(fcd, collision, lane_ids) if collision else None
@@ -291,26 +293,39 @@ def time_space(fcd: dict, title: str, path: str | Path, collision: dict | None =
 
 def accelerations_figure(fcd: dict, title: str, collision: dict | None = None, *, attack_start_s: float = 0.0,
                          lane_change_s: float | None = None):
-    """Every car's acceleration over time."""
-    fig = _figure(figsize=(8.0, 3.8))
-    ax = fig.subplots()
+    """Every car's acceleration over time; under a message attack also every car's speed above it, what the
+    liar said dashed in its colour beside what it did (a lie about its speed shows only there)."""
     fcd = {vid: d for vid, d in fcd.items() if not is_traffic(vid)}  # the platoon's
-    for vid, d in fcd.items():
-        said = vid.endswith(SAID)
-        ax.plot(d["time"], d["acceleration"], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" or said else 1.1,
-                color="black" if vid == "v0" or said else None, zorder=3 if vid == "v0" else 2,
-                linestyle="--" if said else "-")
-    _mark_moments(ax, attack_start_s, lane_change_s)
-    if collision:
-        ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
+    lying = any(vid.endswith(SAID) for vid in fcd)
+    fields = (("speed", "speed [m/s]"), ("acceleration", "acceleration [m/s²]")) if lying else (("acceleration", "acceleration [m/s²]"),)
+    fig = _figure(figsize=(8.0, 6.4 if lying else 3.8))
+    axes = fig.subplots(len(fields), 1, sharex=True, squeeze=False)[:, 0]
+    cycle = iter(plt_colors())
+    colors = {vid: "black" if vid == "v0" else next(cycle) for vid in fcd if not vid.endswith(SAID)}
+    for ax, (field, label) in zip(axes, fields):
+        for vid, d in fcd.items():
+            said = vid.endswith(SAID)
+            ax.plot(d["time"], d[field], label=_vehicle_label(vid), linewidth=1.9 if vid == "v0" or said else 1.1,
+                    color=colors.get(vid[:-len(SAID)] if said else vid), zorder=3 if vid == "v0" else 2,
+                    linestyle="--" if said else "-")
+        _mark_moments(ax, attack_start_s, lane_change_s)
+        if collision:
+            ax.axvline(collision["time_s"], color="red", linestyle="--", linewidth=1, label=f"collision {collision['pair']}")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
     times = np.concatenate([d["time"] for d in fcd.values()])
-    ax.set_xlim(float(times.min()), _episode_end_s(float(times.max()), collision))  # the axis ends with the episode
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("acceleration [m/s²]")
-    ax.set_title(wrap_title(title), fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    axes[0].set_xlim(float(times.min()), _episode_end_s(float(times.max()), collision))  # the axis ends with the episode
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title(wrap_title(title), fontsize=9)
+    axes[0].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     return fig
+
+
+def plt_colors() -> list[str]:
+    """Matplotlib's colour cycle, as many times over as a long platoon needs."""
+    import matplotlib
+
+    return matplotlib.rcParams["axes.prop_cycle"].by_key()["color"] * 4
 
 
 def accelerations(fcd: dict, title: str, path: str | Path, collision: dict | None = None, *, attack_start_s: float = 0.0,

@@ -19,7 +19,7 @@ from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_
 from ..model.config import EpisodeConfig
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
-from ..model.messages import MESSAGE_KEYS, attack_box
+from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
@@ -80,6 +80,11 @@ class Campaign:
         plus a message attack's parameters (`messages`)."""
         return attack_box(self.config, make_attack(self.attack, dict(self.attack_options)), self.message,
                           self.message_field, dict(self.attack_options), self.message_sender)
+
+    @property
+    def lie(self) -> str:
+        """Its message attack in a few words (`messages.lie_label`), or "": the attacker's pedals alone."""
+        return lie_label(self.message, self.message_field, self.message_sender) if self.message else ""
 
     def specification(self) -> Specification:
         c = self.config

@@ -131,3 +131,23 @@ def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tm
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and said in lines[0] and "Traceback" not in result.stderr, (argv, result.stderr)
     assert not (tmp_path / "o").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.sqlite", "s2"]
+
+
+@pytest.mark.sumo
+def test_a_message_attack_is_refused_and_an_honest_cooperative_platoon_exports_its_channel(tmp_path, capsys):
+    """A lie over V2V was exported as an attacker that only drives (the lie nowhere in the file): it is refused
+    in one line; an honest cooperative platoon's followers carry their channel, part of the system under test."""
+    from d4sumo.cli import main
+
+    lies, honest = tmp_path / "lies.sqlite", tmp_path / "honest.sqlite"
+    common = ["--controller", "cacc", "--start", "steady", "--duration", "10", "--samples", "1", "--quiet"]
+    assert main(["falsify", *common, "--set", "attack.message=offset", "--set", "attack.message_field=speed",
+                 "--db", str(lies)]) == 0
+    assert main(["falsify", *common, "--set", "v2v.latency_s=0.2", "--db", str(honest)]) == 0
+    capsys.readouterr()
+    assert main(["export", str(lies), "1", "--openscenario", str(tmp_path / "lie")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "without a message attack" in err and not (tmp_path / "lie").exists()
+    assert main(["export", str(honest), "1", "--openscenario", str(tmp_path / "ok")]) == 0
+    text = (tmp_path / "ok" / "scenario.xosc").read_text()
+    assert 'name="v2v.latency_s" value="0.2"' in text and 'name="v2v.beacon_interval_s" value="0.1"' in text

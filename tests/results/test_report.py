@@ -211,4 +211,42 @@ def test_a_replayed_message_attack_draws_what_the_attacker_said_beside_where_it_
     late = said["time"] >= start + 0.1
     lie = said["speed"][late] - np.interp(said["time"][late], truth["time"], truth["speed"])
     assert np.median(lie) == pytest.approx(value, abs=0.05)  # the beacons' speed, held between them, less the truth
-    assert timespace.accelerations_figure(fcd, "lies") is not None
+    fig = timespace.accelerations_figure(fcd, "lies")
+    speed_panel, _ = fig.axes[:2]  # under a message attack the speeds too: a lie about its speed shows only there
+    said_line, own_line = ({line.get_label(): line for line in speed_panel.get_lines()}[name] for name in ("what v0 said", "v0 attacker"))
+    assert np.array_equal(said_line.get_ydata(), said["speed"]) and said_line.get_linestyle() == "--"
+    assert said_line.get_color() == own_line.get_color()  # in the liar's colour
+
+
+@pytest.mark.sumo
+def test_campaigns_with_and_without_a_lie_are_never_pooled_and_every_output_names_the_lie(tmp_path):
+    """A report of a cacc campaign with pedals alone and one with a lie about its speed showed one row,
+    "knots random", crediting the lie's successes to the pedals; titles and the CSV said nothing of it."""
+    import csv
+
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+    from d4sumo.results.analysis import table_success_statistics
+    from d4sumo.results.export import write_csv
+    from d4sumo.results.figures import heatmap_panels
+    from d4sumo.results.records import load_records
+    from d4sumo.results.report import describe
+    from d4sumo.search.campaign import Campaign, open_store
+    from d4sumo.search.runner import run_campaign
+
+    config = EpisodeConfig(controller=ControllerConfig("cacc"), start="steady", setpoint_m=5.0, duration_s=10.0)
+    db = tmp_path / "mixed.sqlite"
+    with open_store(db) as store:
+        for message in ("", "offset"):
+            run_campaign(Campaign(config=config, optimizer="random", samples=2, message=message, message_field="speed"), store)
+    records = load_records([db])
+    assert [r.lie for r in records] == ["", "", "a lie (offset on its speed)", "a lie (offset on its speed)"]
+    rows = table_success_statistics(records).rows
+    assert [(row[0], row[1]) for row in rows] == [("knots random", "2"), ("knots with a lie (offset on its speed) random", "2")]
+    assert [name for name, _ in heatmap_panels(records)] == [
+        "knots, RANDOM, start steady", "knots with a lie (offset on its speed), RANDOM, start steady"]
+    assert "knots with a lie (offset on its speed) random" in describe(records[2]) and "lie" not in describe(records[0])
+    out = tmp_path / "mixed.csv"
+    with open_store(db, create=False) as store, open(out, "w", newline="") as f:
+        write_csv(store, f)
+    with open(out, newline="") as f:
+        assert [row["lie"] for row in csv.DictReader(f)] == ["", "", "a lie (offset on its speed)", "a lie (offset on its speed)"]
