@@ -611,3 +611,18 @@ def test_knots_with_a_lane_change_take_the_lane_change_time_last(capsys, maneuve
 def test_knots_beside_a_maneuver_that_is_no_name_is_one_line(capsys):
     assert main(["simulate", "--knots=0,0,0", "--set", "scenario.maneuver=[1]"]) == 2
     assert "scenario.maneuver: got [1]" in capsys.readouterr().err
+
+
+@pytest.mark.sumo
+def test_falsify_with_a_formula_of_ones_own_says_how_many_samples_falsified_it(tmp_path, capsys):
+    """The outcomes count crashes; with a formula of one's own the summary said nothing of how often it broke."""
+    from d4sumo.search.campaign import open_store
+
+    db = tmp_path / "f.sqlite"
+    assert main(["falsify", "--formula", "always(gap_1 > 6)", "--duration", "10", "--samples", "4", "--db", str(db), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    with open_store(db, create=False) as store:
+        rhos = [s.robustness for s in store.iter_samples()]
+    assert f"formula falsified (robustness < 0) by {sum(r < 0 for r in rhos)} of 4 samples" in out
+    assert main(["falsify", "--duration", "10", "--samples", "2", "--db", str(db), "--quiet"]) == 0
+    assert "formula falsified" not in capsys.readouterr().out  # the paper's specification: its outcomes say it

@@ -107,6 +107,9 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     print(f"campaign {summary.campaign_id} ({attack}, {where}{sensing}{campaign.optimizer}, seed {campaign.seed}) in {args.db}: "
           f"{len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if campaign.formula is not None:  # the outcomes count crashes; a formula of one's own is falsified where rho < 0
+        broken = sum(s.robustness is not None and s.robustness < 0 for s in summary.samples)
+        print(f"  formula falsified (robustness < 0) by {broken} of {len(summary.samples)} samples")
     if top is not None:
         print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}")
         if top.collision:

@@ -48,9 +48,9 @@ def _export_openscenario(args: argparse.Namespace) -> int:
     from ..results.records import load_records
 
     if args.sample is None:
-        raise ConfigError("sample", "missing", "the id of the sample to write as OpenSCENARIO (d4sumo export DB SAMPLE --openscenario DIR)")
+        raise ConfigError("sample", "none given", "the id of the sample to write as OpenSCENARIO (d4sumo export DB SAMPLE --openscenario DIR)")
     if args.openscenario is None:
-        raise ConfigError("--openscenario", "missing", "a folder to write the sample's road.xodr and scenario.xosc into "
+        raise ConfigError("--openscenario", "none given", "a folder to write the sample's road.xodr and scenario.xosc into "
                                                   "(a sample alone is exported as OpenSCENARIO)")
     if args.out is not None or args.campaign is not None:
         raise ConfigError("--out" if args.out is not None else "--campaign", str(args.out or args.campaign),

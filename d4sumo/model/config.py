@@ -230,8 +230,9 @@ class EpisodeConfig:
             if not isinstance(self.v2v, ChannelParams):
                 raise ConfigError("v2v", self.v2v, "a [v2v] table")
             if not any(x is not False for x in listening):
-                raise ConfigError("v2v", self.v2v.to_dict(), "a platoon with a follower whose controller reads V2V beacons "
-                                                             "(cacc, ploeg, or your own with listens = True)")
+                raise ConfigError("v2v", self.v2v.label, "a platoon with a follower whose controller reads V2V beacons "
+                                                         "(cacc, ploeg, consensus, sumo:CC with a cooperative active_controller, "
+                                                         "or your own with listens = True)")
             for name in ("beacon_interval_s", "latency_s"):
                 value = getattr(self.v2v, name)
                 if not _on_grid(value, self.step_s):

@@ -196,7 +196,8 @@ def fmu_of(name: str) -> Fmu:
     given = name[len(PREFIX):]
     path = _SHIPPED.get(name) or Path(given).expanduser()
     if not path.is_file():
-        raise ControllerImportError(name, "an FMU file", f"no file {given} here (a path from the current folder, or absolute)")
+        what = f"{given} is a folder" if path.is_dir() else f"no file {given} here"
+        raise ControllerImportError(name, "an FMU file", f"{what} (a path from the current folder, or absolute)")
     return _load(name, str(path.resolve()), file_sha256(path))
 
 

@@ -135,6 +135,8 @@ class BeaconFalsifier:
 def lie_label(message: str, field: str, sender: int = 0) -> str:
     """A message attack in a few words: ``a lie (offset on its speed)``, ``a lie (offset on insider v2's speed)``."""
     whose = f"insider v{sender}'s" if sender else "its"
+    if message == "jam":  # no beacon at all: no field of one
+        return f"a lie (jam of {whose} beacons)"
     return f"a lie ({message} on {whose} {field})"
 
 

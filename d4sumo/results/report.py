@@ -137,12 +137,14 @@ def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample
     if fcd_path is not None and kind not in ("time-space", "accel"):
         raise ConfigError("--fcd", str(fcd_path), "an FCD file only with a time-space or accel plot")
     if kind in ("time-space", "accel") and sample is None:
-        raise ConfigError("--sample", "nothing", f"a sample id: a {kind} plot draws one stored sample")
+        raise ConfigError("--sample", "none given", f"a sample id: {'an' if kind[0] in 'aeiou' else 'a'} {kind} plot draws one stored sample")
     records = load_records(dbs)
     if kind in ("time-space", "accel"):
         matches = [r for r in records if r.sample_id == sample]
         if not matches:
-            raise ConfigError("--sample", sample, f"a sample id of {', '.join(map(str, dbs))}")
+            ids = [r.sample_id for r in records]
+            raise ConfigError("--sample", sample, f"a sample id of {', '.join(map(str, dbs))} "
+                                                  f"({f'{min(ids)} .. {max(ids)}' if ids else 'it holds none'})")
         plot_sample(matches[0], kind, out, fcd_path)
         return f"{kind} plot written to {out}" + (f" (FCD: {fcd_path})" if fcd_path is not None else "")
     filters = {"attack": attack, "optimizer": optimizer, "start": start, "setpoint_m": setpoint_m, "speed_mps": speed_mps}
