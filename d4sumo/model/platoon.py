@@ -264,7 +264,7 @@ class Platoon:
         #: each Python follower, as the step loop calls it: its index, its command, its actuator, its inbox
         self._python = [(i, f.command, f.actuator.apply, self.channel.inbox(i) if self.channel is not None else None)
                         for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
-        #: whether each car has one pair at most with a car ahead (no car covers two lanes, no traffic)
+        #: whether the cars are the paper's column, pair i - 1 car i and the car ahead (no lane change, no traffic)
         self._one_ahead = not self.maneuver.lateral and config.traffic is None
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
         #: whether it reads every car ahead's, the newest beacon of each car it reads), where one is new
@@ -282,10 +282,8 @@ class Platoon:
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
         u = self.attack_u[k]
-        if not self._python and self._attacker_driver is None:  # nobody Python commands reads who is ahead
-            ahead = None
-        elif self._one_ahead:
-            ahead = {b: (a, gap) for a, b, gap in pairs}
+        if self._one_ahead or not self._python and self._attacker_driver is None:
+            ahead = None  # the column (car i follows car i - 1, at pair i - 1's gap), or nobody Python commands asks
         else:
             ahead = {}
             for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
@@ -319,7 +317,8 @@ class Platoon:
         channel = self.channel
         if channel is None:
             for i, command, apply, _ in self._python:
-                leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))  # nobody ahead in its lane: a free road
+                # nobody ahead in its lane: a free road
+                leader, gap = (i - 1, pairs[i - 1][2]) if ahead is None else ahead.get(i, (i, FREE_ROAD_GAP_M))
                 c = command(gap, speeds[i], speeds[leader])
                 if type(c) is not float or not -1.0 <= c <= 1.0:  # not a plain command: say why, or take the float it is
                     c = checked_command(c, i, k)
@@ -331,7 +330,7 @@ class Platoon:
             if self._sumo_listening:
                 self._feed_sumo()
             for i, command, apply, inbox in self._python:
-                leader, gap = ahead.get(i, (i, FREE_ROAD_GAP_M))
+                leader, gap = (i - 1, pairs[i - 1][2]) if ahead is None else ahead.get(i, (i, FREE_ROAD_GAP_M))
                 c = command(gap, speeds[i], speeds[leader], accels[i], inbox, positions[i], now)
                 if type(c) is not float or not -1.0 <= c <= 1.0:
                     c = checked_command(c, i, k)
