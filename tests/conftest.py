@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import functools
+import threading
 
 import numpy as np
 import pytest
@@ -22,6 +24,127 @@ def sigint_at_default() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def side_by_side(calls):
+    """Call each of ``calls`` (independent of one another, each typically a whole command run as a process of
+    its own) at once, as many together as this machine has cores (one core fewer when made ahead, beside the
+    tests); their results in order. An exception in one is raised here."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    cores = os.cpu_count() or 1
+    lanes = max(1, cores - 1) if threading.current_thread().name == _AHEAD_THREAD else max(2, cores)
+    with ThreadPoolExecutor(max_workers=lanes) as pool:
+        futures = [pool.submit(call) for call in calls]
+        return [f.result() for f in futures]
+
+
+# --- fixtures made ahead ---------------------------------------------------------------------------------
+#
+# Most tests run in this process, on one core. A fixture whose making is only commands (processes of their
+# own, checked by the tests that use it, timed by nothing) is `made_ahead`: when the session starts, a thread
+# begins making those the selected tests use, in the order they use them, on the core the tests leave idle.
+# It makes them only beside the tests of engine/, model/, results/ and search/ (none of which times
+# anything or looks at other processes); any other test (kills, signals, time limits, process ids) first
+# waits until the thread is done (making those it has not begun itself). A test that needs a fixture the
+# thread has not begun makes it itself.
+
+_AHEAD_THREAD = "made-ahead"
+_AHEAD_BESIDE = ("engine", "model", "results", "search")  # the folders of tests/ the thread runs beside
+_MADE: dict[tuple[str, str], "_Made"] = {}  # (module, fixture name) -> its making
+_ahead: list[tuple] = []  # (the thread, the makings it was given, tmp_path_factory)
+
+
+class _Made:
+    """One fixture's value, made once: by the thread, or by the first test that needs it."""
+
+    def __init__(self, make):
+        self.make = make
+        self._lock = threading.Lock()
+        self._begun = False
+        self._done = threading.Event()
+        self._value = self._error = None
+
+    def begin(self, tmp_path_factory) -> None:
+        """Make it here, unless it is made or being made already."""
+        with self._lock:
+            if self._begun:
+                return
+            self._begun = True
+        try:
+            self._value = self.make(tmp_path_factory)
+        except Exception as exc:  # raised in the tests that use it
+            self._error = exc
+        except BaseException as exc:  # Ctrl-C: the session stops
+            self._error = exc
+            raise
+        finally:
+            self._done.set()
+
+    def value(self, tmp_path_factory):
+        self.begin(tmp_path_factory)
+        self._done.wait()
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
+def made_ahead(scope: str = "module"):
+    """A fixture (of ``scope``) whose value ``make(tmp_path_factory)`` gives, made ahead when the session starts.
+    ``make`` may run commands and write files under ``tmp_path_factory`` only: it runs beside other tests."""
+
+    def wrap(make):
+        key = (make.__module__, make.__name__)
+        _MADE[key] = _Made(make)
+
+        @functools.wraps(make)
+        def fixture(tmp_path_factory):
+            return _MADE[key].value(tmp_path_factory)
+
+        return pytest.fixture(scope=scope)(fixture)
+
+    return wrap
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _make_ahead(request, tmp_path_factory):
+    """Begins making the `made_ahead` fixtures the selected tests use. At the session's end (early, on a
+    failure with -x), nothing more is begun, and what is being made is waited for."""
+    wanted = []
+    for item in request.session.items:
+        for name in item.fixturenames:
+            for key in ((getattr(item.module, "__name__", None), name), (__name__, name)):
+                if key in _MADE and _MADE[key] not in wanted:
+                    wanted.append(_MADE[key])
+    stop = threading.Event()
+
+    def make():
+        for made in wanted:
+            if stop.is_set():
+                return
+            made.begin(tmp_path_factory)
+
+    thread = threading.Thread(target=make, name=_AHEAD_THREAD, daemon=True)
+    _ahead.append((thread, wanted, tmp_path_factory))
+    thread.start()
+    yield
+    stop.set()
+    thread.join()
+
+
+def pytest_runtest_call(item):
+    """A test outside the folders the thread runs beside first makes what the thread has not begun, and waits
+    until the thread is done."""
+    from pathlib import Path
+
+    if _ahead and _ahead[0][0].is_alive():
+        here = Path(__file__).parent
+        if not any(Path(item.path).is_relative_to(here / folder) for folder in _AHEAD_BESIDE):
+            thread, wanted, tmp_path_factory = _ahead[0]
+            for made in wanted:
+                made.begin(tmp_path_factory)
+            thread.join()
 
 
 def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
@@ -69,16 +192,20 @@ samples = 12
 """
 
 
-@pytest.fixture(scope="session")
+@made_ahead(scope="session")
 def small_db(tmp_path_factory):
-    """A small real results database: 8 knot campaigns of 12 samples, simulated in SUMO."""
-    from d4sumo.sweep import Sweep, run_sweep
+    """A small real results database: 8 knot campaigns of 12 samples, simulated in SUMO (the sweep run on one
+    worker by `d4sumo sweep`)."""
+    import subprocess
+    import sys
 
     folder = tmp_path_factory.mktemp("small_db")
     path = folder / "sweep.toml"
     path.write_text(SMALL_SWEEP)
     db = folder / "results.sqlite"
-    run_sweep(Sweep.load(path), db, workers=1)
+    done = subprocess.run([sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "1", "--quiet"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
     return db
 
 

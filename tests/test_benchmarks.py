@@ -10,7 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import arch_cc  # noqa: E402
-from conftest import sigint_at_default  # noqa: E402
+from conftest import made_ahead, side_by_side, sigint_at_default  # noqa: E402
 
 
 def test_with_no_pedal_nobody_moves_and_each_specification_scores_the_standing_gaps():
@@ -111,15 +111,45 @@ def test_the_interval_of_the_mean_simulations_holds_the_mean_narrows_with_runs_a
     assert mean_interval([None, None]) is None and mean_interval([None] * 9 + [1200]) is None
 
 
-def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
+_FOUND = """
+import json, sys
+from types import SimpleNamespace
+
+sys.path.insert(0, sys.argv[1])
+import bench_arch
+
+args = SimpleNamespace(**json.loads(sys.argv[2]))
+bench_arch.use_benchmark(args.benchmark, args.instance)
+print(json.dumps([(spec, o, [f for f, _, _ in r]) for spec, o, r in bench_arch.runs_by_pair(args, ["CC3", "CC1"], 40)]))
+"""
+
+#: bench_arch's runs of the test below, as its flags give them
+ARCH_RUNS = {"jobs": 1, "benchmark": "arch-comp-cc", "instance": 2, "first_seed": 1, "runs": 3, "optimizers": ["auto", "random"]}
+
+
+@made_ahead()
+def arch_runs_alone(tmp_path_factory):
+    """ARCH_RUNS's (spec, optimiser, simulations to falsify on each seed), run alone (--jobs 1) in a process of
+    their own."""
+    import json
+    import subprocess
+
+    tools = Path(__file__).resolve().parent.parent / "tools"
+    done = subprocess.run([sys.executable, "-c", _FOUND, str(tools), json.dumps(ARCH_RUNS)], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    return [(spec, o, found) for spec, o, found in json.loads(done.stdout)]
+
+
+def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone(arch_runs_alone):
     """--jobs: the same seeds, the same simulations to falsify, in the same order."""
     from types import SimpleNamespace
 
     import bench_arch
 
-    alone = SimpleNamespace(jobs=1, benchmark="arch-comp-cc", instance=2, first_seed=1, runs=3, optimizers=["auto", "random"])
+    alone = SimpleNamespace(**ARCH_RUNS)
     bench_arch.use_benchmark(alone.benchmark, alone.instance)
-    found_alone = [(spec, o, [f for f, _, _ in r]) for spec, o, r in bench_arch.runs_by_pair(alone, ["CC3", "CC1"], 40)]
+    found_alone = arch_runs_alone
     on_workers = SimpleNamespace(**{**vars(alone), "jobs": 2})
     found_workers = [(spec, o, [f for f, _, _ in r]) for spec, o, r in bench_arch.runs_by_pair(on_workers, ["CC3", "CC1"], 40)]
     assert found_workers == found_alone and [pair[:2] for pair in found_alone] == [
@@ -127,7 +157,7 @@ def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
     assert any(f is not None for _, _, found in found_alone for f in found)
 
 
-@pytest.mark.parametrize("argv, said", [
+BENCH_ARCH_REFUSED = [
     (["--optimizers", "bayes"], "--optimizers: 'bayes': search.optimizer: got 'bayes'; allowed: one of bo,"),
     (["--optimizers", "bo:xi"], "--optimizers: got 'bo:xi'; allowed: an optimiser's name, or name:key=value"),
     (["--optimizers", "bo:budget=3"], "search.bo.budget: got 3; allowed: a key of [search.bo]"),
@@ -135,35 +165,51 @@ def test_bench_arch_runs_on_worker_processes_give_the_runs_it_gives_alone():
     (["--runs", "0"], "--runs: got 0; allowed: a whole number of at least 1"),
     (["--specs", "CC1"], "--specs: got 'CC1'; allowed: with --benchmark plateaus, one of gap, close, held"),
     (["--benchmark", "arch-comp-cc", "--held", "10", "--jobs", "2"], "--jobs: got 2; allowed: 1 with --held"),
-])
-def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said):
-    """A misspelt optimiser ran the benchmark's first simulation, then ended in a traceback."""
-    import subprocess
+]
 
-    tools = Path(__file__).resolve().parent.parent / "tools"
-    done = subprocess.run([sys.executable, str(tools / "bench_arch.py"), *argv], capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
-
-
-@pytest.mark.parametrize("script, argv, said", [  # regression: each ended in a traceback (or ran on)
+TOOLS_REFUSED = [  # regression: each ended in a traceback (or ran on)
     ("bench_sweep.py", ["--set", "foo"], "--set: got 'foo'; allowed: KEY=VALUE"),
     ("bench_sweep.py", ["--batch", "100000"], "--batch: got 100000; allowed: a whole number in [1, 64]"),
     ("bench_sweep.py", ["--workers", "1", "0"], "--workers: got 0; allowed: a whole number in [1, 1024]"),
     ("check_invariants.py", ["1", "--batch", "100000"], "--batch: got 100000; allowed: a whole number in [0, 64]"),
     ("paper_page.py", ["--runs", "{file}"], "allowed: a folder for the sweeps' databases (this is a file)"),
     ("paper_page.py", ["--runs", "{tmp}/absent/runs"], "allowed: a folder in an existing folder"),
-])
-def test_the_tools_refuse_bad_flags_in_one_line(tmp_path, script, argv, said):
+]
+
+
+@made_ahead()
+def refused(tmp_path_factory):
+    """The tools run with each bad command line below, each a process of its own, side by side:
+    {(script, argv): (the process, the folder its {tmp} and {file} are in)}. A folder holds one empty file."""
     import subprocess
 
-    (tmp_path / "file").write_text("")
     tools = Path(__file__).resolve().parent.parent / "tools"
-    argv = [a.format(file=tmp_path / "file", tmp=tmp_path) for a in argv]
-    done = subprocess.run([sys.executable, str(tools / script), *argv], capture_output=True, text=True, timeout=60)
+    cases = [("bench_arch.py", argv) for argv, _ in BENCH_ARCH_REFUSED] + [(script, argv) for script, argv, _ in TOOLS_REFUSED]
+
+    def run(script, argv):
+        folder = tmp_path_factory.mktemp("refused")
+        (folder / "file").write_text("")
+        argv = [a.format(file=folder / "file", tmp=folder) for a in argv]
+        return subprocess.run([sys.executable, str(tools / script), *argv], capture_output=True, text=True, timeout=60), folder
+
+    done = side_by_side([lambda script=script, argv=argv: run(script, argv) for script, argv in cases])
+    return {(script, tuple(argv)): result for (script, argv), result in zip(cases, done)}
+
+
+@pytest.mark.parametrize("argv, said", BENCH_ARCH_REFUSED)
+def test_bench_arch_refuses_bad_flags_in_one_line_before_any_run(argv, said, refused):
+    """A misspelt optimiser ran the benchmark's first simulation, then ended in a traceback."""
+    done, _ = refused["bench_arch.py", tuple(argv)]
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing made
+
+
+@pytest.mark.parametrize("script, argv, said", TOOLS_REFUSED)
+def test_the_tools_refuse_bad_flags_in_one_line(script, argv, said, refused):
+    done, folder = refused[script, tuple(argv)]
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and said in done.stderr and "Traceback" not in done.stderr
+    assert sorted(p.name for p in folder.iterdir()) == ["file"]  # nothing made
 
 
 def _children(pid: int) -> set[int]:

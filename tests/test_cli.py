@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import sigint_at_default
+from conftest import made_ahead, side_by_side, sigint_at_default
 from d4sumo.cli import main
 from d4sumo.search.optimizers import EARLIER_OPTIONS
 
@@ -326,7 +326,19 @@ def documented_commands() -> list[tuple[str, str]]:
     return found
 
 
-def test_every_command_in_the_readme_and_the_guide_is_valid():
+@made_ahead()
+def tools_helps(tmp_path_factory):
+    """Each tools/ script the README and the guide show, run with --help (the scripts side by side): {its path
+    as shown: the process}."""
+    import shlex
+
+    scripts = sorted({argv[1] for argv in (shlex.split(c) for _, c in documented_commands())
+                      if argv[0] != "d4sumo" and (ROOT / argv[1]).is_file()})
+    return dict(zip(scripts, side_by_side([lambda script=script: subprocess.run(
+        [sys.executable, str(ROOT / script), "--help"], capture_output=True, text=True, timeout=120) for script in scripts])))
+
+
+def test_every_command_in_the_readme_and_the_guide_is_valid(tools_helps):
     """Each d4sumo command parses as shown; each tools/ script exists and has the flags shown."""
     import shlex
 
@@ -347,7 +359,7 @@ def test_every_command_in_the_readme_and_the_guide_is_valid():
         script = ROOT / argv[1]
         assert script.is_file(), f"{page}: {argv[1]} does not exist"
         if argv[1] not in helps:
-            done = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120)
+            done = tools_helps[argv[1]]
             assert done.returncode == 0, done.stderr
             helps[argv[1]] = done.stdout
         for flag in (a.split("=")[0] for a in argv[2:] if a.startswith("--")):
@@ -536,30 +548,51 @@ def test_a_controller_in_the_current_folder_is_found_and_reading_its_database_im
             in refused.stderr)
 
 
+#: bo as d4sumo 0.7 ran it by default: with today's options, and with those of 0.7.0
+EARLIER_DEFAULT = [[], ["--set", "search.bo.inducing=0"]]
+
+
+@made_ahead()
+def falsify_chains(tmp_path_factory):
+    """The commands of the two tests below: each test's one after another on a database of its own ({db}),
+    the tests' side by side. {("earlier", flags) or "unused": the processes in order}."""
+    chains = {("earlier", tuple(earlier)): [
+        ("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", "{db}", "--quiet"),
+        ("falsify", "--samples", "3", "--db", "{db}", "--quiet"),
+        ("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", "{db}", "--quiet"),
+    ] for earlier in EARLIER_DEFAULT}
+    chains["unused"] = [
+        ("falsify", "--samples", "2", "--db", "{db}", "--quiet", "--set", "search.bo.inducing=0"),
+        ("falsify", "--optimizer", "bo", "--samples", "2", "--db", "{db}", "--quiet", "--set", "search.bo.inducing=0"),
+    ]
+
+    def play(chain):
+        db = str(tmp_path_factory.mktemp("falsify") / "r.sqlite")
+        return [run(*(db if a == "{db}" else a for a in argv)) for argv in chain]
+
+    return dict(zip(chains, side_by_side([lambda chain=chain: play(chain) for chain in chains.values()])))
+
+
 @pytest.mark.sumo
-@pytest.mark.parametrize("earlier", [[], ["--set", "search.bo.inducing=0"]])  # bo now, and as 0.7.0 stored it
-def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(tmp_path, earlier):
+@pytest.mark.parametrize("earlier", EARLIER_DEFAULT)  # bo now, and as 0.7.0 stored it
+def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(earlier, falsify_chains):
     """The default optimiser became auto: a database whose campaign ran by default with bo (d4sumo 0.7
     and before, whose bo had no inducing points) is named, with the flags that go on with it."""
-    db = str(tmp_path / "r.sqlite")
-    assert run("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", db, "--quiet").returncode == 0
-    now = run("falsify", "--samples", "3", "--db", db, "--quiet")
+    first, now, again = falsify_chains["earlier", tuple(earlier)]  # bo, then the default, then bo again
+    assert first.returncode == 0
     assert now.returncode == 0, now.stderr
     assert "holds this campaign run with bo, the default optimiser of d4sumo 0.7 and before" in now.stderr
     assert now.stderr.rstrip().endswith("To go on with that one: --optimizer bo" + (" --set search.bo.inducing=0" if earlier else ""))
-    again = run("falsify", "--optimizer", "bo", *earlier, "--samples", "3", "--db", db, "--quiet")
     assert again.returncode == 0 and "holds this campaign run with" not in again.stderr
 
 
 @pytest.mark.sumo
-def test_falsify_says_when_an_optimizers_options_go_unused(tmp_path):
+def test_falsify_says_when_an_optimizers_options_go_unused(falsify_chains):
     """Earlier notes said `--set search.bo.inducing=0`; with auto the default, bo's table alone would go
     unused without a word."""
-    db = str(tmp_path / "r.sqlite")
-    said = run("falsify", "--samples", "2", "--db", db, "--quiet", "--set", "search.bo.inducing=0")
+    said, quiet = falsify_chains["unused"]  # the default with bo's options, then bo with them
     assert said.returncode == 0
     assert "note: the options of [search.bo] are unused: this campaign runs auto (--optimizer bo runs bo)" in said.stderr
-    quiet = run("falsify", "--optimizer", "bo", "--samples", "2", "--db", db, "--quiet", "--set", "search.bo.inducing=0")
     assert quiet.returncode == 0 and "unused" not in quiet.stderr
 
 

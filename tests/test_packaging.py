@@ -12,10 +12,12 @@ from pathlib import Path
 
 import pytest
 
+from conftest import made_ahead, side_by_side
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
-@pytest.fixture(scope="module")
+@made_ahead()
 def wheel(tmp_path_factory):
     """The project's wheel, built from a copy of its files (the checkout stays clean)."""
     src = tmp_path_factory.mktemp("src")
@@ -64,15 +66,18 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     work.mkdir()
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "XDG_CACHE_HOME": str(tmp_path / "cache")}
     run = lambda *code: subprocess.run([str(python), *code], cwd=work, capture_output=True, text=True, env=env, timeout=300)
-    where = run("-c", "import d4sumo.sumo_scenarios as s; print(s.__file__)")
+    # these four side by side: none reads what another writes
+    where, listed, episode, built = side_by_side([
+        lambda: run("-c", "import d4sumo.sumo_scenarios as s; print(s.__file__)"),
+        lambda: run("-m", "d4sumo.cli", "scenarios"),
+        lambda: run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json"),
+        lambda: run("-m", "d4sumo.cli", "build-fmu", "--fmi", "3", "--out", "acc.fmu"),  # its C sources ship in the wheel
+    ])
     assert where.returncode == 0, where.stderr
     assert all(line.startswith(str(site)) for line in where.stdout.split()), where.stdout  # not the checkout
-    listed = run("-m", "d4sumo.cli", "scenarios")
     assert listed.returncode == 0 and "highway_3lane_120kmh" in listed.stdout, listed.stderr
-    episode = run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json")
     assert episode.returncode == 0, episode.stderr
     assert json.loads(episode.stdout)["outcome"] == "attacker_crash"
-    built = run("-m", "d4sumo.cli", "build-fmu", "--fmi", "3", "--out", "acc.fmu")  # its C sources ship in the wheel
     assert built.returncode == 0, built.stderr
     episode = run("-m", "d4sumo.cli", "simulate", "--controller", "fmu:acc.fmu", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json")
     assert episode.returncode == 0 and json.loads(episode.stdout)["outcome"] == "attacker_crash", episode.stderr

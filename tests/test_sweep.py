@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from conftest import sigint_at_default
+from conftest import made_ahead, sigint_at_default
 from d4sumo.cli import main
 from d4sumo.errors import ConfigError
 from d4sumo.search.store import Store, StoreError
@@ -42,6 +42,16 @@ def outcomes(db):
     with Store(db, create=False) as store:
         by_key = {c.id: c.key for c in store.campaigns()}
         return sorted((by_key[s.campaign_id], s.index, s.params, s.robustness, s.outcome) for s in store.samples())
+
+
+def swept_alone(tmp_path_factory, text, *flags):
+    """The database of the sweep ``text`` run by `d4sumo sweep` on one worker: what a test's sweep must store."""
+    folder = tmp_path_factory.mktemp("alone")
+    db = folder / "alone.sqlite"
+    done = subprocess.run([sys.executable, "-m", "d4sumo.cli", "sweep", str(write(folder, text)), "--db", str(db),
+                           "--workers", "1", "--quiet", *flags], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return db
 
 
 def test_a_sweep_is_the_product_of_its_grid(tmp_path):
@@ -135,10 +145,17 @@ def test_a_database_of_another_sweep_is_refused_untouched(tmp_path):
     assert outcomes(db) == before
 
 
+KILLED_WHOLE = TINY.replace("samples = 6", "samples = 40")
+
+
+@made_ahead()
+def killed_whole_alone(tmp_path_factory):
+    return outcomes(swept_alone(tmp_path_factory, KILLED_WHOLE))
+
+
 @pytest.mark.sumo
-def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path):
-    text = TINY.replace("samples = 6", "samples = 40")
-    path = write(tmp_path, text)
+def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path, killed_whole_alone):
+    path = write(tmp_path, KILLED_WHOLE)
     db = tmp_path / "r.sqlite"
     cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--workers", "2", "--quiet"]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -157,13 +174,16 @@ def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path):
     assert subprocess.run(cmd, timeout=300).returncode == 0
     rows = outcomes(db)
     assert len(rows) == 160 and len({(r[0], r[1]) for r in rows}) == 160  # every sample exactly once
-    reference = tmp_path / "ref.sqlite"
-    run_sweep(Sweep.load(path), reference, workers=1)
-    assert rows == outcomes(reference)
+    assert rows == killed_whole_alone
+
+
+@made_ahead()
+def tiny_alone(tmp_path_factory):
+    return outcomes(swept_alone(tmp_path_factory, TINY))
 
 
 @pytest.mark.sumo
-def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path):
+def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path, tiny_alone):
     from distributed import LocalCluster
 
     sweep = Sweep.load(write(tmp_path, TINY))
@@ -171,12 +191,19 @@ def test_a_sweep_runs_on_a_real_local_dask_cluster(tmp_path):
                       dashboard_address=None) as cluster:
         result = run_sweep(sweep, tmp_path / "dask.sqlite", dask_address=cluster.scheduler_address)
     assert result.samples == 24
-    run_sweep(sweep, tmp_path / "local.sqlite", workers=1)
-    assert outcomes(tmp_path / "dask.sqlite") == outcomes(tmp_path / "local.sqlite")
+    assert outcomes(tmp_path / "dask.sqlite") == tiny_alone
+
+
+TURBO = TINY.replace('optimizer = ["random"]', 'optimizer = ["turbo"]').replace("samples = 6", "samples = 16")
+
+
+@made_ahead()
+def turbo_alone(tmp_path_factory):
+    return outcomes(swept_alone(tmp_path_factory, TURBO))
 
 
 @pytest.mark.parametrize("proposals", ["client", "workers"])
-def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_proposes(tmp_path, proposals):
+def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_proposes(tmp_path, proposals, turbo_alone):
     """Issue 36: on a cluster of mixed machines a sweep's samples differed from the same sweep run locally:
     each worker asked its campaigns' GPs with its own BLAS. With the optimisers on the client (the
     default) the workers only play episodes, which are the same on every machine: here workers whose
@@ -186,8 +213,7 @@ def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_propos
 
     from distributed import LocalCluster
 
-    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["turbo"]').replace("samples = 6", "samples = 16")
-    sweep = Sweep.load(write(tmp_path, text))
+    sweep = Sweep.load(write(tmp_path, TURBO))
     preload = [str(Path(__file__).parent / "search" / "nudged_worker.py")]
     if proposals == "client":  # and none is asked for a point on a worker
         preload.append(str(Path(__file__).parent / "search" / "no_optimizer_worker.py"))
@@ -197,9 +223,8 @@ def test_a_dask_sweep_on_workers_of_other_numerics_stores_what_the_client_propos
     assert result.samples == 64
     rows = outcomes(tmp_path / "dask.sqlite")
     assert len({(r[0], r[1]) for r in rows}) == 64
-    if proposals == "client":
-        run_sweep(sweep, tmp_path / "local.sqlite", workers=1)
-        assert rows == outcomes(tmp_path / "local.sqlite")
+    if proposals == "client":  # what this machine's process alone stores
+        assert rows == turbo_alone
 
 
 def test_dask_proposals_without_dask_is_said_to_be_unused(tmp_path, capsys):
@@ -209,15 +234,23 @@ def test_dask_proposals_without_dask_is_said_to_be_unused(tmp_path, capsys):
     assert "--dask-proposals is unused" in capsys.readouterr().err
 
 
+TINY30 = TINY.replace("samples = 6", "samples = 30")
+
+
+@made_ahead()
+def tiny30_alone(tmp_path_factory):
+    return outcomes(swept_alone(tmp_path_factory, TINY30))
+
+
 @pytest.mark.sumo
-def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_on_the_client(tmp_path):
+def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_on_the_client(tmp_path, tiny30_alone):
     """Regression: Dask workers wrote into a database on their own side and the client reported
     '0 samples'. Now the workers (started elsewhere, with their own cache) only compute; the client
     stores everything, and a worker killed mid-sweep loses nothing finished."""
     from conftest import dask_elsewhere
 
     with dask_elsewhere(tmp_path, workers=2) as (address, workers):
-        path = write(tmp_path, TINY.replace("samples = 6", "samples = 30"))
+        path = write(tmp_path, TINY30)
         db = tmp_path / "client" / "r.sqlite"
         db.parent.mkdir()
         cmd = [sys.executable, "-m", "d4sumo.cli", "sweep", str(path), "--db", str(db), "--dask", address, "--quiet"]
@@ -231,8 +264,7 @@ def test_a_sweep_on_a_real_scheduler_with_workers_in_other_folders_writes_only_o
             assert not list((tmp_path / f"worker{i}").rglob("*.sqlite"))
     rows = outcomes(db)
     assert len(rows) == 120 and len({(r[0], r[1]) for r in rows}) == 120
-    run_sweep(Sweep.load(path), tmp_path / "local.sqlite", workers=1)
-    assert rows == outcomes(tmp_path / "local.sqlite")
+    assert rows == tiny30_alone
 
 
 @pytest.mark.sumo
@@ -244,7 +276,7 @@ def test_dask_local_runs_a_local_cluster(tmp_path):
 
 def test_an_unreachable_dask_scheduler_is_a_clear_error(tmp_path, capsys):
     path = write(tmp_path, TINY)
-    assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "2", "--quiet"]) == 2
+    assert main(["sweep", str(path), "--db", str(tmp_path / "r.sqlite"), "--dask", "tcp://127.0.0.1:9", "--dask-timeout", "0.5", "--quiet"]) == 2
     assert "no Dask scheduler answered" in capsys.readouterr().err
     assert not (tmp_path / "r.sqlite").exists()  # regression: an empty database was left behind
 
@@ -322,11 +354,9 @@ def wait_for_samples(db, n, timeout=90):
 LONG = TINY.replace("samples = 6", "samples = 100")  # about 5 s on 2 cores: long enough to kill midway
 
 
-@pytest.fixture(scope="module")
+@made_ahead()
 def long_reference(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("reference")
-    run_sweep(Sweep.load(write(folder, LONG)), folder / "ref.sqlite", workers=1)
-    return outcomes(folder / "ref.sqlite")
+    return outcomes(swept_alone(tmp_path_factory, LONG))
 
 
 @pytest.mark.sumo
@@ -372,16 +402,22 @@ def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_pat
 @pytest.mark.sumo
 def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp_path):
     """Regression: two runs of one sweep on one database both crashed part-way ("already has sample 0")."""
-    path = write(tmp_path, TINY.replace("samples = 6", "samples = 200"))  # long enough to be running still
+    path = write(tmp_path, LONG)
     db = tmp_path / "r.sqlite"
     cmd, first = start_sweep(path, db)
     wait_for_samples(db, 5)
-    second = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    # the first sweep (its workers too) held where it is, midway, with its database open for writing, for as
+    # long as the second takes to start, whatever this machine's speed; then it goes on
+    os.killpg(first.pid, signal.SIGSTOP)
+    try:
+        second = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    finally:
+        os.killpg(first.pid, signal.SIGCONT)
     assert second.returncode == 2 and second.stderr.count("\n") == 1
     assert "another d4sumo command is writing to it" in second.stderr
     assert first.wait(timeout=300) == 0
     rows = outcomes(db)
-    assert len(rows) == 800 and len({(r[0], r[1]) for r in rows}) == 800
+    assert len(rows) == 400 and len({(r[0], r[1]) for r in rows}) == 400
 
 
 @pytest.mark.sumo
@@ -414,16 +450,24 @@ def test_grid_points_that_are_one_campaign_are_refused_before_anything_runs(tmp_
         Sweep.load(write(tmp_path, TINY.replace("[grid]\n", '[grid]\ncontroller = ["sumo:ACC"]\n') + "[controller]\ntau = 0.5\n"))
 
 
+#: every optimiser, from rest and steady: tasks of two campaigns whose episodes share a batch, each with its own
+#: start, cut by batches of 7 and chunks returned between them
+BATCHED = (TINY.replace('optimizer = ["random"]', 'optimizer = ["random", "ce", "cmaes", "bo"]')
+           .replace("samples = 6", "samples = 23").replace("setpoint_m = [5.0, 7.0]", "setpoint_m = [5.0]"))
+
+
+@made_ahead()
+def batched_played_alone(tmp_path_factory):
+    """BATCHED on one worker, every episode alone in its SUMO (--batch 1)."""
+    return outcomes(swept_alone(tmp_path_factory, BATCHED, "--batch", "1"))
+
+
 @pytest.mark.sumo
-def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or_alone(tmp_path):
+def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or_alone(tmp_path, batched_played_alone):
     """Issue 13: batches, and the chunks a worker returns between them, change the speed only."""
-    path = write(tmp_path, TINY.replace('optimizer = ["random"]', 'optimizer = ["random", "ce", "cmaes", "bo"]')
-                 .replace("samples = 6", "samples = 23"))
-    sweep = Sweep.load(path)
-    run_sweep(sweep, tmp_path / "alone.sqlite", workers=1, batch=1)
-    run_sweep(sweep, tmp_path / "batched.sqlite", workers=2, batch=7)
-    assert outcomes(tmp_path / "alone.sqlite") == outcomes(tmp_path / "batched.sqlite")
-    assert len(outcomes(tmp_path / "alone.sqlite")) == 16 * 23
+    run_sweep(Sweep.load(write(tmp_path, BATCHED)), tmp_path / "batched.sqlite", workers=2, batch=7)
+    assert outcomes(tmp_path / "batched.sqlite") == batched_played_alone
+    assert len(batched_played_alone) == 8 * 23
 
 
 def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):
@@ -436,22 +480,30 @@ def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(
     assert {c.config.cutin_offset_m for c in by_maneuver["cutin"]} == {-2.0, 0.0, 5.0}
 
 
+GAPPED = (TINY.replace('optimizer = ["random"]', 'optimizer = ["ce", "bo"]').replace("samples = 6", "samples = 30")
+          + "\n[search.bo]\nbatch_size = 1\n")  # one point per score: 30 chunks
+
+
+@made_ahead()
+def gapped_whole(tmp_path_factory):
+    """GAPPED run whole on one worker: its database."""
+    return swept_alone(tmp_path_factory, GAPPED)
+
+
 @pytest.mark.sumo
-def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path):
+def test_a_sweep_resumes_a_campaign_with_a_sample_missing_in_between(tmp_path, gapped_whole):
     """Regression: a stored campaign with a gap (sample 3 gone) made the resumed sweep stop with 'a
     worker returned samples out of order'; the campaign runner plays just the missing samples."""
-    text = TINY.replace('optimizer = ["random"]', 'optimizer = ["ce", "bo"]').replace("samples = 6", "samples = 30")
-    sweep = Sweep.load(write(tmp_path, text + "\n[search.bo]\nbatch_size = 1\n"))  # one point per score: 30 chunks
-    run_sweep(sweep, tmp_path / "whole.sqlite", workers=1)
+    sweep = Sweep.load(write(tmp_path, GAPPED))
     db = tmp_path / "r.sqlite"
-    run_sweep(sweep, db, workers=1)
+    shutil.copy(gapped_whole, db)  # the sweep stored whole
     with Store(db) as store:  # a short gap, and one longer than a chunk
         store.db.execute("DELETE FROM sample WHERE idx = 3 OR idx BETWEEN 8 AND 24")
         store.db.commit()
     for batch in (1, 64):
         shutil.copy(db, tmp_path / f"b{batch}.sqlite")
         run_sweep(sweep, tmp_path / f"b{batch}.sqlite", workers=2, batch=batch)
-        assert outcomes(tmp_path / f"b{batch}.sqlite") == outcomes(tmp_path / "whole.sqlite")
+        assert outcomes(tmp_path / f"b{batch}.sqlite") == outcomes(gapped_whole)
 
 
 def test_a_sweep_begun_where_the_numerics_differ_resumes_and_says_so_once(tmp_path, caplog):
@@ -545,16 +597,23 @@ def test_a_campaign_that_kills_its_worker_is_found_alone_and_named(tmp_path):
     assert all(n in (0, 6) for n in counts.values())  # whatever else ran was stored whole
 
 
+EIGHT = TINY.replace("[grid]\nsetpoint_m = [5.0, 7.0]\n", "[grid]\nsetpoint_m = [" + ", ".join(f"{s:.1f}" for s in range(3, 11)) + "]\n").replace(
+    'start = ["rest", "steady"]', 'start = ["rest"]')  # 8 campaigns
+
+
+@made_ahead()
+def eight_alone(tmp_path_factory):
+    return outcomes(swept_alone(tmp_path_factory, EIGHT))
+
+
 @pytest.mark.sumo
-def test_a_worker_that_dies_between_two_submissions_loses_nothing(tmp_path, monkeypatch):
+def test_a_worker_that_dies_between_two_submissions_loses_nothing(tmp_path, monkeypatch, eight_alone):
     """Regression: when a worker died after the sweep last looked at its pool, the next submission raised
     BrokenProcessPool out of the sweep, a traceback. The tasks in flight now run again, as on any death."""
     from d4sumo.sweep import run as sweep_run
     from d4sumo.sweep import workers as sweep_workers
 
-    grid = "[grid]\nsetpoint_m = [" + ", ".join(f"{s:.1f}" for s in range(3, 11)) + "]\n"  # 8 campaigns
-    text = TINY.replace("[grid]\nsetpoint_m = [5.0, 7.0]\n", grid).replace('start = ["rest", "steady"]', 'start = ["rest"]')
-    path = write(tmp_path, text)
+    path = write(tmp_path, EIGHT)
     pools = []
 
     def new_pool(workers):  # the first pool's workers die just before its third submission
@@ -579,8 +638,7 @@ def test_a_worker_that_dies_between_two_submissions_loses_nothing(tmp_path, monk
     monkeypatch.setattr(sweep_run, "new_pool", new_pool)
     run_sweep(Sweep.load(path), tmp_path / "r.sqlite", workers=2)
     assert len(pools) >= 2  # the death was seen, and the sweep went on on a new pool
-    run_sweep(Sweep.load(path), tmp_path / "alone.sqlite", workers=1)
-    assert outcomes(tmp_path / "r.sqlite") == outcomes(tmp_path / "alone.sqlite")
+    assert outcomes(tmp_path / "r.sqlite") == eight_alone
 
 
 @pytest.mark.parametrize("earlier", ["", "[search.bo]\ninducing = 0\n"])  # bo now, and as 0.7.0 ran it

@@ -263,7 +263,8 @@ def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatc
 
     (tmp_path / "d4sumo").mkdir()
     (tmp_path / "d4sumo" / "vtypes").write_text("a file where the folder should be")
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    # the cache moved by sumo's own lookup, not by XDG_CACHE_HOME: commands the tests run meanwhile keep theirs
+    monkeypatch.setattr(sumo, "default_cache_dir", lambda: tmp_path / "d4sumo" / "nets")
     monkeypatch.setattr(sumo, "_CHECKED", {})
     config = EpisodeConfig(controller=ControllerConfig("sumo:IDM", (("tau", 0.77),)))
     with pytest.raises(SumoError, match="cannot write SUMO's vehicle types"):

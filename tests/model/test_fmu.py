@@ -12,7 +12,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from conftest import random_plans
+from conftest import random_plans, side_by_side
 from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
@@ -92,27 +92,35 @@ def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading
     assert ran.returncode == 0, ran.stderr
     with open_store(db, create=False) as store:
         assert store.campaigns()[0].definition["config"]["controller"][SHA_KEY] == file_sha256(fmu)
-    assert run("replay", str(db), "1", cwd=tmp_path).returncode == 0
+    # the replay side by side with the build of the changed FMU (elsewhere in tmp_path, until it is copied in)
+    replayed, changed = side_by_side([
+        lambda: run("replay", str(db), "1", cwd=tmp_path),
+        lambda: variant(tmp_path, monkeypatch, "changed", patch=("switching_step(&((Instance *)c)->law, communicationStepSize);",
+                                                                 "switching_step(&((Instance *)c)->law, 2 * communicationStepSize);")),
+    ])
+    assert replayed.returncode == 0
     stored = db.read_bytes()
-    changed = variant(tmp_path, monkeypatch, "changed", patch=("switching_step(&((Instance *)c)->law, communicationStepSize);",
-                                                               "switching_step(&((Instance *)c)->law, 2 * communicationStepSize);"))
     shutil.copy(changed, fmu)
-    replay = run("replay", str(db), "1", cwd=tmp_path)
+    # the refused replay (it reads the database) side by side with a campaign of the changed FMU (it writes one)
+    replay, resumed = side_by_side([
+        lambda: run("replay", str(db), "1", cwd=tmp_path),
+        lambda: run("falsify", "--controller", "fmu:acc.fmu", "--start", "steady", "--setpoint", "5", "--optimizer", "random",
+                    "--samples", "6", "--db", str(db), "--quiet", cwd=tmp_path),
+    ])
     said = replay.stderr.strip().splitlines()  # the note that it loads the FMU, then why it will not
     assert replay.returncode == 2 and said[0].startswith("d4sumo: loading fmu:acc.fmu") and len(said) == 2
     assert "acc.fmu has changed since" in said[1] and "Traceback" not in replay.stderr
-    resumed = run("falsify", "--controller", "fmu:acc.fmu", "--start", "steady", "--setpoint", "5", "--optimizer", "random",
-                  "--samples", "6", "--db", str(db), "--quiet", cwd=tmp_path)
     assert resumed.returncode == 0  # another system: a campaign of its own, the first one untouched
     fmu.unlink()
-    exported = run("export", str(db), cwd=tmp_path)  # reading loads no FMU: it need not be there
+    # reading loads no FMU: it need not be there (the export and the report side by side: both only read)
+    exported, reported = side_by_side([lambda: run("export", str(db), cwd=tmp_path),
+                                       lambda: run("report", str(db), "--out", "rep", cwd=tmp_path)])
     assert exported.returncode == 0 and exported.stdout.count("\n") == 3 + 6 + 1
     assert db.read_bytes() != stored  # (the second campaign's samples) ...
     with open_store(db, create=False) as store:
         assert len(store.samples(1)) == 3 and len(store.campaigns()) == 2  # ... the first's kept
     # Regression: a report of campaigns whose FMU is gone (or has changed) failed whole; it now shows what
     # it can read and says why it replays none of them
-    reported = run("report", str(db), "--out", "rep", cwd=tmp_path)
     assert reported.returncode == 0, reported.stderr
     page = (tmp_path / "rep" / "index.html").read_text()
     assert "not replayed here" in page and "no file acc.fmu here" in page
@@ -161,9 +169,11 @@ def test_bad_fmus_get_one_line_and_exit_2_and_nothing_is_stored(switching_fmus, 
         z.writestr("binaries/win64/d4sumo_switching.dll", b"MZ")
     cases = {"missing.fmu": "no file missing.fmu", str(text): "not a zip archive", str(exchange): "model exchange only",
              str(other): "binaries for win64 and no sources"}
-    for fmu, said in cases.items():
-        db = tmp_path / "x.sqlite"
-        result = run("falsify", "--controller", f"fmu:{fmu}", "--samples", "2", "--db", str(db), cwd=tmp_path)
+    # side by side, each with a database of its own
+    dbs = [tmp_path / f"x{i}.sqlite" for i in range(len(cases))]
+    results = side_by_side([lambda fmu=fmu, db=db: run("falsify", "--controller", f"fmu:{fmu}", "--samples", "2", "--db", str(db),
+                                                       cwd=tmp_path) for fmu, db in zip(cases, dbs)])
+    for (fmu, said), db, result in zip(cases.items(), dbs, results):
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and said in lines[0] and "Traceback" not in result.stderr, (fmu, result.stderr)
         assert not db.exists()
@@ -186,9 +196,14 @@ def test_a_dask_sweep_ships_the_fmu_to_workers_that_cannot_see_the_clients_disk(
         with Store(db, create=False) as store:
             return sorted((s.campaign_id, s.index, s.params, s.robustness, s.outcome) for s in store.samples())
 
-    with dask_elsewhere(tmp_path) as (address, _):
-        swept = run("sweep", "sweep.toml", "--db", "dask.sqlite", "--dask", address, "--quiet", cwd=client)
-        assert swept.returncode == 0, swept.stderr
+    def on_dask():
+        with dask_elsewhere(tmp_path) as (address, _):
+            return run("sweep", "sweep.toml", "--db", "dask.sqlite", "--dask", address, "--quiet", cwd=client)
+
+    # the same sweep on the client alone, side by side with the Dask one (another database)
+    swept, local = side_by_side([on_dask, lambda: run("sweep", "sweep.toml", "--db", "local.sqlite", "--workers", "1", "--quiet",
+                                                      cwd=client)])
+    assert swept.returncode == 0, swept.stderr
     assert list((tmp_path / "worker1" / "cache" / "d4sumo" / "fmus" / "shipped").glob("*.fmu"))  # it came by value
-    assert run("sweep", "sweep.toml", "--db", "local.sqlite", "--workers", "1", "--quiet", cwd=client).returncode == 0
+    assert local.returncode == 0
     assert rows(client / "dask.sqlite") == rows(client / "local.sqlite") and len(rows(client / "local.sqlite")) == 12

@@ -5,6 +5,7 @@ it, and the same crash comes."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import made_ahead, side_by_side
 from d4sumo.errors import ConfigError
 from d4sumo.results.openscenario import heading_rad, read_motion
 
@@ -20,6 +22,27 @@ SUCCESS_KNOTS = "0.46,-0.65,0.73,0.08,-0.4,-0.15,-0.94,-0.75,0.34"
 
 def run(*argv, cwd=None):
     return subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True, timeout=300, cwd=cwd)
+
+
+#: the campaign each test below exports from, as falsify's flags
+CAMPAIGNS = {
+    # seed 2's first two samples: a success (v2-v3) and an attacker crash (v0-v1), one counterexample of each kind
+    "checked": ("--start", "steady", "--setpoint", "5", "--optimizer", "random", "--samples", "2", "--seed", "2"),
+    "swerving": ("--maneuver", "swerve", "--controller", "timegap", "--start", "steady", "--speed", "28", "--optimizer",
+                 "random", "--samples", "4"),
+    "refused": ("--start", "steady", "--optimizer", "random", "--samples", "2"),
+}
+
+
+@made_ahead()
+def campaigns(tmp_path_factory):
+    """Each campaign of CAMPAIGNS run by `d4sumo falsify` into a database of its own, side by side: {name: (the
+    process, the database)}. The tests only read them."""
+    folder = tmp_path_factory.mktemp("campaigns")
+    names = list(CAMPAIGNS)
+    done = side_by_side([lambda name=name: run("falsify", *CAMPAIGNS[name], "--db", str(folder / f"{name}.sqlite"), "--quiet")
+                         for name in names])
+    return {name: (ran, folder / f"{name}.sqlite") for name, ran in zip(names, done)}
 
 
 def xosc_issues(path: Path, tmp: Path) -> dict[str, list[str]]:
@@ -64,24 +87,35 @@ def test_the_heading_is_openscenarios_and_a_ballistic_trajectory_gives_back_its_
 
 @pytest.mark.sumo
 def test_an_exported_counterexample_passes_asams_checkers_and_replays_to_the_same_crash_on_its_road_imported_back(
-        tmp_path, asam_opendrive_checker):
-    db = tmp_path / "c.sqlite"
-    assert run("falsify", "--start", "steady", "--setpoint", "5", "--optimizer", "random", "--samples", "4", "--seed", "2",
-               "--db", str(db), "--quiet").returncode == 0
+        tmp_path, asam_opendrive_checker, campaigns):
+    ran, db = campaigns["checked"]
+    assert ran.returncode == 0
     from d4sumo.search.campaign import open_store
 
     with open_store(db, create=False) as store:
         samples = store.samples()
     crashed = [s for s in samples if s.outcome != "no_crash"]
     assert {s.outcome for s in crashed} >= {"success", "attacker_crash"} or len(crashed) >= 2
-    for s in crashed:
+
+    def exported_and_replayed(s):
+        """The sample's export, ASAM's OpenDRIVE checker's issues with its road, and its replay on that road."""
         out = tmp_path / f"sample{s.id}"
         exported = run("export", str(db), str(s.id), "--openscenario", str(out))
-        assert exported.returncode == 0, exported.stderr
-        assert not any(issues for issues in xosc_issues(out / "scenario.xosc", tmp_path).values())
-        assert not any(issues for issues in asam_opendrive_checker(out / "road.xodr", tmp_path).values())
+        if exported.returncode != 0:
+            return exported, None, None
+        checks = tmp_path / f"checks{s.id}"
+        checks.mkdir()
+        road_issues = asam_opendrive_checker(out / "road.xodr", checks)
         back = run("replay", str(db), str(s.id), "--openscenario", str(out / "scenario.xosc"), "--network",
                    str(out / "road.xodr"), "--json")
+        return exported, road_issues, back
+
+    # each sample's commands side by side: they read the database and write folders of their own
+    for s, (exported, road_issues, back) in zip(crashed, side_by_side([lambda s=s: exported_and_replayed(s) for s in crashed])):
+        out = tmp_path / f"sample{s.id}"
+        assert exported.returncode == 0, exported.stderr
+        assert not any(issues for issues in xosc_issues(out / "scenario.xosc", tmp_path).values())
+        assert not any(issues for issues in road_issues.values())
         assert back.returncode == 0, back.stderr
         summary = json.loads(back.stdout)
         assert summary["reproduced"] and summary["collision"]["pair"] == s.collision["pair"]
@@ -90,12 +124,11 @@ def test_an_exported_counterexample_passes_asams_checkers_and_replays_to_the_sam
 
 
 @pytest.mark.sumo
-def test_a_swerving_attackers_export_replays_to_the_same_crash(tmp_path):
+def test_a_swerving_attackers_export_replays_to_the_same_crash(tmp_path, campaigns):
     """Its lane changes come from the stored sample; its speeds from the trajectory, read along its heading
     (a lane change moves it across): the same crash, positions within a metre (measured: 0.6 m at most)."""
-    db = tmp_path / "s.sqlite"
-    assert run("falsify", "--maneuver", "swerve", "--controller", "timegap", "--start", "steady", "--speed", "28",
-               "--optimizer", "random", "--samples", "4", "--db", str(db), "--quiet").returncode == 0
+    ran, db = campaigns["swerving"]
+    assert ran.returncode == 0
     from d4sumo.search.campaign import open_store
 
     with open_store(db, create=False) as store:
@@ -111,9 +144,11 @@ def test_a_swerving_attackers_export_replays_to_the_same_crash(tmp_path):
 
 
 @pytest.mark.sumo
-def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tmp_path):
+def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tmp_path, campaigns):
+    ran, stored = campaigns["refused"]
+    assert ran.returncode == 0
     db = tmp_path / "c.sqlite"
-    assert run("falsify", "--start", "steady", "--optimizer", "random", "--samples", "2", "--db", str(db), "--quiet").returncode == 0
+    shutil.copy(stored, db)
     afile = tmp_path / "a.txt"
     afile.write_text("x")
     cases = [
@@ -126,8 +161,8 @@ def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tm
         (("replay", str(db), "1", "--openscenario", str(tmp_path / "s2" / "scenario.xosc")), "the export of sample 1 (this one is sample 2's)"),
     ]
     assert run("export", str(db), "2", "--openscenario", str(tmp_path / "s2")).returncode == 0
-    for argv, said in cases:
-        result = run(*argv)
+    # side by side: each refused command reads the database only
+    for (argv, said), result in zip(cases, side_by_side([lambda argv=argv: run(*argv) for argv, _ in cases])):
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and said in lines[0] and "Traceback" not in result.stderr, (argv, result.stderr)
     assert not (tmp_path / "o").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.sqlite", "s2"]

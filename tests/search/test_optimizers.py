@@ -11,6 +11,7 @@ from d4sumo.errors import ConfigError
 from d4sumo.search.optimizers import OPTIMIZERS, CrossEntropy, make_optimizer
 from d4sumo.search.optimizers.portfolio import BO, PIECE, RANDOM
 
+from conftest import made_ahead, side_by_side
 from histories import DATA, check_history, numerics, tell_history  # noqa: F401  (numerics: a fixture)
 
 LOWER, UPPER = -np.ones(9), np.ones(9)
@@ -251,21 +252,37 @@ pickle.dump((opt, asked), open(path, "wb"))
 """
 
 
-@pytest.mark.parametrize("name", OPTIMIZERS)
-def test_an_optimisers_state_goes_on_exactly_in_another_process(name, tmp_path):
-    """Regression: pycma finds the points it asked by hash(x.tobytes()), which Python salts anew in every
-    process: CMA-ES carried to another worker mid-generation (a sweep's next chunk) went on differently,
-    so a sweep's samples depended on how its chunks fell on its workers."""
+@made_ahead()
+def halves_in_two_processes(tmp_path_factory):
+    """Every optimiser's 30 asks, the first 13 in one process and the rest in another of another hash salt,
+    the optimisers side by side: {name: (the two processes, the file of the state and every ask)}."""
     import os
-    import pickle
     import subprocess
     import sys
 
-    path = tmp_path / "state.pkl"
-    for half, salt in (("first", "1"), ("second", "2")):
-        done = subprocess.run([sys.executable, "-c", _HALVES, name, half, str(path)], capture_output=True, text=True,
-                              env={**os.environ, "PYTHONHASHSEED": salt}, timeout=120)
-        assert done.returncode == 0, done.stderr
+    folder = tmp_path_factory.mktemp("halves")
+
+    def halves(name):
+        path, done = folder / f"{name}.pkl", []
+        for half, salt in (("first", "1"), ("second", "2")):
+            done.append(subprocess.run([sys.executable, "-c", _HALVES, name, half, str(path)], capture_output=True, text=True,
+                                       env={**os.environ, "PYTHONHASHSEED": salt}, timeout=120))
+            if done[-1].returncode != 0:
+                break
+        return done, path
+
+    return dict(zip(OPTIMIZERS, side_by_side([lambda name=name: halves(name) for name in OPTIMIZERS])))
+
+
+@pytest.mark.parametrize("name", OPTIMIZERS)
+def test_an_optimisers_state_goes_on_exactly_in_another_process(name, halves_in_two_processes):
+    """Regression: pycma finds the points it asked by hash(x.tobytes()), which Python salts anew in every
+    process: CMA-ES carried to another worker mid-generation (a sweep's next chunk) went on differently,
+    so a sweep's samples depended on how its chunks fell on its workers."""
+    import pickle
+
+    processes, path = halves_in_two_processes[name]
+    assert [p.args[4] for p in processes] == ["first", "second"] and [p.returncode for p in processes] == [0, 0], processes[-1].stderr
     _, asked = pickle.load(open(path, "rb"))
     opt, alone = make_optimizer(name, np.zeros(4), np.ones(4), budget=30, rng=np.random.default_rng(5)), []
     for _ in range(30):
