@@ -93,7 +93,9 @@ class Channel:
         self.sources = {i: tuple(range(i)) if i in hear_all else tuple(dict.fromkeys((0, i - 1)))  # the leader, the car ahead
                         for i in range(1, cars)}
         self.senders = sorted({s for sources in self.sources.values() for s in sources})
-        self.rngs = {(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
+        #: each link's losses (made only where beacons are lost: a generator costs as much as a hundred steps' beacons)
+        self.rngs = ({(s, i): np.random.default_rng([params.seed, s, i]) for i, srcs in self.sources.items() for s in srcs}
+                     if params.loss else {})
         self.in_flight: deque[tuple[int, int, Message]] = deque()  # (step delivered, receiver, beacon)
         self.newest: dict[int, dict[int, Message]] = {i: {} for i in self.sources}
         self.direct = not self.delay and not params.loss
