@@ -28,12 +28,13 @@ def sigint_at_default() -> None:
 
 def side_by_side(calls):
     """Call each of ``calls`` (independent of one another, each typically a whole command run as a process of
-    its own) at once, as many together as this machine has cores (one core fewer when made ahead, beside the
+    its own) at once, as many together as this process has cores (one core fewer when made ahead, beside the
     tests); their results in order. An exception in one is raised here."""
-    import os
     from concurrent.futures import ThreadPoolExecutor
 
-    cores = os.cpu_count() or 1
+    from d4sumo.sweep.workers import usable_cores
+
+    cores = usable_cores()
     lanes = max(1, cores - 1) if threading.current_thread().name == _AHEAD_THREAD else max(2, cores)
     with ThreadPoolExecutor(max_workers=lanes) as pool:
         futures = [pool.submit(call) for call in calls]

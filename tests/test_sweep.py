@@ -135,6 +135,21 @@ def test_local_workers_run_every_campaign_once_and_match_a_single_worker(tmp_pat
 
 
 @pytest.mark.sumo
+def test_by_default_a_sweep_runs_a_worker_on_each_core_it_may_use_not_each_of_the_machines(tmp_path, monkeypatch, tiny_alone):
+    """Regression: the default --workers was the machine's count of cores, so a sweep given one core of many
+    (a container's share, taskset) started a worker for each, all waiting for that one."""
+    from d4sumo.sweep import run as sweep_run
+    from d4sumo.sweep import workers as sweep_workers
+
+    pools = []
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)  # a machine of 64 cores ...
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5})  # ... of which this process may use 2
+    monkeypatch.setattr(sweep_run, "new_pool", lambda workers: pools.append(workers) or sweep_workers.new_pool(workers))
+    assert run_sweep(Sweep.load(write(tmp_path, TINY)), tmp_path / "r.sqlite").samples == 24
+    assert pools == [2] and outcomes(tmp_path / "r.sqlite") == tiny_alone
+
+
+@pytest.mark.sumo
 def test_a_database_of_another_sweep_is_refused_untouched(tmp_path):
     db = tmp_path / "r.sqlite"
     run_sweep(Sweep.load(write(tmp_path, TINY)), db, workers=1)

@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("sweep", help="run a grid of campaigns (local processes or a Dask cluster); resumable")
     p.add_argument("sweep", type=Path, help="sweep file (TOML: [grid] of lists, [search] samples, fixed tables)")
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database [results.sqlite]")
-    p.add_argument("--workers", type=int, help="local worker processes [number of cores]")
+    p.add_argument("--workers", type=int, help="local worker processes [the cores this process may run on]")
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on a Dask scheduler (e.g. tcp://10.0.0.5:8786), or 'local' for a local Dask cluster of --workers")
     p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S", help="seconds to wait for the scheduler [30]")

@@ -7,7 +7,6 @@ import contextlib
 import itertools
 import json
 import logging
-import os
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -26,7 +25,7 @@ from ..search.store import Store, StoreError
 from .dask_cluster import _dask_client, _run_dask, _run_dask_proposing, check_dask_address
 from .grid import Sweep
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
-from .workers import kill_pool, new_pool
+from .workers import kill_pool, new_pool, usable_cores
 
 log = logging.getLogger(__name__)
 
@@ -118,7 +117,7 @@ def run_sweep(
         raise ConfigError("--dask-proposals", dask_proposals, f"one of {', '.join(DASK_PROPOSALS)}")
     if dask_address is not None:
         dask_address = check_dask_address(dask_address)
-    workers = workers or os.cpu_count() or 1
+    workers = workers or usable_cores()
     t0 = time.perf_counter()
     sources: dict[str, NetworkSource] = {}
     with contextlib.ExitStack() as stack:

@@ -11,6 +11,15 @@ from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity: a container's or taskset's share), not the
+    machine's: as many workers as that, and none wait for a core."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):  # no affinity where the system has none to say (macOS)
+        return os.cpu_count() or 1
+
+
 def new_pool(workers: int) -> ProcessPoolExecutor:
     """``workers`` local processes, spawned clean (libsumo keeps one simulation per process), that ignore
     Ctrl-C (the caller's to handle) and die with the caller."""
