@@ -63,7 +63,7 @@ class ControllerConfig:
             object.__setattr__(self, "params", carfollowing.check_params(self.cls, dict(self.params), self.where))
             return
         try:
-            controller = resolve_controller(self.cls)
+            controller = resolve_controller(self.cls, self.params)
             resolved = build_params(controller, dict(self.params))  # validates every value
         except NotImported:  # read by name only: its parameters as given
             object.__setattr__(self, "params", tuple(self.params))
@@ -80,7 +80,7 @@ class ControllerConfig:
         return carfollowing.model_of(self.cls) if carfollowing.is_sumo(self.cls) else None
 
     def controller_class(self) -> type:
-        return resolve_controller(self.cls)
+        return resolve_controller(self.cls, self.params)
 
     def build_params(self) -> Any:
         return build_params(self.controller_class(), dict(self.params))

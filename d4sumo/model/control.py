@@ -675,14 +675,15 @@ def user_code(name: str) -> str | None:
     return name if is_fmu(name) else user_module(name)
 
 
-def resolve_controller(name: str) -> type:
-    """A registered name, or "package.module:ClassName" for a user's own controller class (`plugins`).
+def resolve_controller(name: str, params=()) -> type:
+    """A registered name, or "package.module:ClassName" for a user's own controller class (`plugins`), or
+    "fmu:PATH" for an FMU (its ``params``, (key, value) pairs, may name the content a campaign ran).
 
     (``sumo:MODEL`` names a SUMO car-following model: not a Python class, see `carfollowing`.)"""
     if name in _REGISTRY:
         return _REGISTRY[name]
     if is_fmu(name):
-        return fmu_controller(name)
+        return fmu_controller(name, params)
     if ":" not in name:
         raise ConfigError("controller.class", name, f"one of {', '.join(registered_controllers())}, a SUMO model as "
                                                     "'sumo:MODEL', an FMU as 'fmu:PATH' or 'package.module:ClassName'")

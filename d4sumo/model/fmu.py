@@ -10,9 +10,11 @@ follower's vehicle. A follower's [controller] table maps other names (``gap_m = 
 the FMU's own parameters by name (``acc_kp = 1.2``); an output ``mode`` is recorded in the trace.
 
 The campaign's identity holds the FMU's content (``fmu_sha256``): a changed FMU is another system, and a
-stored campaign of it is refused, not replayed with it. Reading a database never loads an FMU
+stored campaign of it is refused, not replayed with it. Every FMU a campaign runs is kept by its content
+(`kept`): a stored campaign whose path names no file from where it is replayed (a relative path, from
+another folder; a file moved or deleted) loads that copy. Reading a database never loads an FMU
 (`plugins.names_only`). An FMU that ships only its C sources is built for this machine, once (fmpy's
-build: CMake and a C compiler). Unpacked FMUs are kept in ``~/.cache/d4sumo/fmus``.
+build: CMake and a C compiler). Unpacked and kept FMUs are in ``~/.cache/d4sumo/fmus``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import ctypes
 import dataclasses
 import functools
 import hashlib
+import logging
 import math
 import os
 import shutil
@@ -43,6 +46,8 @@ OUTPUTS = ("command", "acceleration_mps2")
 MODE = "mode"
 SIGNALS = (*INPUTS, *CONSTANTS, *OUTPUTS, MODE)
 SHA_KEY = "fmu_sha256"
+
+log = logging.getLogger(__name__)
 
 
 def is_fmu(name: object) -> bool:
@@ -136,7 +141,26 @@ def _load(name: str, path: str, sha256: str) -> Fmu:
     unzipdir = _cache_dir() / sha256[:24]
     if not unzipdir.is_dir():
         _unpack(path, unzipdir, not binary, name)
+    if Path(path) != kept(sha256):
+        _keep(Path(path).read_bytes(), sha256)
     return Fmu(name, Path(path), sha256, unzipdir, description)
+
+
+def kept(sha256: str) -> Path:
+    """Where this machine keeps the FMU of content ``sha256``: each one a campaign ran here, and each one a
+    Dask client shipped to this worker."""
+    return _cache_dir() / "by-content" / f"{sha256}.fmu"
+
+
+def _keep(data: bytes, sha256: str) -> Path:
+    """The FMU's bytes kept by their content (written whole, then moved in place: once, whoever is first)."""
+    path = kept(sha256)
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(f"{path.name}.{os.getpid()}.partial")
+        partial.write_bytes(data)
+        partial.replace(path)
+    return path
 
 
 def _unpack(path: str, unzipdir: Path, build: bool, name: str) -> None:
@@ -168,6 +192,8 @@ def _unpack(path: str, unzipdir: Path, build: bool, name: str) -> None:
 
 #: on a Dask worker: the FMUs a client shipped (`receive`), by name, as files of this machine
 _SHIPPED: dict[str, Path] = {}
+#: the kept FMUs loaded in place of a missing file (said once a process)
+_SAID: set[tuple[str, str]] = set()
 
 
 def shipment(config) -> tuple[tuple[str, bytes], ...]:
@@ -180,33 +206,35 @@ def shipment(config) -> tuple[tuple[str, bytes], ...]:
 def receive(fmus: tuple[tuple[str, bytes], ...]) -> None:
     """On a worker: the FMUs a client shipped, kept as files in the cache and found by their names."""
     for name, data in fmus:
-        sha = hashlib.sha256(data).hexdigest()
-        path = _cache_dir() / "shipped" / f"{sha[:24]}.fmu"
-        if not path.is_file():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            partial = path.with_name(f"{path.name}.{os.getpid()}.partial")
-            partial.write_bytes(data)
-            partial.replace(path)
-        _SHIPPED[name] = path
+        _SHIPPED[name] = _keep(data, hashlib.sha256(data).hexdigest())
 
 
-def fmu_of(name: str) -> Fmu:
+def fmu_of(name: str, sha256: str | None = None) -> Fmu:
     """The FMU a controller name ``fmu:PATH`` names, as its file is now (on a Dask worker: as the client
-    shipped it)."""
+    shipped it). ``sha256``: the content a stored campaign ran, loaded as this machine kept it where
+    the path names no file."""
     given = name[len(PREFIX):]
     path = _SHIPPED.get(name) or Path(given).expanduser()
     if not path.is_file():
-        what = f"{given} is a folder" if path.is_dir() else f"no file {given} here"
-        raise ControllerImportError(name, "an FMU file", f"{what} (a path from the current folder, or absolute)")
+        if sha256 and kept(sha256).is_file() and not path.is_dir():
+            if (name, sha256) not in _SAID:  # once a process: a report replays many samples
+                _SAID.add((name, sha256))
+                log.warning("no file %s here: loading the copy of the FMU the campaign ran, kept in %s", given,
+                            kept(sha256).parent)
+            path = kept(sha256)
+        else:
+            what = f"{given} is a folder" if path.is_dir() else f"no file {given} here"
+            raise ControllerImportError(name, "an FMU file", f"{what} (a path from the current folder, or absolute)")
     return _load(name, str(path.resolve()), file_sha256(path))
 
 
-def fmu_controller(name: str) -> type:
+def fmu_controller(name: str, params=()) -> type:
     """The controller class of the FMU ``name`` names (``fmu:PATH``): its Params hold the FMU's content
-    hash, the names its signals map to and the FMU's parameters."""
+    hash, the names its signals map to and the FMU's parameters. ``params``: a stored campaign's (its
+    ``fmu_sha256`` finds the FMU it ran where the path names none)."""
     if not may_import():
         raise NotImported("controller.class", name, "a controller read by its name only (nothing is loaded here)")
-    return _controller_class(fmu_of(name))
+    return _controller_class(fmu_of(name, dict(params).get(SHA_KEY)))
 
 
 @functools.lru_cache(maxsize=None)

@@ -4,6 +4,8 @@ this machine, stepped through fmpy in SUMO episodes, against the Python controll
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 import shutil
 import subprocess
 import sys
@@ -22,8 +24,9 @@ from d4sumo.search.campaign import open_store
 pytestmark = pytest.mark.sumo
 
 
-def run(*argv, cwd=None):
-    return subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True, timeout=300, cwd=cwd)
+def run(*argv, cwd=None, env=None):
+    return subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True, timeout=300, cwd=cwd,
+                          env=env)
 
 
 def variant(tmp_path, monkeypatch, name: str, version: int = 2, patch: tuple[str, str] | None = None, rename=None):
@@ -112,9 +115,15 @@ def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading
     assert "acc.fmu has changed since" in said[1] and "Traceback" not in replay.stderr
     assert resumed.returncode == 0  # another system: a campaign of its own, the first one untouched
     fmu.unlink()
-    # reading loads no FMU: it need not be there (the export and the report side by side: both only read)
-    exported, reported = side_by_side([lambda: run("export", str(db), cwd=tmp_path),
-                                       lambda: run("report", str(db), "--out", "rep", cwd=tmp_path)])
+    (tmp_path / "elsewhere").mkdir()
+    # side by side, each only reads: reading loads no FMU, it need not be there (the export); on a machine that
+    # never ran it (an empty cache) the report replays none; where it ran, a sample replays from any folder
+    never_ran = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "empty-cache")}
+    exported, reported, elsewhere = side_by_side([
+        lambda: run("export", str(db), cwd=tmp_path),
+        lambda: run("report", str(db), "--out", "rep", cwd=tmp_path, env=never_ran),
+        lambda: run("replay", str(db), "1", "--json", cwd=tmp_path / "elsewhere"),
+    ])
     assert exported.returncode == 0 and exported.stdout.count("\n") == 3 + 6 + 1
     assert db.read_bytes() != stored  # (the second campaign's samples) ...
     with open_store(db, create=False) as store:
@@ -124,6 +133,11 @@ def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading
     assert reported.returncode == 0, reported.stderr
     page = (tmp_path / "rep" / "index.html").read_text()
     assert "not replayed here" in page and "no file acc.fmu here" in page
+    # Regression: a relative path named no file from another folder, nor once the file was gone; the campaign's
+    # content, kept where it ran, replays its sample to the same verdict
+    assert elsewhere.returncode == 0, elsewhere.stderr
+    assert "no file acc.fmu here: loading the copy of the FMU the campaign ran" in elsewhere.stderr
+    assert json.loads(elsewhere.stdout)["reproduced"]
 
 
 @pytest.mark.parametrize("kind", ["fails", "nan"])
@@ -204,6 +218,6 @@ def test_a_dask_sweep_ships_the_fmu_to_workers_that_cannot_see_the_clients_disk(
     swept, local = side_by_side([on_dask, lambda: run("sweep", "sweep.toml", "--db", "local.sqlite", "--workers", "1", "--quiet",
                                                       cwd=client)])
     assert swept.returncode == 0, swept.stderr
-    assert list((tmp_path / "worker1" / "cache" / "d4sumo" / "fmus" / "shipped").glob("*.fmu"))  # it came by value
+    assert list((tmp_path / "worker1" / "cache" / "d4sumo" / "fmus" / "by-content").glob("*.fmu"))  # it came by value
     assert local.returncode == 0
     assert rows(client / "dask.sqlite") == rows(client / "local.sqlite") and len(rows(client / "local.sqlite")) == 12
