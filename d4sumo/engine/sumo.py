@@ -11,6 +11,7 @@ remove. Many platoons share one SUMO each on its own copy of the road (`scenario
 from __future__ import annotations
 
 import functools
+import gzip
 import hashlib
 import math
 import os
@@ -19,7 +20,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 from typing import Callable, Sequence
-from xml.sax.saxutils import escape as xml_escape
+from xml.sax.saxutils import escape as xml_escape, unescape as xml_unescape
 
 import numpy as np
 
@@ -392,6 +393,8 @@ class _LanePathCheck:
 
 #: the version of the warm-up d4sumo saves: a cached state of another is warmed up again
 TRAFFIC_STATE = 1
+#: a flow's or a vehicle's element in SUMO's saved state that does not say its insertion checks: its id
+_UNCHECKED = re.compile(rb'<(?:flowState|vehicle) id="([^"]*)"(?![^>]*\binsertionChecks=)')
 
 
 def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
@@ -410,7 +413,8 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     demand = traffic_file(config, road)
     sumo = sumo_binary("sumo")
     key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, demand.name,
-                     str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s)])
+                     str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s),
+                     *(["insertion-checks"] if config.traffic.insertion_checks else [])])
     folder = Path(default_cache_dir()).parent / "traffic-states"
     path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
     if path.is_file():
@@ -429,6 +433,8 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
             libsumo.simulation.saveState(tmp)
         finally:
             libsumo.close()
+        if config.traffic.insertion_checks:
+            _keep_insertion_checks(Path(tmp), demand)
         os.replace(tmp, path)
     except libsumo.TraCIException as exc:
         raise SumoError(f"SUMO failed in the traffic's warm-up: {exc}") from None
@@ -436,6 +442,26 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _keep_insertion_checks(state: Path, demand: Path) -> None:
+    """SUMO's saved state drops what the demand says of its flows' and vehicles' insertion checks (1.28), and
+    the episode inserts with none (the platoon's cars are placed where they are put): each flow and vehicle
+    in the state is given back its demand's (`traffic.demand_xml`: all of them where a user's sets none; a
+    flow's vehicle, its flow's), so that a car entering after the warm-up does not land on the one before it."""
+    import xml.etree.ElementTree as ET
+
+    checks = {e.get("id"): e.get("insertionChecks", "all") for e in ET.parse(demand).getroot() if e.get("id")}
+
+    def given(match: re.Match) -> bytes:
+        vid = xml_unescape(match.group(1).decode())
+        value = checks.get(vid) or checks.get(vid.rpartition(".")[0]) or "all"
+        return match.group(0) + f' insertionChecks="{xml_escape(value)}"'.encode()
+
+    with gzip.open(state, "rb") as f:
+        text = f.read()
+    with gzip.open(state, "wb") as f:
+        f.write(_UNCHECKED.sub(given, text))
 
 
 def _warm_up(api, config: EpisodeConfig, road: Road) -> None:

@@ -48,6 +48,8 @@ DEFAULT_VPH = 1200.0
 TRAFFIC_ID = "traffic"
 #: a vehicle type's name: SUMO's ids allow more, a flow's id is built from it
 _TYPE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
+#: what a stored definition's [traffic] table without a key held: the traffic as that version played it
+EARLIER_TRAFFIC = {"insertion_checks": False}
 #: <vType> attributes d4sumo sets itself (the type's id)
 _OWN_ATTRIBUTES = ("id",)
 
@@ -71,6 +73,10 @@ class TrafficParams:
     #: vehicle types by name, each its share of the flow and SUMO <vType> attributes, as ((name, ((key,
     #: value), ...)), ...) (a mapping of tables is taken too); none: SUMO's default passenger car
     types: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+    #: traffic that enters after the warm-up, with the platoon on the road, does so with SUMO's insertion
+    #: checks, as in the warm-up (false: with none, as d4sumo 0.16 and before played it: a car then entered
+    #: onto the one before it; their stored campaigns replay so)
+    insertion_checks: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -91,8 +97,9 @@ class TrafficParams:
         fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
         fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
         fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
-        if not isinstance(self.per_sample, bool):
-            raise ConfigError("traffic.per_sample", self.per_sample, "true or false")
+        for name in ("per_sample", "insertion_checks"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"traffic.{name}", getattr(self, name), "true or false")
         fix("types", _checked_types(self.types))
 
     @classmethod
@@ -111,6 +118,8 @@ class TrafficParams:
             del out["demand_sha256"]
         if not self.per_sample:  # stored where set
             del out["per_sample"]
+        if not self.insertion_checks:  # as campaigns stored before it was a key (`EARLIER_TRAFFIC`) hold it
+            del out["insertion_checks"]
         if self.types and self.vehicles_per_hour is not None:
             out["types"] = {name: dict(attributes) for name, attributes in self.types}
         return out

@@ -20,6 +20,7 @@ from ..model.config import EpisodeConfig
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
+from ..model.traffic import EARLIER_TRAFFIC
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
@@ -135,8 +136,11 @@ class Campaign:
     def _from_definition(cls, definition: dict[str, Any], samples: int, where: str) -> "Campaign":
         try:
             attack = definition["attack"]
+            config = definition["config"]
+            if isinstance(config.get("traffic"), dict):  # keys later versions added, as the earlier ones played it
+                config = {**config, "traffic": {**EARLIER_TRAFFIC, **config["traffic"]}}
             return cls(
-                config=EpisodeConfig.from_dict(definition["config"]),
+                config=EpisodeConfig.from_dict(config),
                 attack=attack["family"],
                 optimizer=definition["optimizer"],
                 samples=samples,

@@ -216,6 +216,17 @@ def test_a_collision_of_two_traffic_cars_is_kept_apart_from_the_platoon_verdict(
         assert kept[0][0] == pytest.approx(config.step_s)  # the step it entered, on top of the other
 
 
+def test_traffic_entering_with_the_platoon_on_the_road_keeps_sumos_insertion_checks():
+    """Regression: SUMO's saved state of the warm-up dropped the flows' insertion checks, and the episode
+    inserts with none: from the platoon's joining on, each car entered onto the one before it (25 collisions
+    among the traffic in 40 s at 1,500 veh/h/lane, cars stacked at the road's start at 0 m/s). A campaign
+    stored before (its [traffic] table without the key) replays as it ran."""
+    config = dataclasses.replace(BUSY, duration_s=40.0, traffic=dataclasses.replace(BUSY.traffic, vehicles_per_hour=1500.0))
+    assert simulate(config, np.full(config.steps, np.nan)).traffic_collisions == ()
+    as_before = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, insertion_checks=False))
+    assert len(simulate(as_before, np.full(config.steps, np.nan)).traffic_collisions) >= 20
+
+
 def test_on_bremen_the_traffic_ahead_of_the_attacker_is_where_sumo_fcd_puts_it_edge_after_edge(tmp_path):
     """A traffic car's gap is SUMO's, along lanes and junctions: on SUMO's Bremen motorway, with its own
     demand, the attacker's gap to the traffic car ahead agrees with the FCD's positions wherever both drive

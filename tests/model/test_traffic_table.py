@@ -59,7 +59,7 @@ def test_traffic_is_stored_only_where_there_is_some_and_round_trips():
     with_traffic = EpisodeConfig(start="steady", traffic={"vehicles_per_hour": 900, "types": {"car": {"tau": 1.2}}})
     stored = with_traffic.to_dict()
     assert stored["traffic"] == {"vehicles_per_hour": 900.0, "warmup_s": 60.0, "clear_m": 50.0, "seed": 0,
-                                 "types": {"car": {"tau": 1.2}}}
+                                 "insertion_checks": True, "types": {"car": {"tau": 1.2}}}
     assert EpisodeConfig.from_dict(stored) == with_traffic
     assert with_traffic.world_label == "traffic 900 veh/h/lane of car, seed 0"
     assert not with_traffic.batch_arrays  # each episode meets its traffic alone
@@ -109,7 +109,7 @@ def test_a_user_demand_keeps_its_elements_its_vehicles_named_as_traffic_and_inse
     assert flow.get("id") == "traffic.main_1" and flow.get("insertionChecks") == "all"
     assert vehicle.get("id") == "traffic.v1" and vehicle.get("insertionChecks") == "none"  # the user's own choice
     assert params.to_dict() == {"warmup_s": 60.0, "clear_m": 50.0, "seed": 0, "demand": [str(demand)],
-                                "demand_sha256": params.demand_sha256}
+                                "demand_sha256": params.demand_sha256, "insertion_checks": True}
     both = TrafficParams(demand=str(demand), vehicles_per_hour=300)
     assert len(ET.fromstring(demand_xml(both, ["a", "b"], [0, 1], 100.0)).findall("flow")) == 3
     demand.write_text(demand.read_text().replace("900", "1800"))  # another demand: other traffic

@@ -10,6 +10,7 @@ import pytest
 
 import d4sumo.search.runner as campaign_module
 from d4sumo.errors import ConfigError, SumoError
+from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import run_campaign
 from d4sumo.search.store import Store, StoreError
@@ -379,6 +380,20 @@ def test_an_auto_campaign_an_earlier_version_stored_replays_as_it_ran_under_its_
     assert (options["stall"], options["suffix"], options["patience"], options["per_signal"]) == (*ran, 0)
     assert campaign_key(stored.definition()) == campaign_key(old)
     assert Campaign(optimizer="auto", optimizer_options=kept, samples=12).definition() == stored.definition()
+
+
+def test_a_traffic_campaign_an_earlier_version_stored_keeps_its_identity_and_its_traffic():
+    """d4sumo 0.16 and before stored [traffic] without ``insertion_checks``: it played the traffic entering
+    after the warm-up with none, and its campaigns replay and resume so, under the same key."""
+    from d4sumo.search.store import campaign_key
+
+    new = Campaign(config=EpisodeConfig(start="steady", traffic={}))
+    assert new.definition()["config"]["traffic"]["insertion_checks"] is True
+    old = copy.deepcopy(new.definition())
+    del old["config"]["traffic"]["insertion_checks"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert stored.config.traffic.insertion_checks is False
+    assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
 
 
 @pytest.mark.parametrize("version, removed, kept", [
