@@ -126,6 +126,10 @@ FALSIFY = [
     ["--db", "/nonexistent/folder/r.sqlite"],
     # traffic SUMO cannot insert: refused by its warm-up, before a sample is stored
     ["--network", "highway_4lane", "--start", "steady", "--set", "traffic.vehicles_per_hour=3600", "--set", "traffic.warmup_s=40"],
+    # regression: a traffic type of a class SUMO does not know (it drove as its default) or with an attribute its
+    # <vType> has not (ignored) was stored as a campaign
+    ["--start", "steady", "--set", "traffic.types.truck.share=1", "--set", 'traffic.types.truck.vClass="truk"'],
+    ["--start", "steady", "--set", "traffic.types.truck.share=1", "--set", "traffic.types.truck.speedfactor=0.5"],
 ]
 
 

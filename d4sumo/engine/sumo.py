@@ -29,9 +29,9 @@ from ..model.config import EpisodeConfig
 from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, lane_pairs, maneuver_of, occupied_lanes
 from ..model.carfollowing import beacon_parameters, vehicle_data
 from ..model.platoon import SumoFollower, followers_of
-from ..model.traffic import demand_xml
+from ..model.traffic import demand_xml, type_elements
 from ..model.vehicle import VehicleParams
-from ..sumohome import sumo_binary
+from ..sumohome import sumo_binary, sumo_home
 from .scenarios import Road, default_cache_dir
 
 ROUTE_ID = "platoon"
@@ -135,31 +135,50 @@ def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[
     return path
 
 
-def _sumo_errors(cmd: list[str], what: str) -> str | None:
+def _sumo_errors(cmd: list[str], what: str, env: dict | None = None) -> str | None:
     """SUMO's first error loading ``cmd`` (None: it loaded)."""
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
     except subprocess.TimeoutExpired:
         raise SumoError(f"SUMO did not load {what} within 120 s") from None
-    if done.returncode == 0:
-        return None
+    # an error SUMO goes on after (an unknown vehicle class: it takes the default) is one too
     errors = [ln.removeprefix("Error: ") for ln in done.stderr.splitlines() if ln.startswith("Error:")]
+    if done.returncode == 0 and not errors:
+        return None
     return errors[0] if errors else done.stderr.strip() or f"exit {done.returncode}"
 
 
+#: the root of a file of SUMO's routes that SUMO checks against its schema (an unknown attribute is refused)
+_VALIDATED_ROUTES = ('<routes xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
+                     'xsi:noNamespaceSchemaLocation="http://sumo.dlr.de/xsd/routes_file.xsd">')
+
+
 def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: str) -> None:
-    cmd = [sumo, "--net-file", str(road.net_file), "--route-files", demand, "--step-length", repr(config.step_s),
+    cmd = [sumo, "--net-file", str(road.net_file), "--step-length", repr(config.step_s),
            "--end", "1", "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
-    message = _sumo_errors(cmd, "the traffic's demand")
+    message = None
+    if config.traffic.types and config.traffic.vehicles_per_hour is not None:
+        # the types first, alone, against SUMO's schema (found in SUMO_HOME): a misspelt attribute
+        # ("speedfactor") is otherwise taken without a word
+        types = f"{demand}.types.rou.xml"
+        try:
+            Path(types).write_text("\n".join([_VALIDATED_ROUTES, *type_elements(config.traffic), "</routes>"]) + "\n")
+            message = _sumo_errors(cmd + ["--route-files", types], "the traffic's vehicle types",
+                                   env={**os.environ, "SUMO_HOME": sumo_home()})
+        finally:
+            Path(types).unlink(missing_ok=True)
+    message = message or _sumo_errors(cmd + ["--route-files", demand], "the traffic's demand")
     if message is None:
         return
     named = re.search(r"[Aa]ttribute '?(\w+)'?", message)
     attribute = (named.group(1) if named else "carFollowModel" if "car following model" in message
-                 else "laneChangeModel" if "lane change model" in message else None)
+                 else "laneChangeModel" if "lane change model" in message else "vClass" if "vehicle class" in message
+                 else None)
     for name, attributes in config.traffic.types:
         if attribute in dict(attributes):
             field = f"traffic.types.{name}.{attribute}"
-            raise ConfigError(field, dict(attributes)[attribute], f"a value SUMO's <vType> accepts (SUMO: {message})")
+            what = "an attribute of SUMO's <vType>" if "is not declared" in message else "a value SUMO's <vType> accepts"
+            raise ConfigError(field, dict(attributes)[attribute], f"{what} (SUMO: {message})")
     if config.traffic.demand:
         raise ConfigError("traffic.demand", list(config.traffic.demand), f"demand SUMO plays on {road.name} (SUMO: {message})")
     raise ConfigError("traffic", config.traffic.label, f"traffic SUMO can insert on {road.name} (SUMO: {message})")

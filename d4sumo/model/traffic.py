@@ -234,9 +234,7 @@ def demand_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequenc
     if params.vehicles_per_hour is None:
         return "\n".join([*lines, "</routes>"]) + "\n"
     shares = params.type_shares
-    for name, _, attributes in shares:
-        attrs = "".join(f" {k}={quoteattr(_sumo_value(v))}" for k, v in attributes.items())
-        lines.append(f'    <vType id="{TRAFFIC_ID}_{name}"{attrs}/>')
+    lines += [f"    {element}" for element in type_elements(params)]
     distribution = " ".join(f"{TRAFFIC_ID}_{name}" for name, _, _ in shares)
     probabilities = " ".join(repr(p) for _, p, _ in shares)
     lines.append(f'    <vTypeDistribution id="{TRAFFIC_ID}" vTypes="{distribution}" probabilities="{probabilities}"/>')
@@ -248,6 +246,12 @@ def demand_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequenc
                      f'departSpeed="max" insertionChecks="all"/>')
     lines.append("</routes>")
     return "\n".join(lines) + "\n"
+
+
+def type_elements(params: TrafficParams) -> list[str]:
+    """The <vType> elements of d4sumo's flow, one per type of [traffic.types] (SUMO's default car without)."""
+    return [f'<vType id="{TRAFFIC_ID}_{name}"' + "".join(f" {k}={quoteattr(_sumo_value(v))}" for k, v in attributes.items()) + "/>"
+            for name, _, attributes in params.type_shares]
 
 
 def _sumo_value(value: Any) -> str:
