@@ -11,6 +11,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -483,6 +484,33 @@ def test_a_sweep_stores_the_same_samples_whether_its_episodes_play_in_batches_or
     run_sweep(Sweep.load(write(tmp_path, BATCHED)), tmp_path / "batched.sqlite", workers=2, batch=7)
     assert outcomes(tmp_path / "batched.sqlite") == batched_played_alone
     assert len(batched_played_alone) == 8 * 23
+
+
+@pytest.mark.sumo
+def test_a_grid_of_the_platoon_alone_and_among_a_networks_own_demand_plays_each_on_its_road(tmp_path):
+    """Regression: a sweep's campaigns shared one road per network and route, the first one's: the platoon
+    alone's, the route's edges, on which the Bremen demand's routes over the network's other ways are not
+    ("The edge '153180751' within the route 'ramp' is not known"), and the sweep stopped before it began."""
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    text = f"""name = "bremen"
+[grid]
+traffic = [{{}}, {{demand = "{game / 'highway.rou.xml'}"}}]
+[scenario]
+network = "{game / 'highway.net.xml'}"
+route = ["145354574", "189597495", "E0", "191842213"]
+start = "steady"
+speed_mps = 30.0
+duration_s = 20.0
+[search]
+optimizer = "random"
+samples = 2
+"""
+    result = run_sweep(Sweep.load(write(tmp_path, text)), tmp_path / "r.sqlite", workers=1)
+    assert result.samples == 4
+    with Store(tmp_path / "r.sqlite", create=False) as store:
+        assert sorted("traffic" in c.definition["config"] for c in store.campaigns()) == [False, True]
 
 
 def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):

@@ -129,7 +129,7 @@ class Sweep:
         """Build every road and check every campaign fits it, and every formula parses: before running."""
         roads = {}
         for c in self.campaigns:
-            key = c.config.network, c.config.route, c.config.lane
+            key = c.config.network, c.config.route, c.config.lane, c.config.whole_network  # whole: a demand drives it all
             if key not in roads:
                 roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane,
                                          whole=c.config.whole_network)
