@@ -167,7 +167,7 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
             speed_noise_mps=float(rng.choice([0.0, 0.1, 0.5])), latency_s=float(rng.choice([0.0, 0.1, 0.3])),
             seed=int(rng.integers(0, 1000))))
     if rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
-        config = dataclasses.replace(config, network="highway_4lane", route=(), duration_s=60.0, start="steady",
+        config = dataclasses.replace(config, network="highway_4lane", network_sha256=None, route=(), duration_s=60.0, start="steady",
                                      traffic=traffic_table(rng))
     if config.v2v is not None and rng.random() < 0.5:  # cooperative followers over a late or lossy channel
         config = dataclasses.replace(config, v2v={"beacon_interval_s": float(rng.choice([0.05, 0.1, 0.2])),

@@ -131,7 +131,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
     if args.network is not None:
         network = opendrive_network(args.network) if args.network.suffix == ".xodr" else args.network
-        config = dataclasses.replace(config, network=str(network), route=(), lane=None)
+        config = dataclasses.replace(config, network=str(network), network_sha256=None, route=(), lane=None)
         campaign = campaign.replace(config=config)
     evaluator = Evaluator(campaign)
     plan = dataclasses.replace(evaluator.plan(row.params),

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +23,7 @@ else:  # Python 3.10: the same parser, published as tomli
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
-from .fmu import SHA_KEY, is_fmu
+from .fmu import SHA_KEY, file_sha256, is_fmu
 from .plugins import ControllerImportError, NotImported, build_params
 from .sensing import RadarParams
 from .traffic import TrafficParams
@@ -124,6 +126,10 @@ class EpisodeConfig:
     """One episode of the paper's scenario: road, platoon, start mode, step and duration."""
 
     network: str = "highway_4lane"  # a folder of sumo_scenarios/, or a path: a folder of node and edge files, a *.net.xml
+    #: the content of the files a network path names (`network_digest`), taken when the configuration is made
+    #: (None): what identifies a user's road, as the demand's does its traffic; "" for a shipped variant, and in
+    #: campaigns stored before it was a key (their road is taken as it is)
+    network_sha256: str | None = None
     route: tuple[str, ...] = ()  # the edges the platoon drives (none: the network's one chain of edges)
     #: the platoon's lane on the route's first edge (SUMO's index, 0 the rightmost); none: the rightmost
     #: lane that leads on through every junction of the route. Its index may change along the route
@@ -174,6 +180,10 @@ class EpisodeConfig:
             raise ConfigError("scenario.network", self.network, "a shipped variant (see `d4sumo scenarios`), a folder of node "
                                                                 "and edge files, or a *.net.xml")
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
+        if self.network_sha256 is None or not is_network_path(self.network):
+            fix("network_sha256", network_digest(self.network))
+        elif not isinstance(self.network_sha256, str):
+            raise ConfigError("scenario.network_sha256", self.network_sha256, "the digest d4sumo takes of scenario.network (leave it out)")
         if not isinstance(self.route, (list, tuple)) or not all(isinstance(e, str) and e for e in self.route):
             raise ConfigError("scenario.route", self.route, "a list of edge ids, e.g. [\"e1\", \"e2\"]")
         fix("route", tuple(self.route))
@@ -422,7 +432,7 @@ class EpisodeConfig:
             del scenario["attacker_declared_decel_mps2"]
         for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
             del scenario[key]  # a maneuver's settings have no effect on another
-        for key in ("attacker_cruise_offset_mps", "end_distance_m", "collision_gap_m", "route"):  # stored where set: earlier campaigns keep their identity
+        for key in ("attacker_cruise_offset_mps", "end_distance_m", "collision_gap_m", "route", "network_sha256"):  # stored where set: earlier campaigns keep their identity
             if not scenario[key]:
                 del scenario[key]
         if "route" in scenario:
@@ -503,6 +513,31 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
+#: what a stored definition's [scenario] table without a key held: the scenario as that version played it
+EARLIER_SCENARIO = {"network_sha256": ""}
+
+
+def is_network_path(network: str) -> bool:
+    """Whether a network is named by a path (else by a shipped variant's name)."""
+    return "/" in network or os.sep in network or network.endswith(".net.xml")
+
+
+def network_digest(network: str) -> str:
+    """sha256 over the files a network path names (a *.net.xml, or a folder's node, edge and network files, by
+    name); "" for a shipped variant's name (a name without a "/": d4sumo's own roads, versioned with it) and a
+    path with no such files."""
+    if not is_network_path(network):
+        return ""
+    path = Path(network).expanduser()
+    if path.is_file():
+        files = [path]
+    elif path.is_dir():
+        files = sorted(f for pattern in ("*.nod.xml", "*.edg.xml", "*.net.xml") for f in path.glob(pattern))
+    else:
+        return ""
+    if len(files) == 1:
+        return file_sha256(files[0])
+    return hashlib.sha256("".join(f"{f.name}\0{file_sha256(f)}\0" for f in files).encode()).hexdigest()
 
 
 def _short_table(table: Any) -> Any:

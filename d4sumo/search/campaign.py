@@ -16,7 +16,7 @@ from typing import Any
 
 from ..errors import ConfigError, NotSimulable, check_int, check_number
 from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from ..model.config import EpisodeConfig
+from ..model.config import EARLIER_SCENARIO, EpisodeConfig, network_digest
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
@@ -123,6 +123,8 @@ class Campaign:
         not import here is a ConfigError saying how to make it importable, not damage."""
         with names_only():
             named = cls._from_definition(definition, samples, where)
+        if imports:
+            _check_road(named.config, where)
         if not imports or not named.user_modules:
             return named
         for module in named.user_modules:
@@ -136,8 +138,9 @@ class Campaign:
     def _from_definition(cls, definition: dict[str, Any], samples: int, where: str) -> "Campaign":
         try:
             attack = definition["attack"]
-            config = definition["config"]
-            if isinstance(config.get("traffic"), dict):  # keys later versions added, as the earlier ones played it
+            config = definition["config"]  # keys later versions added, as the earlier ones played it:
+            config = {**config, "scenario": {**EARLIER_SCENARIO, **config.get("scenario", {})}}
+            if isinstance(config.get("traffic"), dict):
                 config = {**config, "traffic": {**EARLIER_TRAFFIC, **config["traffic"]}}
             return cls(
                 config=EpisodeConfig.from_dict(config),
@@ -175,6 +178,15 @@ class Campaign:
     def with_options(self, options: dict) -> "Campaign":
         """The campaign with ``options`` of its optimiser changed (as an earlier version ran it, say)."""
         return self.replace(optimizer_options=tuple({**dict(self.optimizer_options), **options}.items()))
+
+
+def _check_road(config: EpisodeConfig, where: str) -> None:
+    """A campaign about to be simulated plays on the road it ran on: its network's files as they were (a
+    changed road is another one, as a changed demand or FMU is another system)."""
+    now = network_digest(config.network)
+    if config.network_sha256 and now not in ("", config.network_sha256):
+        raise NotSimulable(f"{where}: its road {config.network} cannot be simulated here: its files have changed since "
+                           f"the campaign ran (sha256 {config.network_sha256[:16]}..., now {now[:16]}...): another road")
 
 
 def check_definition(definition: dict[str, Any], where: str) -> None:

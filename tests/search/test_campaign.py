@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 import json
 
 import numpy as np
 import pytest
 
 import d4sumo.search.runner as campaign_module
-from d4sumo.errors import ConfigError, SumoError
+from d4sumo.errors import ConfigError, NotSimulable, SumoError
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import run_campaign
@@ -380,6 +381,34 @@ def test_an_auto_campaign_an_earlier_version_stored_replays_as_it_ran_under_its_
     assert (options["stall"], options["suffix"], options["patience"], options["per_signal"]) == (*ran, 0)
     assert campaign_key(stored.definition()) == campaign_key(old)
     assert Campaign(optimizer="auto", optimizer_options=kept, samples=12).definition() == stored.definition()
+
+
+def test_a_campaign_on_a_road_of_ones_own_holds_its_content_and_one_stored_before_keeps_its_identity(tmp_path):
+    """The road's files are part of the campaign, as a demand's or an FMU's: a changed road is another one,
+    and a stored campaign of it is refused (it went on over the changed road without a word). d4sumo 0.16
+    and before stored no digest: their campaigns take the road as it is, under the same key."""
+    import shutil
+
+    from d4sumo.search.store import campaign_key
+
+    road = tmp_path / "road"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges", road)
+    new = Campaign(config=EpisodeConfig(network=str(road), start="steady"))
+    stored = new.definition()
+    assert len(stored["config"]["scenario"]["network_sha256"]) == 64
+    assert Campaign.from_definition(stored).definition() == stored
+    old = copy.deepcopy(stored)
+    del old["config"]["scenario"]["network_sha256"]
+    assert campaign_key(Campaign.from_definition(old).definition()) == campaign_key(old) != campaign_key(stored)
+    edges = road / "road.edg.xml"
+    edges.write_text(edges.read_text().replace('speed="', 'speed="1', 1))  # one edge's speed changed
+    assert Campaign.from_definition(stored).definition() == stored  # read: the road need not be as it was ...
+    with pytest.raises(NotSimulable, match="its road .* cannot be simulated here: its files have changed since"):
+        Campaign.from_definition(stored, imports=True)  # ... played, it must
+    assert Campaign.from_definition(old, imports=True).config.network_sha256 == ""  # as it ran: the road as it is
+    assert Campaign(config=EpisodeConfig(network=str(road), start="steady")).definition() != stored  # another campaign
+    shipped = Campaign(config=EpisodeConfig(start="steady")).definition()
+    assert "network_sha256" not in shipped["config"]["scenario"]  # d4sumo's own roads: as before
 
 
 def test_a_traffic_campaign_an_earlier_version_stored_keeps_its_identity_and_its_traffic():
