@@ -513,6 +513,27 @@ samples = 2
         assert sorted("traffic" in c.definition["config"] for c in store.campaigns()) == [False, True]
 
 
+@pytest.mark.sumo
+def test_a_sweep_an_earlier_version_ran_on_a_road_of_ones_own_among_traffic_is_told_how_to_go_on(tmp_path, capsys):
+    """d4sumo 0.16 stored no road digest and let traffic enter after the warm-up unchecked: its sweep's grid is
+    another one now, refused untouched with the keys that go on with it as it ran."""
+    road = tmp_path / "road"
+    shutil.copytree(Path(__file__).resolve().parent.parent / "examples" / "roads" / "three_edges", road)
+    text = (f'name = "mine"\n[grid]\nsetpoint_m = [5.0, 7.0]\n[scenario]\nnetwork = "{road}/"\nstart = "steady"\n'
+            '[traffic]\nvehicles_per_hour = 600\n[search]\noptimizer = "random"\nsamples = 2\n')
+    as_before = text.replace('start = "steady"', 'start = "steady"\nnetwork_sha256 = ""').replace(
+        "vehicles_per_hour = 600", "vehicles_per_hour = 600\ninsertion_checks = false")
+    db = tmp_path / "r.sqlite"
+    assert main(["sweep", str(write(tmp_path, as_before, "before.toml")), "--db", str(db), "--quiet"]) == 0
+    stored = outcomes(db)
+    capsys.readouterr()
+    assert main(["sweep", str(write(tmp_path, text)), "--db", str(db), "--quiet"]) == 2
+    said = capsys.readouterr().err
+    assert said.count("\n") == 1 and "It was run by d4sumo 0.16 or before" in said
+    assert '`network_sha256 = ""` in [scenario] and `insertion_checks = false` in [traffic]' in said
+    assert outcomes(db) == stored
+
+
 def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):
     """Regression: maneuver = [inlane, cutin] with a cut-in offset axis was refused, the in-lane campaigns
     (which read no offset) being the same campaign twice; now they are one campaign."""

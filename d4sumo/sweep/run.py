@@ -70,6 +70,13 @@ def claim(store: Store, sweep: Sweep) -> None:
                     hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
                             f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"`{table} in the sweep file to go on with it, or use another --db")
                     break
+            inputs_before = sweep.with_inputs_of_before()
+            if inputs_before is not sweep and theirs["name"] == sweep.name and theirs["fingerprint"] == inputs_before.fingerprint():
+                keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
+                        *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"] if any(c.config.traffic for c in sweep.campaigns) else [])]
+                hint = (f"It was run by d4sumo 0.16 or before, which took a road of one's own as it found it and let "
+                        f"traffic enter after the warm-up unchecked: set {' and '.join(keys)} of the sweep file to go on "
+                        f"with it as it ran, or use another --db")
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"
