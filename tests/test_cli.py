@@ -587,6 +587,20 @@ def test_falsify_names_a_campaign_run_by_the_earlier_default_optimizer(earlier, 
 
 
 @pytest.mark.sumo
+def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path):
+    """d4sumo 0.16 let traffic enter after the warm-up unchecked: its campaign is another one now, and falsify
+    with the same flags says so, with the flag that goes on with it."""
+    db = str(tmp_path / "r.sqlite")
+    flags = ["--start", "steady", "--duration", "20", "--set", "traffic.vehicles_per_hour=600", "--optimizer", "random",
+             "--samples", "2", "--db", db, "--quiet"]
+    assert main(["falsify", *flags, "--set", "traffic.insertion_checks=false"]) == 0  # as 0.16 stored it
+    now = run("falsify", *flags)
+    assert now.returncode == 0, now.stderr
+    assert "holds this campaign as d4sumo 0.16 or before ran it" in now.stderr
+    assert now.stderr.rstrip().endswith("To go on with that one: --set traffic.insertion_checks=false")
+
+
+@pytest.mark.sumo
 def test_falsify_says_when_an_optimizers_options_go_unused(falsify_chains):
     """Earlier notes said `--set search.bo.inducing=0`; with auto the default, bo's table alone would go
     unused without a word."""

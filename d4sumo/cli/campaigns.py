@@ -72,6 +72,13 @@ def cmd_falsify(args: argparse.Namespace) -> int:
                     bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
                               f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)
                     break
+            before = campaign.with_inputs_of_before()
+            if before is not campaign and store.find_campaign(before.definition()) is not None:
+                flags = " ".join([*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
+                                  *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else [])])
+                bar.write(f"d4sumo: note: {args.db} holds this campaign as d4sumo 0.16 or before ran it (a road of one's own "
+                          f"taken as found, traffic entering after the warm-up unchecked); this starts a new one. To go on "
+                          f"with that one: {flags}", file=sys.stderr)
         try:
             summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
         except KeyboardInterrupt as exc:

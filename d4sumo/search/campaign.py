@@ -175,6 +175,14 @@ class Campaign:
             changes["optimizer_options"] = ()
         return dataclasses.replace(self, **changes)
 
+    def with_inputs_of_before(self) -> "Campaign":
+        """The campaign as d4sumo 0.16 and before ran it: its road's files without a digest, its traffic entering
+        after the warm-up without insertion checks (`EARLIER_SCENARIO`, `EARLIER_TRAFFIC`)."""
+        config = dataclasses.replace(self.config, **EARLIER_SCENARIO)
+        if config.traffic is not None:
+            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
+        return self if config == self.config else self.replace(config=config)
+
     def with_options(self, options: dict) -> "Campaign":
         """The campaign with ``options`` of its optimiser changed (as an earlier version ran it, say)."""
         return self.replace(optimizer_options=tuple({**dict(self.optimizer_options), **options}.items()))

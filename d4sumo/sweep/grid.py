@@ -15,8 +15,7 @@ from ..engine.scenarios import build_road
 from ..engine.simulation import check_episode, check_traffic
 from ..errors import ConfigError
 from ..inputs import campaign_of, check_document, with_overrides
-from ..model.config import EARLIER_SCENARIO, read_toml
-from ..model.traffic import EARLIER_TRAFFIC
+from ..model.config import read_toml
 from ..model.maneuvers import MANEUVERS
 from ..search.campaign import Campaign
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER
@@ -65,13 +64,7 @@ class Sweep:
     def with_inputs_of_before(self) -> "Sweep":
         """The sweep as d4sumo 0.16 and before ran it: its roads' files without a digest, its traffic entering
         after the warm-up without insertion checks (`EARLIER_SCENARIO`, `EARLIER_TRAFFIC`)."""
-        def before(c: Campaign) -> Campaign:
-            config = dataclasses.replace(c.config, **EARLIER_SCENARIO)
-            if config.traffic is not None:
-                config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
-            return c.replace(config=config)
-
-        campaigns = tuple(before(c) for c in self.campaigns)
+        campaigns = tuple(c.with_inputs_of_before() for c in self.campaigns)
         return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 
     def with_default_of_before(self) -> "Sweep":
