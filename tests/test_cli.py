@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -598,6 +599,35 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
     assert now.returncode == 0, now.stderr
     assert "holds this campaign as d4sumo 0.16 or before ran it" in now.stderr
     assert now.stderr.rstrip().endswith("To go on with that one: --set traffic.insertion_checks=false")
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("given", ["folder", "network file"])
+def test_a_sample_on_a_road_of_ones_own_replays_from_another_folder_and_after_the_road_moved(tmp_path, given):
+    """Regression: the summary's "replay it:" line failed from any folder but the one the campaign ran in
+    (its road a relative path), and once the road's files moved; the campaign keeps them by their content."""
+    import shutil
+
+    work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.copytree(ROOT / "examples" / "roads" / "three_edges", work / "road")
+    if given == "network file":  # netconvert's network of it, named by its path
+        built = subprocess.run([sys.executable, "-c", "import sys; from d4sumo.engine.scenarios import build_road; "
+                                "print(build_road(sys.argv[1]).net_file)", "road"], cwd=work, capture_output=True, text=True)
+        shutil.copy(built.stdout.strip(), work / "road.net.xml")
+    network = "road/" if given == "folder" else "road.net.xml"
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    ran = lambda *argv, cwd: subprocess.run([sys.executable, "-m", "d4sumo.cli", *argv], capture_output=True, text=True,  # noqa: E731
+                                            timeout=120, cwd=cwd, env=env)
+    assert ran("falsify", "--network", network, "--start", "steady", "--optimizer", "random", "--samples", "2", "--db",
+               "r.sqlite", "--quiet", cwd=work).returncode == 0
+    there = ran("replay", str(work / "r.sqlite"), "2", "--json", cwd=elsewhere)
+    assert there.returncode == 0, there.stderr
+    assert json.loads(there.stdout)["reproduced"]
+    assert f"no road {network} here: playing the copy of the road the campaign ran" in there.stderr
+    (work / network.rstrip("/")).rename(tmp_path / "moved")
+    moved = ran("replay", "r.sqlite", "1", "--json", cwd=work)
+    assert moved.returncode == 0 and json.loads(moved.stdout)["reproduced"], moved.stderr
 
 
 @pytest.mark.sumo

@@ -16,6 +16,8 @@ import hashlib
 import logging
 import os
 import shlex
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,8 +46,57 @@ def list_scenarios(root: Path | None = None) -> list[str]:
     return sorted(p.name for p in root.iterdir() if p.is_dir() and _inputs(p, strict=False))
 
 
+#: network paths stored campaigns name that are not where this process runs: this machine's copy of their files
+_KEPT: dict[str, Path] = {}
+
+
+def kept_road(sha256: str) -> Path:
+    """Where this machine keeps the files of the road of content ``sha256`` (`keep_road`)."""
+    from .scenarios import default_cache_dir
+
+    return default_cache_dir().parent / "roads" / sha256
+
+
+def keep_road(network: str, sha256: str) -> None:
+    """Keep the files of a campaign's road of one's own by their content (once, whoever is first), so that its
+    samples replay from any folder of this machine, and after the files were moved: `use_kept_road`."""
+    from ..model.config import network_digest, network_files
+
+    kept = kept_road(sha256)
+    files = network_files(network)
+    if kept.is_dir() or not files or network_digest(network) != sha256:
+        return
+    path = Path(network).expanduser()
+    try:
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        work = Path(tempfile.mkdtemp(prefix=".keep-", dir=kept.parent))
+        inside = work if path.is_file() else work / path.name
+        inside.mkdir(exist_ok=True)
+        for f in files:
+            shutil.copyfile(f, inside / f.name)
+        try:
+            work.rename(kept)
+        except OSError:  # another process was first: its copy is the same
+            shutil.rmtree(work, ignore_errors=True)
+    except OSError:  # a cache that cannot be written keeps nothing: the road is still where it is
+        pass
+
+
+def use_kept_road(network: str, sha256: str) -> Path | None:
+    """Where a stored campaign's road ``network`` is not (a relative path from another folder, files moved),
+    its files as this machine kept them, from now on in this process (None: none kept)."""
+    kept = kept_road(sha256)
+    found = sorted(kept.iterdir()) if kept.is_dir() else []
+    if not found:
+        return None
+    _KEPT[network] = found[0] if found[0].is_dir() or len(found) == 1 else kept
+    return _KEPT[network]
+
+
 def scenario_folder(name: str, root: Path | None = None) -> Path:
     """The folder of a named variant, or the folder or ``.net.xml`` file given directly."""
+    if name in _KEPT:
+        return _KEPT[name]
     root = root or SCENARIOS_DIR
     candidates = [root / name] if "/" not in name and os.sep not in name else []
     candidates.append(Path(name))

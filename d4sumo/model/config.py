@@ -522,18 +522,25 @@ def is_network_path(network: str) -> bool:
     return "/" in network or os.sep in network or network.endswith(".net.xml")
 
 
+def network_files(network: str) -> list[Path]:
+    """The files a network path names: a network file, or a folder's node, edge and network files (none for a
+    shipped variant's name, or a path with none there)."""
+    if not is_network_path(network):
+        return []
+    path = Path(network).expanduser()
+    if path.is_file():
+        return [path]
+    if path.is_dir():
+        return sorted(f for pattern in ("*.nod.xml", "*.edg.xml", "*.net.xml") for f in path.glob(pattern))
+    return []
+
+
 def network_digest(network: str) -> str:
     """sha256 over the files a network path names (a *.net.xml, or a folder's node, edge and network files, by
     name); "" for a shipped variant's name (a name without a "/": d4sumo's own roads, versioned with it) and a
     path with no such files."""
-    if not is_network_path(network):
-        return ""
-    path = Path(network).expanduser()
-    if path.is_file():
-        files = [path]
-    elif path.is_dir():
-        files = sorted(f for pattern in ("*.nod.xml", "*.edg.xml", "*.net.xml") for f in path.glob(pattern))
-    else:
+    files = network_files(network)
+    if not files:
         return ""
     if len(files) == 1:
         return file_sha256(files[0])

@@ -188,10 +188,20 @@ class Campaign:
         return self.replace(optimizer_options=tuple({**dict(self.optimizer_options), **options}.items()))
 
 
+_SAID: set[str] = set()  # the roads played from their kept copies, said once
+
+
 def _check_road(config: EpisodeConfig, where: str) -> None:
     """A campaign about to be simulated plays on the road it ran on: its network's files as they were (a
-    changed road is another one, as a changed demand or FMU is another system)."""
+    changed road is another one, as a changed demand or FMU is another system); where they are not, the copy
+    this machine kept of them when the campaign ran (`networks.keep_road`)."""
+    from ..engine.networks import use_kept_road
+
     now = network_digest(config.network)
+    if config.network_sha256 and not now and (kept := use_kept_road(config.network, config.network_sha256)):
+        if config.network not in _SAID:  # once a process: a report replays many samples
+            _SAID.add(config.network)
+            log.warning("no road %s here: playing the copy of the road the campaign ran, kept in %s", config.network, kept)
     if config.network_sha256 and now not in ("", config.network_sha256):
         raise NotSimulable(f"{where}: its road {config.network} cannot be simulated here: its files have changed since "
                            f"the campaign ran (sha256 {config.network_sha256[:16]}..., now {now[:16]}...): another road")

@@ -13,6 +13,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..engine.networks import keep_road
 from ..engine.scenarios import MAX_COPIES, NetworkSource, Road, batch_road, build_road, network_source
 from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
@@ -51,6 +52,8 @@ class Evaluator:
         self.family = campaign.family()
         self.spec = campaign.specification()
         config = campaign.config  # what batches' roads are built from: the network, or its route's edges alone
+        if config.network_sha256:  # a road of one's own: kept, to replay from anywhere here
+            keep_road(config.network, config.network_sha256)
         self.network = network or campaign_network(config)
         self.road = road or campaign_road(self.network, config)
         check_episode(campaign.config, self.road)
