@@ -29,7 +29,7 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--preset", help="a bundle of options under the file and the flags: paper-as-run (the paper as its "
                                     "authors' code ran it, with --attack persistent, intermittent or knots)")
     g.add_argument("--network", help="the road: a shipped variant (see `d4sumo scenarios`), a folder of one *.nod.xml and "
-                                     "one *.edg.xml (or of one *.net.xml), or a *.net.xml file (netconvert's, netgenerate's; "
+                                     "one *.edg.xml (or of one *.net.xml), or a *.net.xml file (or .net.xml.gz: netconvert's, netgenerate's; "
                                      "an OSM file: netconvert --osm-files map.osm -o map.net.xml first) [highway_4lane]")
     g.add_argument("--followers", type=int, help="followers behind the attacker, 1..10 [3]")
     g.add_argument("--setpoint", type=float, help="bumper-to-bumper setpoint distance d in m [7]")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
+from ..model.config import NETWORK_FILE_SUFFIXES
 from .netconvert import plain_xml
 
 log = logging.getLogger(__name__)
@@ -101,7 +102,7 @@ def scenario_folder(name: str, root: Path | None = None) -> Path:
     candidates = [root / name] if "/" not in name and os.sep not in name else []
     candidates.append(Path(name))
     for folder in candidates:
-        if folder.is_file() and folder.name.endswith(".net.xml"):
+        if folder.is_file() and folder.name.endswith(NETWORK_FILE_SUFFIXES):
             return folder.resolve()
         if folder.is_dir() and _inputs(folder, strict=False):
             return folder.resolve()
@@ -118,7 +119,7 @@ def _not_a_network(path: Path, root: Path) -> str:
         net = path.name[:path.name.lower().index(".osm")] + ".net.xml"
         return (f"a network file (*.net.xml): import an OpenStreetMap file with netconvert first: "
                 f"netconvert --osm-files {shlex.quote(str(path))} -o {shlex.quote(net)}")
-    if path.name.endswith(".net.xml") and not path.exists():
+    if path.name.endswith(NETWORK_FILE_SUFFIXES) and not path.exists():
         return f"a *.net.xml that exists (there is no {path.absolute()})"
     if path.name.endswith((".nod.xml", ".edg.xml")) and path.is_file():
         return f"the folder that holds the node and edge files ({path.absolute().parent}), not one of them"
@@ -129,7 +130,7 @@ def _not_a_network(path: Path, root: Path) -> str:
     allowed = (f"one of {', '.join(names) or '(none found in ' + str(root) + ')'}, a folder with *.nod.xml and *.edg.xml, "
                "or a *.net.xml")
     if path.is_file():
-        return f"{allowed} ({path.name} is not one: a network file's name ends in .net.xml)"
+        return f"{allowed} ({path.name} is not one: a network file's name ends in .net.xml, or .net.xml.gz)"
     return allowed + (f" (there is no {path.absolute()})" if len(path.parts) > 1 or path.suffix else "")
 
 
@@ -139,7 +140,7 @@ def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | Path | Non
     edges = sorted(folder.glob("*.edg.xml"))
     if len(nodes) == 1 and len(edges) == 1:
         return nodes[0], edges[0]
-    nets = sorted(folder.glob("*.net.xml"))
+    nets = sorted(f for suffix in NETWORK_FILE_SUFFIXES for f in folder.glob(f"*{suffix}"))
     if not nodes and not edges and len(nets) == 1:
         return nets[0]
     if strict:
@@ -213,7 +214,7 @@ def _network_source(name: str, root: Path | None = None) -> NetworkSource:
     found = folder if folder.is_file() else _inputs(folder)
     try:
         if isinstance(found, Path):
-            return _plain_source(found, name, folder.name.removesuffix(".net.xml") if folder.is_file() else folder.name)
+            return _plain_source(found, name, _stem(folder.name) if folder.is_file() else folder.name)
         nodes, edges = found
         return NetworkSource(name, folder.name, nodes.read_bytes(), edges.read_bytes())
     except OSError as exc:
@@ -251,6 +252,11 @@ def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
 
 
 _PLAIN: dict[tuple[str, int, int], NetworkSource] = {}  # a network file, by path, size and time -> its plain XML
+
+
+def _stem(file_name: str) -> str:
+    """A network file's name without its suffix (``.net.xml``, or compressed ``.net.xml.gz``)."""
+    return next(file_name[:-len(s)] for s in sorted(NETWORK_FILE_SUFFIXES, key=len, reverse=True) if file_name.endswith(s))
 
 
 def _plain_source(net_file: Path, name: str, stem: str) -> NetworkSource:

@@ -517,9 +517,13 @@ TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 EARLIER_SCENARIO = {"network_sha256": ""}
 
 
+#: the names of SUMO's network files (netconvert's, netgenerate's, SUMO's own examples': compressed)
+NETWORK_FILE_SUFFIXES = (".net.xml", ".net.xml.gz")
+
+
 def is_network_path(network: str) -> bool:
     """Whether a network is named by a path (else by a shipped variant's name)."""
-    return "/" in network or os.sep in network or network.endswith(".net.xml")
+    return "/" in network or os.sep in network or network.endswith(NETWORK_FILE_SUFFIXES)
 
 
 def network_files(network: str) -> list[Path]:
@@ -531,7 +535,7 @@ def network_files(network: str) -> list[Path]:
     if path.is_file():
         return [path]
     if path.is_dir():
-        return sorted(f for pattern in ("*.nod.xml", "*.edg.xml", "*.net.xml") for f in path.glob(pattern))
+        return sorted(f for pattern in ("*.nod.xml", "*.edg.xml", *(f"*{s}" for s in NETWORK_FILE_SUFFIXES)) for f in path.glob(pattern))
     return []
 
 

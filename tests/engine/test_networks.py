@@ -15,7 +15,7 @@ from d4sumo.errors import ConfigError
     ("nosuch.net.xml", "a *.net.xml that exists (there is no {cwd}/nosuch.net.xml)"),
     ("{tmp}/two_edges/road.nod.xml", "the folder that holds the node and edge files ({tmp}/two_edges), not one of them"),
     ("{tmp}/two_edges/notes.txt", "one of highway_1lane, highway_3lane_120kmh, highway_4lane, a folder with *.nod.xml and "
-                                  "*.edg.xml, or a *.net.xml (notes.txt is not one: a network file's name ends in .net.xml)"),
+                                  "*.edg.xml, or a *.net.xml (notes.txt is not one: a network file's name ends in .net.xml, or .net.xml.gz)"),
     ("{tmp}/two_edges/map.osm", "a network file (*.net.xml): import an OpenStreetMap file with netconvert first: "
                                 "netconvert --osm-files {tmp}/two_edges/map.osm -o map.net.xml"),
     ("{tmp}/nosuch.osm", "an OpenStreetMap file that exists, imported with netconvert first (there is no {tmp}/nosuch.osm)"),
@@ -58,3 +58,25 @@ def test_a_network_files_signal_plans_that_the_built_road_drops_are_said_once(tm
     caplog.clear()
     network_source(str(tmp_path / "r.nod.xml").replace("r.nod.xml", ""))  # the same nodes as a folder: the user's own plan
     assert not [r for r in caplog.records if "traffic light" in r.getMessage()]
+
+
+@pytest.mark.sumo
+def test_a_compressed_network_file_is_the_network_it_holds(tmp_path):
+    """Regression: a *.net.xml.gz (SUMO reads them, and ships its example networks so) was refused ('a network
+    file's name ends in .net.xml'); it plays the episode its plain file plays, bit for bit."""
+    import gzip
+
+    import numpy as np
+
+    from d4sumo.engine.scenarios import build_road
+    from d4sumo.engine.simulation import simulate
+    from d4sumo.model.config import EpisodeConfig
+
+    plain = tmp_path / "three.net.xml"
+    shutil.copy(build_road(str(Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges")).net_file, plain)
+    packed = tmp_path / "three.net.xml.gz"
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    u = np.full(EpisodeConfig().steps, -0.3)
+    a, b = (simulate(EpisodeConfig(network=str(p), start="steady"), u) for p in (plain, packed))
+    assert a.outcome == b.outcome and all(np.array_equal(a.trace[k], b.trace[k]) for k in a.trace.names)
+    assert network_source(str(packed)).stem == "three"
