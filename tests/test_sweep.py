@@ -421,14 +421,18 @@ def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp
     path = write(tmp_path, LONG)
     db = tmp_path / "r.sqlite"
     cmd, first = start_sweep(path, db)
-    wait_for_samples(db, 5)
-    # the first sweep (its workers too) held where it is, midway, with its database open for writing, for as
-    # long as the second takes to start, whatever this machine's speed; then it goes on
-    os.killpg(first.pid, signal.SIGSTOP)
     try:
-        second = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-    finally:
-        os.killpg(first.pid, signal.SIGCONT)
+        wait_for_samples(db, 5)
+        # the first sweep (its workers too) held where it is, midway, with its database open for writing, for as
+        # long as the second takes to start, whatever this machine's speed; then it goes on
+        os.killpg(first.pid, signal.SIGSTOP)
+        try:
+            second = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        finally:
+            os.killpg(first.pid, signal.SIGCONT)
+    except BaseException:  # the first sweep (a session of its own) does not outlive a failed test
+        os.killpg(first.pid, signal.SIGKILL)
+        raise
     assert second.returncode == 2 and second.stderr.count("\n") == 1
     assert "another d4sumo command is writing to it" in second.stderr
     assert first.wait(timeout=300) == 0

@@ -22,22 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
-from ..model.config import NETWORK_FILE_SUFFIXES
+from ..model.config import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR
 from .netconvert import plain_xml
 
 log = logging.getLogger(__name__)
 _SAID: set[tuple[str, tuple[str, ...]]] = set()  # networks (and routes) whose dropped signal plans were said
 
-def _shipped_variants() -> Path:
-    # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
-    # d4sumo/sumo_scenarios). Run from a checkout, or an editable install, they are the folder beside it.
-    package = Path(__file__).resolve().parent.parent
-    inside = package / "sumo_scenarios"
-    return inside if inside.is_dir() else package.parent / "sumo_scenarios"
-
-
-#: The variants shipped with d4sumo (a folder of data).
-SCENARIOS_DIR = _shipped_variants()
 
 
 def list_scenarios(root: Path | None = None) -> list[str]:
@@ -68,6 +58,7 @@ def keep_road(network: str, sha256: str) -> None:
     if kept.is_dir() or not files or network_digest(network) != sha256:
         return
     path = Path(network).expanduser()
+    work = None
     try:
         kept.parent.mkdir(parents=True, exist_ok=True)
         work = Path(tempfile.mkdtemp(prefix=".keep-", dir=kept.parent))
@@ -75,12 +66,10 @@ def keep_road(network: str, sha256: str) -> None:
         inside.mkdir(exist_ok=True)
         for f in files:
             shutil.copyfile(f, inside / f.name)
-        try:
-            work.rename(kept)
-        except OSError:  # another process was first: its copy is the same
+        work.rename(kept)
+    except OSError:  # another process was first (its copy is the same), or a cache that cannot be written:
+        if work is not None:  # the road is still where it is
             shutil.rmtree(work, ignore_errors=True)
-    except OSError:  # a cache that cannot be written keeps nothing: the road is still where it is
-        pass
 
 
 def use_kept_road(network: str, sha256: str) -> Path | None:

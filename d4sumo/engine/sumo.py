@@ -89,6 +89,9 @@ def followers_file(config: EpisodeConfig, road: Road) -> Path | None:
 
 
 _DEMANDS: dict[tuple, str] = {}  # the traffic's demand text, by what makes it (its files by path, time and size)
+#: the version of the demand's check: a demand an earlier one passed is checked again (2: its vehicle types
+#: against SUMO's schema, and errors SUMO goes on after)
+DEMAND_CHECK = 2
 
 
 def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
@@ -103,16 +106,17 @@ def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
     if key not in _DEMANDS:
         _DEMANDS[key] = demand_xml(*key[:4])
     text = _DEMANDS[key]
-    return _checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: _check_demand(config, road, sumo, tmp))
+    return _checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: _check_demand(config, road, sumo, tmp),
+                         version=DEMAND_CHECK)
 
 
-def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[[str, str], None]) -> Path:
-    """A file SUMO reads, written under d4sumo's cache and named by its content and SUMO's build once
-    ``check(sumo, path)`` passed on it; later calls with the same text return it at once."""
+def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[[str, str], None], version: int = 1) -> Path:
+    """A file SUMO reads, written under d4sumo's cache and named by its content, SUMO's build and the check's
+    ``version`` once ``check(sumo, path)`` passed on it; later calls with the same text return it at once."""
     if text in _CHECKED and _CHECKED[text].is_file():
         return _CHECKED[text]
     sumo = sumo_binary("sumo")
-    build = f"{sumo}:{os.stat(sumo).st_mtime_ns}"  # another SUMO checks again
+    build = f"{sumo}:{os.stat(sumo).st_mtime_ns}" + (f":check {version}" if version > 1 else "")  # another SUMO, or check, again
     folder = Path(default_cache_dir()).parent / kind
     path = folder / f"{hashlib.sha256((build + text).encode()).hexdigest()[:16]}{suffix}"
     if not path.is_file():
@@ -153,11 +157,21 @@ _VALIDATED_ROUTES = ('<routes xmlns:xsi="http://www.w3.org/2001/XMLSchema-instan
                      'xsi:noNamespaceSchemaLocation="http://sumo.dlr.de/xsd/routes_file.xsd">')
 
 
+def _sumo_home_known() -> bool:
+    """Whether SUMO's installation folder is known (not only its programs, on the PATH)."""
+    try:
+        sumo_home()
+    except SumoError:
+        return False
+    return True
+
+
 def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: str) -> None:
     cmd = [sumo, "--net-file", str(road.net_file), "--step-length", repr(config.step_s),
            "--end", "1", "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
     message = None
-    if config.traffic.types and config.traffic.vehicles_per_hour is not None:
+    xsd = Path(sumo_home(), "data", "xsd") if _sumo_home_known() else None
+    if config.traffic.types and config.traffic.vehicles_per_hour is not None and xsd is not None and xsd.is_dir():
         # the types first, alone, against SUMO's schema (found in SUMO_HOME): a misspelt attribute
         # ("speedfactor") is otherwise taken without a word
         types = f"{demand}.types.rou.xml"
@@ -427,13 +441,11 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     neither is the platoon's doing."""
     if config.traffic is None:
         return None
-    import libsumo
-
     demand = traffic_file(config, road)
     sumo = sumo_binary("sumo")
     key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, demand.name,
                      str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s),
-                     *(["insertion-checks"] if config.traffic.insertion_checks else [])])
+                     *(["insertion-checks", "a process of its own"] if config.traffic.insertion_checks else [])])
     folder = Path(default_cache_dir()).parent / "traffic-states"
     path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
     if path.is_file():
@@ -446,21 +458,62 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
         raise SumoError(f"cannot write the traffic's warm-up under {folder}: {exc.strerror or exc}") from None
     cmd = sumo_command(config, road, demand_file=demand) + ["--save-state.rng", "true", "--save-state.precision", "17"]
     try:
-        libsumo.start(cmd)
-        try:
-            _warm_up(libsumo, config, road)
-            libsumo.simulation.saveState(tmp)
-        finally:
-            libsumo.close()
+        _warm_up_alone(cmd, config, road, tmp)
         if config.traffic.insertion_checks:
             _keep_insertion_checks(Path(tmp), demand)
         os.replace(tmp, path)
-    except libsumo.TraCIException as exc:
-        raise SumoError(f"SUMO failed in the traffic's warm-up: {exc}") from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _warm_up_alone(cmd: list[str], config: EpisodeConfig, road: Road, state: str) -> None:
+    """The warm-up, its state saved to ``state``, in a process of its own: SUMO's stream of random numbers for
+    the demand it reads (a flow's random headways) counts its draws across the simulations of a process, and
+    the saved state holds that count, which its loading replays; a state saved in a process that ran other
+    simulations before met other traffic once loaded (the gap to the car ahead of the attacker 38.9 m, not
+    55.4 m). A fresh process saves the same state on every machine."""
+    import pickle
+    import sys
+
+    with tempfile.TemporaryDirectory() as work:
+        given, said = Path(work, "given.pickle"), Path(work, "said.pickle")
+        given.write_bytes(pickle.dumps((os.getpid(), cmd, config, road, state)))
+        code = "import sys; from d4sumo.engine.sumo import _warm_up_here; _warm_up_here(sys.argv[1], sys.argv[2])"
+        done = subprocess.run([sys.executable, "-c", code, str(given), str(said)], capture_output=True, text=True)
+        if not said.is_file():
+            last = (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
+            raise SumoError(f"the traffic's warm-up failed: {last}")
+        outcome = pickle.loads(said.read_bytes())
+    if outcome is not None:
+        kind, what = outcome
+        raise ConfigError(*what) if kind == "config" else SumoError(what)
+
+
+def _warm_up_here(given: str, said: str) -> None:
+    """`_warm_up_alone`'s process: plays the warm-up, saves its state, and says how it ended (None: saved)."""
+    import pickle
+
+    import libsumo
+
+    from ..processes import die_with_parent
+
+    parent, cmd, config, road, state = pickle.loads(Path(given).read_bytes())
+    die_with_parent(parent)
+    outcome = None
+    try:
+        libsumo.start(cmd)
+        try:
+            _warm_up(libsumo, config, road)
+            libsumo.simulation.saveState(state)
+        finally:
+            libsumo.close()
+    except ConfigError as exc:
+        outcome = ("config", (exc.field, exc.given, exc.allowed))
+    except libsumo.TraCIException as exc:
+        outcome = ("sumo", f"SUMO failed in the traffic's warm-up: {exc}")
+    Path(said).write_bytes(pickle.dumps(outcome))
 
 
 def _keep_insertion_checks(state: Path, demand: Path) -> None:

@@ -10,6 +10,7 @@ import dataclasses
 import functools
 import hashlib
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -182,8 +183,9 @@ class EpisodeConfig:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
         if self.network_sha256 is None or not is_network_path(self.network):
             fix("network_sha256", network_digest(self.network))
-        elif not isinstance(self.network_sha256, str):
-            raise ConfigError("scenario.network_sha256", self.network_sha256, "the digest d4sumo takes of scenario.network (leave it out)")
+        elif not isinstance(self.network_sha256, str) or not re.fullmatch(r"([0-9a-f]{64})?", self.network_sha256):
+            raise ConfigError("scenario.network_sha256", self.network_sha256, "the digest d4sumo takes of scenario.network "
+                                                                              "(leave it out), or \"\" (the road as it is)")
         if not isinstance(self.route, (list, tuple)) or not all(isinstance(e, str) and e for e in self.route):
             raise ConfigError("scenario.route", self.route, "a list of edge ids, e.g. [\"e1\", \"e2\"]")
         fix("route", tuple(self.route))
@@ -521,22 +523,39 @@ EARLIER_SCENARIO = {"network_sha256": ""}
 NETWORK_FILE_SUFFIXES = (".net.xml", ".net.xml.gz")
 
 
+def _shipped_variants() -> Path:
+    # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
+    # d4sumo/sumo_scenarios). Run from a checkout, or an editable install, they are the folder beside it.
+    package = Path(__file__).resolve().parent.parent
+    inside = package / "sumo_scenarios"
+    return inside if inside.is_dir() else package.parent / "sumo_scenarios"
+
+
+#: The variants shipped with d4sumo (a folder of data).
+SCENARIOS_DIR = _shipped_variants()
+
+
 def is_network_path(network: str) -> bool:
-    """Whether a network is named by a path (else by a shipped variant's name)."""
-    return "/" in network or os.sep in network or network.endswith(NETWORK_FILE_SUFFIXES)
+    """Whether a network is named by a path, not by a shipped variant's name (which is taken first, as
+    `engine.networks.scenario_folder` does)."""
+    return "/" in network or os.sep in network or not (SCENARIOS_DIR / network).is_dir()
 
 
 def network_files(network: str) -> list[Path]:
-    """The files a network path names: a network file, or a folder's node, edge and network files (none for a
-    shipped variant's name, or a path with none there)."""
+    """The files a network path names, those its road is built from: a network file, or a folder's node and
+    edge files, else its one network file (none for a shipped variant's name, or a path with none there)."""
     if not is_network_path(network):
         return []
     path = Path(network).expanduser()
     if path.is_file():
         return [path]
-    if path.is_dir():
-        return sorted(f for pattern in ("*.nod.xml", "*.edg.xml", *(f"*{s}" for s in NETWORK_FILE_SUFFIXES)) for f in path.glob(pattern))
-    return []
+    if not path.is_dir():
+        return []
+    found = {pattern: sorted(f for f in path.glob(pattern) if f.is_file())
+             for pattern in ("*.nod.xml", "*.edg.xml", *(f"*{s}" for s in NETWORK_FILE_SUFFIXES))}
+    if len(found["*.nod.xml"]) == 1 and len(found["*.edg.xml"]) == 1:
+        return sorted([*found["*.nod.xml"], *found["*.edg.xml"]])
+    return sorted(f for pattern, files in found.items() for f in files)
 
 
 def network_digest(network: str) -> str:
@@ -544,11 +563,13 @@ def network_digest(network: str) -> str:
     name); "" for a shipped variant's name (a name without a "/": d4sumo's own roads, versioned with it) and a
     path with no such files."""
     files = network_files(network)
-    if not files:
-        return ""
-    if len(files) == 1:
-        return file_sha256(files[0])
-    return hashlib.sha256("".join(f"{f.name}\0{file_sha256(f)}\0" for f in files).encode()).hexdigest()
+    try:
+        if len(files) == 1:
+            return file_sha256(files[0])
+        return hashlib.sha256("".join(f"{f.name}\0{file_sha256(f)}\0" for f in files).encode()).hexdigest() if files else ""
+    except OSError as exc:
+        raise ConfigError("scenario.network", network, f"a road whose files can be read ({exc.strerror or exc}: "
+                                                       f"{exc.filename})") from None
 
 
 def _short_table(table: Any) -> Any:

@@ -142,7 +142,10 @@ def _load(name: str, path: str, sha256: str) -> Fmu:
     if not unzipdir.is_dir():
         _unpack(path, unzipdir, not binary, name)
     if Path(path) != kept(sha256):
-        _keep(Path(path).read_bytes(), sha256)
+        try:
+            _keep(Path(path).read_bytes(), sha256)
+        except OSError:  # a cache that cannot be written keeps nothing: the FMU is still where it is
+            pass
     return Fmu(name, Path(path), sha256, unzipdir, description)
 
 

@@ -134,12 +134,14 @@ class TrafficParams:
 
     @property
     def label(self) -> str:
-        """In a few words: ``1200 veh/h/lane, seed 0`` (the types' names where given, the demand files')."""
+        """In a few words: ``1200 veh/h/lane, seed 0`` (the types' names where given, the demand files'; traffic
+        entering without insertion checks says so)."""
         parts = [Path(p).name for p in self.demand]
         if self.vehicles_per_hour is not None:
             types = f" of {', '.join(name for name, _ in self.types)}" if self.types else ""
             parts.append(f"{self.vehicles_per_hour:g} veh/h/lane{types}")
-        return f"{' + '.join(parts)}, seed {self.seed}" + (" per sample" if self.per_sample else "")
+        return (f"{' + '.join(parts)}, seed {self.seed}" + (" per sample" if self.per_sample else "")
+                + ("" if self.insertion_checks else ", entering unchecked"))  # as 0.16 played it: another experiment
 
     @property
     def type_shares(self) -> list[tuple[str, float, dict[str, Any]]]:

@@ -168,8 +168,8 @@ def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
     stored = config.to_dict()["scenario"]
     out = []
     for key in SCENARIO_KEYS:
-        if key in GRID_KEYS or (key not in stored and key in NO_EFFECT_WHEN_LEFT_OUT):
-            continue
+        if key in GRID_KEYS or key == "network_sha256" or (key not in stored and key in NO_EFFECT_WHEN_LEFT_OUT):
+            continue  # (a road's digest identifies its files: the road is its network's name)
         value = stored.get(key, getattr(config, key))
         out.append((key, tuple(value) if isinstance(value, (list, tuple)) else value))
     out.append(("traffic", config.traffic.label if config.traffic is not None else "none"))  # alone is a scenario too

@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
-import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
+from ..processes import die_with_parent
+
 
 def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity: a container's or taskset's share), not the
-    machine's: as many workers as that, and none wait for a core."""
+    """The cores this process may run on (its CPU affinity: a container's cpuset, taskset's), not the
+    machine's: as many workers as that, and none wait for a core. (A CPU quota, docker --cpus, is not an
+    affinity: --workers says it.)"""
     try:
         return len(os.sched_getaffinity(0)) or 1
     except (AttributeError, OSError):  # no affinity where the system has none to say (macOS)
@@ -68,20 +69,4 @@ def _worker_init(parent_pid: int) -> None:
     """A local worker: Ctrl-C is the client's to handle, and the worker dies with the client."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:  # Linux: the kernel kills the worker when its parent dies, even by kill -9
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent_pid:  # the parent died before the line above took effect
-        os._exit(1)
-
-    def watch() -> None:  # everywhere else: notice within a second
-        while True:
-            time.sleep(1.0)
-            if os.getppid() != parent_pid:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+    die_with_parent(parent_pid)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -62,6 +64,9 @@ def test_traffic_is_stored_only_where_there_is_some_and_round_trips():
                                  "insertion_checks": True, "types": {"car": {"tau": 1.2}}}
     assert EpisodeConfig.from_dict(stored) == with_traffic
     assert with_traffic.world_label == "traffic 900 veh/h/lane of car, seed 0"
+    # traffic as 0.16 played it is another experiment: its label, and so the report's rows, say so
+    unchecked = dataclasses.replace(with_traffic.traffic, insertion_checks=False)
+    assert unchecked.label == "900 veh/h/lane of car, seed 0, entering unchecked"
     assert not with_traffic.batch_arrays  # each episode meets its traffic alone
 
 

@@ -411,6 +411,26 @@ def test_a_campaign_on_a_road_of_ones_own_holds_its_content_and_one_stored_befor
     assert "network_sha256" not in shipped["config"]["scenario"]  # d4sumo's own roads: as before
 
 
+def test_a_roads_digest_is_of_the_files_it_is_built_from_whatever_names_it(tmp_path, monkeypatch):
+    """A road named by its folder's name alone (no "/") holds a digest too; a network file netconvert wrote
+    beside the node and edge files, or a folder named like one, changes nothing (the road is built from the
+    node and edge files); a digest that is none is refused in one line."""
+    import shutil
+
+    road = tmp_path / "mine"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges", road)
+    monkeypatch.chdir(tmp_path)
+    digest = EpisodeConfig(network="mine").network_sha256
+    assert len(digest) == 64 and EpisodeConfig(network="./mine").network_sha256 == digest
+    (road / "mine.net.xml").write_text("<net/>")
+    (road / "old.net.xml").mkdir()
+    assert EpisodeConfig(network="mine").network_sha256 == digest
+    assert EpisodeConfig(network="highway_4lane").network_sha256 == ""  # a shipped variant's name
+    with pytest.raises(ConfigError) as info:
+        EpisodeConfig(network="mine", network_sha256="bogus")
+    assert info.value.field == "scenario.network_sha256"
+
+
 def test_a_traffic_campaign_an_earlier_version_stored_keeps_its_identity_and_its_traffic():
     """d4sumo 0.16 and before stored [traffic] without ``insertion_checks``: it played the traffic entering
     after the warm-up with none, and its campaigns replay and resume so, under the same key."""
