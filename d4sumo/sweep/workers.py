@@ -13,7 +13,7 @@ from ..processes import die_with_parent
 
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity: a container's cpuset, taskset's), not the
-    machine's: as many workers as that, and none wait for a core. (A CPU quota, docker --cpus, is not an
+    machine's: as many workers as that, and none wait for a core. (A CPU quota, as Docker's cpus option sets, is not an
     affinity: --workers says it.)"""
     try:
         return len(os.sched_getaffinity(0)) or 1
