@@ -599,6 +599,12 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
     assert now.returncode == 0, now.stderr
     assert "holds this campaign as d4sumo 0.16 or before ran it" in now.stderr
     assert now.stderr.rstrip().endswith("To go on with that one: --set traffic.insertion_checks=false")
+    # one an earlier auto ran too (d4sumo 0.10: held inputs cut across signals): both keys said at once
+    older = [*flags[:6], "--samples", "2", "--db", str(tmp_path / "older.sqlite"), "--quiet"]  # the default: auto
+    assert main(["falsify", *older, "--set", "search.auto.per_signal=0", "--set", "traffic.insertion_checks=false"]) == 0
+    said = run("falsify", *older)
+    assert said.returncode == 0 and said.stderr.rstrip().endswith(
+        "To go on with that one: --set search.auto.per_signal=0 --set traffic.insertion_checks=false"), said.stderr
 
 
 @pytest.mark.sumo

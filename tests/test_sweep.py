@@ -536,6 +536,16 @@ def test_a_sweep_an_earlier_version_ran_on_a_road_of_ones_own_among_traffic_is_t
     assert said.count("\n") == 1 and "It was run by d4sumo 0.16 or before" in said
     assert '`network_sha256 = ""` in [scenario] and `insertion_checks = false` in [traffic]' in said
     assert outcomes(db) == stored
+    # one whose optimiser an earlier d4sumo ran otherwise too (ce without its noise): both said at once
+    ce = text.replace('optimizer = "random"', 'optimizer = "ce"')
+    ce_before = as_before.replace('optimizer = "random"', 'optimizer = "ce"') + "[search.ce]\nnoise_fraction = 0.0\n"
+    older = tmp_path / "older.sqlite"
+    assert main(["sweep", str(write(tmp_path, ce_before, "ce_before.toml")), "--db", str(older), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["sweep", str(write(tmp_path, ce, "ce.toml")), "--db", str(older), "--quiet"]) == 2
+    said = capsys.readouterr().err
+    assert ('set `noise_fraction = 0.0` in [search.ce]; `network_sha256 = ""` in [scenario] and `insertion_checks = false` '
+            'in [traffic]' in said), said
 
 
 def test_a_grid_of_maneuvers_and_cut_in_settings_counts_the_in_lane_attack_once(tmp_path):

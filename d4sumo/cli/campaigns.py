@@ -13,6 +13,28 @@ from .common import check_batch, document, note_unused_flags
 from .episodes import collision_text
 
 
+def _as_earlier_versions_ran(campaign):
+    """The campaign as earlier versions of d4sumo ran it (its optimiser, that optimiser's options, its inputs,
+    in every combination), each with what differed and the flags that go on with it."""
+    inputs = campaign.with_inputs_of_before()
+    input_flags = [*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
+                   *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else [])]
+    for base, flags in [(campaign, []), *([(inputs, input_flags)] if inputs is not campaign else [])]:
+        if campaign.optimizer == DEFAULT_OPTIMIZER:
+            default_before = base.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
+            for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
+                yield (default_before.with_options(earlier),
+                       f"run with {EARLIER_DEFAULT_OPTIMIZER}, the default optimiser of d4sumo 0.7 and before; this starts a "
+                       f"new one with {DEFAULT_OPTIMIZER}",
+                       [f"--optimizer {EARLIER_DEFAULT_OPTIMIZER}", as_set_flags(EARLIER_DEFAULT_OPTIMIZER, earlier), *flags])
+        for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
+            if (before := base.with_options(earlier)) != campaign:
+                yield before, "as an earlier d4sumo ran it; this starts a new one", [as_set_flags(campaign.optimizer, earlier), *flags]
+        if base is not campaign:
+            yield (base, "as d4sumo 0.16 or before ran it (a road of one's own taken as found, traffic entering after the "
+                         "warm-up unchecked); this starts a new one", flags)
+
+
 def cmd_falsify(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -56,29 +78,12 @@ def cmd_falsify(args: argparse.Namespace) -> int:
                 bar.update(1)
             bar.set_postfix(success=counts["success"], best=f"{best[0]:.3f}" if best[0] is not None else "-", refresh=False)
 
-        if known is None:
-            if campaign.optimizer == DEFAULT_OPTIMIZER:
-                default_before = campaign.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
-                for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
-                    if store.find_campaign(default_before.with_options(earlier).definition()) is not None:
-                        flags = " ".join(f for f in (f"--optimizer {EARLIER_DEFAULT_OPTIMIZER}", as_set_flags(EARLIER_DEFAULT_OPTIMIZER, earlier)) if f)
-                        bar.write(f"d4sumo: note: {args.db} holds this campaign run with {EARLIER_DEFAULT_OPTIMIZER}, the default "
-                                  f"optimiser of d4sumo 0.7 and before; this starts a new one with {DEFAULT_OPTIMIZER}. To go on "
-                                  f"with that one: {flags}", file=sys.stderr)
-                        break
-            for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
-                before = campaign.with_options(earlier)
-                if before != campaign and store.find_campaign(before.definition()) is not None:
-                    bar.write(f"d4sumo: note: {args.db} holds this campaign as an earlier d4sumo ran it; this starts a new "
-                              f"one. To go on with that one: {as_set_flags(campaign.optimizer, earlier)}", file=sys.stderr)
+        if known is None:  # the same campaign as an earlier d4sumo ran it: said, with the flags that go on with it
+            for before, what, flags in _as_earlier_versions_ran(campaign):
+                if store.find_campaign(before.definition()) is not None:
+                    bar.write(f"d4sumo: note: {args.db} holds this campaign {what}. To go on with that one: "
+                              f"{' '.join(f for f in flags if f)}", file=sys.stderr)
                     break
-            before = campaign.with_inputs_of_before()
-            if before is not campaign and store.find_campaign(before.definition()) is not None:
-                flags = " ".join([*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
-                                  *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else [])])
-                bar.write(f"d4sumo: note: {args.db} holds this campaign as d4sumo 0.16 or before ran it (a road of one's own "
-                          f"taken as found, traffic entering after the warm-up unchecked); this starts a new one. To go on "
-                          f"with that one: {flags}", file=sys.stderr)
         try:
             summary = run_campaign(campaign, store, evaluator=evaluator, on_sample=progress, batch=args.batch)
         except KeyboardInterrupt as exc:

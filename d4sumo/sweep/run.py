@@ -39,6 +39,40 @@ log = logging.getLogger(__name__)
 # dies loses only its unfinished task, which the client sends again (split in two, so that a campaign
 # that kills its worker every time is found alone); workers need nothing but the installed package.
 
+def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
+    """What to set in the sweep file to go on with a database an earlier d4sumo wrote for it: its optimisers as
+    earlier versions ran them, its inputs as 0.16 and before did, in every combination; None: none of them."""
+    if theirs["name"] != sweep.name:
+        return None
+    inputs = sweep.with_inputs_of_before()
+    input_keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
+                  *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"]
+                    if any(c.config.traffic for c in sweep.campaigns) else [])]
+    for base, keys in [(sweep, []), *([(inputs, input_keys)] if inputs is not sweep else [])]:
+        names = list(EARLIER_OPTIONS)
+        # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
+        for choice in itertools.product(*[(None, *EARLIER_OPTIONS[o]) for o in names]):
+            changed = [(o, e) for o, e in zip(names, choice) if e is not None]
+            before = base
+            for optimizer, earlier in changed:
+                before = before.as_run_before(optimizer, earlier)
+            if (changed or keys) and theirs["fingerprint"] == before.fingerprint():
+                tables = [", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed]
+                version = "d4sumo 0.16 or before, which took a road of one's own as it found it and let traffic enter after " \
+                          "the warm-up unchecked" if keys and not changed else "an earlier d4sumo"
+                wanted = "; ".join([*tables, *([" and ".join(keys)] if keys else [])])
+                return f"It was run by {version}: set {wanted} of the sweep file to go on with it, or use another --db"
+        default_before = base.with_default_of_before()
+        earliers = ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ()))  # bo as each earlier version ran it
+        for earlier in earliers if default_before is not base else ():
+            if theirs["fingerprint"] == default_before.as_run_before(EARLIER_DEFAULT_OPTIMIZER, earlier).fingerprint():
+                table = "".join(f", `{k} = {v}` in [search.{EARLIER_DEFAULT_OPTIMIZER}]" for k, v in earlier.items())
+                table += "".join(f", {k}" for k in keys)  # and its inputs as it took them
+                return (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
+                        f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"`{table} in the sweep file to go on with it, or use another --db")
+    return None
+
+
 def claim(store: Store, sweep: Sweep) -> None:
     """Mark the database as this sweep's, refusing one written by anything else."""
     meta = store.meta()
@@ -50,33 +84,7 @@ def claim(store: Store, sweep: Sweep) -> None:
         except (ValueError, TypeError, KeyError):
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
-            hint = "Use another --db, or the sweep file that wrote it"
-            names = list(EARLIER_OPTIONS)
-            # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
-            for choice in itertools.product(*[(None, *EARLIER_OPTIONS[o]) for o in names]):
-                changed = [(o, e) for o, e in zip(names, choice) if e is not None]
-                before = sweep
-                for optimizer, earlier in changed:
-                    before = before.as_run_before(optimizer, earlier)
-                if changed and theirs["name"] == sweep.name and theirs["fingerprint"] == before.fingerprint():
-                    tables = "; ".join(", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed)
-                    hint = f"It was run by an earlier d4sumo: set {tables} of the sweep file to go on with it, or use another --db"
-                    break
-            default_before = sweep.with_default_of_before()
-            earliers = ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ()))  # bo as each earlier version ran it
-            for earlier in earliers if default_before is not sweep and theirs["name"] == sweep.name else ():
-                if theirs["fingerprint"] == default_before.as_run_before(EARLIER_DEFAULT_OPTIMIZER, earlier).fingerprint():
-                    table = "".join(f", `{k} = {v}` in [search.{EARLIER_DEFAULT_OPTIMIZER}]" for k, v in earlier.items())
-                    hint = (f"It was run by d4sumo 0.7 or before, whose default optimiser was {EARLIER_DEFAULT_OPTIMIZER}: set "
-                            f"`optimizer = \"{EARLIER_DEFAULT_OPTIMIZER}\"`{table} in the sweep file to go on with it, or use another --db")
-                    break
-            inputs_before = sweep.with_inputs_of_before()
-            if inputs_before is not sweep and theirs["name"] == sweep.name and theirs["fingerprint"] == inputs_before.fingerprint():
-                keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
-                        *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"] if any(c.config.traffic for c in sweep.campaigns) else [])]
-                hint = (f"It was run by d4sumo 0.16 or before, which took a road of one's own as it found it and let "
-                        f"traffic enter after the warm-up unchecked: set {' and '.join(keys)} of the sweep file to go on "
-                        f"with it as it ran, or use another --db")
+            hint = _earlier_hint(sweep, theirs) or "Use another --db, or the sweep file that wrote it"
             raise StoreError(
                 f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"
