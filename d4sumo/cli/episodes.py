@@ -89,6 +89,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return _replay_openscenario(args, row, campaign, fcd)
     evaluator = Evaluator(campaign)
     plan = evaluator.plan(row.params)
+    if row.outcome == "error":  # what the campaign stored was how it failed: the replay fails the same way, or not
+        try:
+            evaluator.simulate(row.index, row.params, fcd_path=fcd, gui=args.gui)
+        except Exception as exc:  # a user's controller's, or SUMO's
+            again = evaluator.failure(exc)
+        else:
+            again = None
+        if again == row.error:
+            print(f"reproduces the stored sample exactly: it fails again, {again}")
+            return 0
+        print(f"differs from the stored sample: it failed ({row.error}); replayed, " + (f"it fails otherwise ({again})" if again else "it plays"))
+        return EXIT_DIFFERS
     episode = evaluator.simulate(row.index, row.params, fcd_path=fcd, gui=args.gui)
     rho = evaluator.spec.robustness(episode.trace)
     summary = episode_summary(campaign.config, evaluator.family, row.params, plan, episode, rho, campaign.d_safe_m, fcd)
@@ -123,19 +135,22 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     from ..engine.networks import opendrive_network
     from ..results.openscenario import read_motion
     from ..search.runner import Evaluator
+    from ..search.store import campaign_key
 
     config = campaign.config
     if config.traffic is not None:
         raise ConfigError("--openscenario", str(args.openscenario), "a sample of a campaign without [traffic] "
                                                                     "(its traffic is not exported)")
     stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
+    key = campaign_key(campaign.definition())  # the campaign an export of this sample names
     if args.network is not None:
         network = opendrive_network(args.network) if args.network.suffix == ".xodr" else args.network
         config = dataclasses.replace(config, network=str(network), network_sha256=None, route=(), lane=None)
         campaign = campaign.replace(config=config)
     evaluator = Evaluator(campaign)
     plan = dataclasses.replace(evaluator.plan(row.params),
-                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id))
+                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id,
+                                                  key))
     from ..engine.simulation import simulate
 
     episode = simulate(config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)

@@ -226,7 +226,7 @@ def fmu_of(name: str, sha256: str | None = None) -> Fmu:
                             kept(sha256).parent)
             path = kept(sha256)
         else:
-            what = f"{given} is a folder" if path.is_dir() else f"no file {given} here"
+            what = "no path given" if not given else f"{given} is a folder" if path.is_dir() else f"no file {given} here"
             raise ControllerImportError(name, "an FMU file", f"{what} (a path from the current folder, or absolute)")
     return _load(name, str(path.resolve()), file_sha256(path))
 

@@ -28,8 +28,10 @@ import numpy as np
 
 from ..engine.netconvert import opendrive_output
 from ..errors import ConfigError
+from ..model.fmu import SIGNALS, is_fmu
 from ..model.maneuvers import CAR_WIDTH_M
 from ..model.trace import Collision
+from ..search.store import campaign_key
 from .records import Record
 
 CAR_HEIGHT_M = 1.5
@@ -60,12 +62,13 @@ def heading_rad(sumo_angle_deg: float) -> float:
     return math.radians(90.0 - sumo_angle_deg) % (2.0 * math.pi)
 
 
-def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sample: int | None = None) -> np.ndarray:
+def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sample: int | None = None,
+                campaign: str | None = None) -> np.ndarray:
     """The speed at each step's end of ``vehicle`` as an exported scenario has it, what `AttackPlan.motion`
     replays: from its initial speed, and the distance between two of its trajectory's timed positions,
     which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that stops
     within a step ends it at 0). Past the trajectory's end it holds its last speed. ``sample``: the sample it
-    must be the export of (its header says so), if it says."""
+    must be the export of, and ``campaign`` the key of its campaign (its header says so), where it says."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
@@ -75,21 +78,35 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
     if len(vertices) < 2:
         raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s trajectory "
                                                        "(a polyline of timed world positions)")
-    t = np.array([float(v.get("time")) for v in vertices])
-    if sample is not None:  # the header says which sample it is: another's motion would replay another attack
-        said = next((p.get("value") for p in root.iter("Property") if p.get("name") == "d4sumo.sample"), None)
-        if said is not None and said != str(sample):
-            raise ConfigError("--openscenario", str(path), f"the export of sample {sample} (this one is sample {said}'s)")
-    xy = np.array([[float(v.find("./Position/WorldPosition").get(k)) for k in ("x", "y")] for v in vertices])
-    if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
-        raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")
     start = next((p for p in root.iter("Private") if p.get("entityRef") == vehicle), None)
     target = start.find(".//AbsoluteTargetSpeed") if start is not None else None
     if target is None:
         raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, with {vehicle}'s initial speed")
-    v = float(target.get("value"))
-    # the distance along the car's heading: a lane change, which SUMO makes within a step, moves it across
-    heading = np.array([float(v_.find("./Position/WorldPosition").get("h", 0.0)) for v_ in vertices])
+    try:
+        t = np.array([float(v.get("time")) for v in vertices])
+        xy = np.array([[float(v.find("./Position/WorldPosition").get(k)) for k in ("x", "y")] for v in vertices])
+        # the distance along the car's heading: a lane change, which SUMO makes within a step, moves it across
+        heading = np.array([float(v_.find("./Position/WorldPosition").get("h", 0.0)) for v_ in vertices])
+        v = float(target.get("value"))
+    except (TypeError, ValueError, AttributeError):
+        ok = False
+    else:
+        ok = bool(np.all(np.isfinite(t)) and np.all(np.isfinite(xy)) and np.all(np.isfinite(heading)) and math.isfinite(v))
+    if not ok:  # a NaN played as a position replayed another motion
+        raise ConfigError("--openscenario", str(path), f"an OpenSCENARIO file d4sumo exported, {vehicle}'s trajectory's times, "
+                                                       "positions, headings and initial speed numbers")
+    if sample is not None:  # the header says which sample it is: another's motion would replay another attack
+        said = next((p.get("value") for p in root.iter("Property") if p.get("name") == "d4sumo.sample"), None)
+        if said is not None and said != str(sample):
+            raise ConfigError("--openscenario", str(path), f"the export of sample {sample} (this one is sample {said}'s)")
+    if campaign is not None:  # the same sample number in another database is another campaign's attack
+        of = next((p.get("value") for p in root.iter("Property") if p.get("name") == "d4sumo.campaign"), None)
+        if of is not None and of != campaign:
+            where = next((p.get("value") for p in root.iter("Property") if p.get("name") == "d4sumo.database"), "?")
+            raise ConfigError("--openscenario", str(path), f"the export of this database's sample {sample} (this one is "
+                                                           f"of another campaign, exported from {where})")
+    if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
+        raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")
     step = np.diff(xy, axis=0)
     along = np.abs(step[:, 0] * np.cos(heading[:-1]) + step[:, 1] * np.sin(heading[:-1]))
     speeds = []
@@ -158,7 +175,10 @@ def _controller(xosc, follower: int, controller, config):
     sensing = [*controller.params,  # what it senses and hears is part of the system under test too
                *((f"radar.{k}", v) for k, v in (config.radar.to_dict() if config.radar is not None else {}).items()),
                *((f"v2v.{k}", v) for k, v in (config.v2v.to_dict() if config.v2v is not None else {}).items())]
+    fmu = is_fmu(controller.cls)
     for key, value in sensing:
+        if fmu and key in SIGNALS:  # the FMU's variable a signal maps to: not the signal's value set above
+            key = f"fmu.{key}"
         properties.add_property(str(key), repr(value) if isinstance(value, float) else str(value))
     return xosc.Controller(f"v{follower}_{controller.cls}", properties)
 
@@ -224,8 +244,9 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
     storyboard = xosc.StoryBoard(init, stops)
     storyboard.add_story(story)
     header = xosc.Properties()
-    header.add_property("d4sumo.database", str(record.db))
+    header.add_property("d4sumo.database", str(Path(record.db).resolve()))
     header.add_property("d4sumo.sample", str(record.sample_id))
+    header.add_property("d4sumo.campaign", campaign_key(campaign.definition()))  # which campaign's sample: a replay checks it
     header.add_property("d4sumo.outcome", outcome)
     if first is not None:
         header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")

@@ -108,15 +108,20 @@ class Evaluator:
         campaign stored before that window existed (``score_from_attack_start`` false), the whole episode."""
         return episode.min_gaps_m() if self.spec.start_step else episode.min_gaps_with_warmup_m()
 
+    @staticmethod
+    def failure(exc: Exception) -> str:
+        """How a sample that ended in ``exc`` stores its error."""
+        return str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
+
     def _failed(self, index: int, x: tuple[float, ...], exc: Exception, wall_s: float) -> SampleResult:
-        message = str(exc) if isinstance(exc, (SumoError, ValueError)) else f"{type(exc).__name__}: {exc}"
+        message = self.failure(exc)
         # a failure that repeats is said twice, not once a sample (a warm-up collision ends every one alike)
         repeats = self._failures.get(message, 0)
         self._failures[message] = repeats + 1
         if repeats == 0:
-            log.warning("sample %d failed: %s", index, message)
+            log.warning("sample index %d failed: %s", index, message)  # its index in the campaign (export's index column), not its id
         elif repeats == 1:
-            log.warning("sample %d failed the same way; later samples that do are counted, not shown", index)
+            log.warning("sample index %d failed the same way; later samples that do are counted, not shown", index)
         return SampleResult(index, x, None, "error", None, None, wall_s, message)
 
 

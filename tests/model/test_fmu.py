@@ -158,6 +158,10 @@ def test_an_fmu_that_fails_or_answers_nan_mid_episode_makes_an_error_sample(tmp_
     with open_store(db, create=False) as store:
         message = store.samples()[0].error
     assert "v1" in message and ("status 3" in message if kind == "fails" else "nan" in message)
+    # regression: its replay ended in an error line, exit 2, though it failed exactly as stored
+    replayed = run("replay", str(db), "1")
+    assert replayed.returncode == 0, replayed.stderr
+    assert replayed.stdout.strip() == f"reproduces the stored sample exactly: it fails again, {message}"
 
 
 def _rezip(source, target, drop=(), edit=None):
@@ -181,7 +185,7 @@ def test_bad_fmus_get_one_line_and_exit_2_and_nothing_is_stored(switching_fmus, 
     other = _rezip(switching_fmus[2], tmp_path / "other.fmu", drop=("sources/", f"binaries/{fmpy.platform}/"))
     with zipfile.ZipFile(other, "a") as z:
         z.writestr("binaries/win64/d4sumo_switching.dll", b"MZ")
-    cases = {"missing.fmu": "no file missing.fmu", str(text): "not a zip archive", str(exchange): "model exchange only",
+    cases = {"missing.fmu": "no file missing.fmu", "": "no path given", str(text): "not a zip archive", str(exchange): "model exchange only",
              str(other): "binaries for win64 and no sources"}
     # side by side, each with a database of its own
     dbs = [tmp_path / f"x{i}.sqlite" for i in range(len(cases))]
@@ -221,3 +225,23 @@ def test_a_dask_sweep_ships_the_fmu_to_workers_that_cannot_see_the_clients_disk(
     assert list((tmp_path / "worker1" / "cache" / "d4sumo" / "fmus" / "by-content").glob("*.fmu"))  # it came by value
     assert local.returncode == 0
     assert rows(client / "dask.sqlite") == rows(client / "local.sqlite") and len(rows(client / "local.sqlite")) == 12
+
+
+@pytest.mark.sumo
+def test_an_fmu_followers_exported_scenario_names_each_controller_property_once(switching_fmus, tmp_path):
+    """Regression: an FMU's signal mapping (setpoint_m -> the FMU's variable "setpoint_m") was written beside the
+    setpoint's value under the same name: two properties of one name, which ASAM's checker refuses."""
+    import xml.etree.ElementTree as ET
+
+    shutil.copy(switching_fmus[2], tmp_path / "acc.fmu")
+    db = tmp_path / "c.sqlite"
+    ran = run("falsify", "--controller", "fmu:acc.fmu", "--start", "steady", "--setpoint", "5", "--optimizer", "random",
+              "--samples", "1", "--db", str(db), "--quiet", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    exported = run("export", str(db), "1", "--openscenario", str(tmp_path / "x"), cwd=tmp_path)
+    assert exported.returncode == 0, exported.stderr
+    controllers = list(ET.parse(tmp_path / "x" / "scenario.xosc").getroot().iter("Controller"))
+    assert len(controllers) == 3
+    for controller in controllers:
+        names = [p.get("name") for p in controller.iter("Property")]
+        assert len(names) == len(set(names)) and "fmu.setpoint_m" in names, names

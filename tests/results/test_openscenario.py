@@ -5,6 +5,7 @@ it, and the same crash comes."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -159,8 +160,19 @@ def test_what_cannot_be_exported_or_replayed_gets_one_line_and_writes_nothing(tm
         (("replay", str(db), "1", "--network", "road.xodr"), "with --openscenario"),
         (("replay", str(db), "1", "--openscenario", str(afile)), "an OpenSCENARIO file d4sumo exported"),
         (("replay", str(db), "1", "--openscenario", str(tmp_path / "s2" / "scenario.xosc")), "the export of sample 1 (this one is sample 2's)"),
+        # regression: a position that is no number was played (a NaN), or ended in a traceback (a word)
+        (("replay", str(db), "2", "--openscenario", str(tmp_path / "s2" / "nan.xosc")), "positions, headings and initial speed numbers"),
+        (("replay", str(db), "2", "--openscenario", str(tmp_path / "s2" / "word.xosc")), "positions, headings and initial speed numbers"),
+        # regression: sample 2 of another database's campaign was played as this one's, and said not to reproduce
+        (("replay", str(db), "2", "--openscenario", str(tmp_path / "s2" / "foreign.xosc")), "(this one is of another campaign, exported from"),
     ]
     assert run("export", str(db), "2", "--openscenario", str(tmp_path / "s2")).returncode == 0
+    exported = (tmp_path / "s2" / "scenario.xosc").read_text()
+    at = exported.index("<WorldPosition x=\"", exported.index("v0_as_played")) + len("<WorldPosition x=\"")
+    for name, value in (("nan", "nan"), ("word", "ten")):  # v0's first timed position's x
+        (tmp_path / "s2" / f"{name}.xosc").write_text(exported[:at] + value + exported[exported.index('"', at):])
+    key = re.search(r'name="d4sumo.campaign" value="(\w+)"', exported).group(1)
+    (tmp_path / "s2" / "foreign.xosc").write_text(exported.replace(key, "0" * len(key)))
     # side by side: each refused command reads the database only
     for (argv, said), result in zip(cases, side_by_side([lambda argv=argv: run(*argv) for argv, _ in cases])):
         lines = result.stderr.strip().splitlines()

@@ -163,8 +163,8 @@ def test_a_failure_every_sample_ends_in_is_said_twice_not_once_a_sample(tmp_path
         run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=1)
         rows = store.samples()
     said = [r.getMessage() for r in caplog.records if "failed" in r.getMessage()]
-    assert said == ["sample 0 failed: the same failure",
-                    "sample 1 failed the same way; later samples that do are counted, not shown"]
+    assert said == ["sample index 0 failed: the same failure",
+                    "sample index 1 failed the same way; later samples that do are counted, not shown"]
     assert [r.outcome for r in rows] == ["error"] * 6
 
 
