@@ -111,15 +111,18 @@ def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
 
 
 def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[[str, str], None], version: int = 1) -> Path:
-    """A file SUMO reads, written under d4sumo's cache and named by its content, SUMO's build and the check's
-    ``version`` once ``check(sumo, path)`` passed on it; later calls with the same text return it at once."""
+    """A file SUMO reads, written under d4sumo's cache and named by its content and SUMO's build once
+    ``check(sumo, path)`` passed on it; later calls with the same text return it at once. A check of a later
+    ``version`` than the one a cached file passed runs again (its name stays: what is named after it, a
+    traffic's warm-up, stays too)."""
     if text in _CHECKED and _CHECKED[text].is_file():
         return _CHECKED[text]
     sumo = sumo_binary("sumo")
-    build = f"{sumo}:{os.stat(sumo).st_mtime_ns}" + (f":check {version}" if version > 1 else "")  # another SUMO, or check, again
+    build = f"{sumo}:{os.stat(sumo).st_mtime_ns}"  # another SUMO checks again
     folder = Path(default_cache_dir()).parent / kind
     path = folder / f"{hashlib.sha256((build + text).encode()).hexdigest()[:16]}{suffix}"
-    if not path.is_file():
+    passed = path.with_name(f"{path.name}.check{version}") if version > 1 else path  # what says the check passed
+    if not path.is_file() or not passed.is_file():
         try:
             folder.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=folder, suffix=suffix)
@@ -130,6 +133,7 @@ def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[
                 f.write(text)
             check(sumo, tmp)
             os.replace(tmp, path)
+            passed.touch()
         except OSError as exc:
             raise SumoError(f"cannot write SUMO's {what} under {folder}: {exc.strerror or exc}") from None
         finally:
