@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
-from ..model.config import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR
+from ..model.config import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files
 from .netconvert import plain_xml
 
 log = logging.getLogger(__name__)
@@ -125,11 +125,9 @@ def _not_a_network(path: Path, root: Path) -> str:
 
 def _inputs(folder: Path, strict: bool = True) -> tuple[Path, Path] | Path | None:
     """A variant's node and edge files, or its lone network file."""
-    nodes = sorted(folder.glob("*.nod.xml"))
-    edges = sorted(folder.glob("*.edg.xml"))
+    nodes, edges, nets = folder_files(folder)
     if len(nodes) == 1 and len(edges) == 1:
         return nodes[0], edges[0]
-    nets = sorted(f for suffix in NETWORK_FILE_SUFFIXES for f in folder.glob(f"*{suffix}"))
     if not nodes and not edges and len(nets) == 1:
         return nets[0]
     if strict:

@@ -517,6 +517,8 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 #: what a stored definition's [scenario] table without a key held: the scenario as that version played it
 EARLIER_SCENARIO = {"network_sha256": ""}
+#: [scenario] keys that identify a campaign's inputs (its road's files' digest), not describe its scenario
+IDENTITY_KEYS = ("network_sha256",)
 
 
 #: the names of SUMO's network files (netconvert's, netgenerate's, SUMO's own examples': compressed)
@@ -551,11 +553,15 @@ def network_files(network: str) -> list[Path]:
         return [path]
     if not path.is_dir():
         return []
-    found = {pattern: sorted(f for f in path.glob(pattern) if f.is_file())
-             for pattern in ("*.nod.xml", "*.edg.xml", *(f"*{s}" for s in NETWORK_FILE_SUFFIXES))}
-    if len(found["*.nod.xml"]) == 1 and len(found["*.edg.xml"]) == 1:
-        return sorted([*found["*.nod.xml"], *found["*.edg.xml"]])
-    return sorted(f for pattern, files in found.items() for f in files)
+    nodes, edges, nets = folder_files(path)
+    return sorted(nodes + edges) if len(nodes) == 1 and len(edges) == 1 else sorted(nodes + edges + nets)
+
+
+def folder_files(folder: Path) -> tuple[list[Path], list[Path], list[Path]]:
+    """A road folder's node, edge and network files, each sorted: a road is one node and one edge file, or one
+    network file (`engine.networks` builds it from them)."""
+    return tuple(sorted(f for pattern in patterns for f in folder.glob(pattern) if f.is_file())
+                 for patterns in (("*.nod.xml",), ("*.edg.xml",), tuple(f"*{s}" for s in NETWORK_FILE_SUFFIXES)))
 
 
 def network_digest(network: str) -> str:

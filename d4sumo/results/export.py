@@ -8,7 +8,7 @@ import csv
 import dataclasses
 from typing import Any, TextIO
 
-from ..model.config import EpisodeConfig
+from ..model.config import IDENTITY_KEYS, EpisodeConfig
 from ..search.campaign import Campaign
 from ..search.store import Store
 from .records import system_label
@@ -21,8 +21,6 @@ SCENARIO = ["network", "followers", "setpoint_m", "speed_mps", "start", "maneuve
 RESULT = ["system", "attack", "lie", "optimizer", "seed", "robustness", "outcome", "pair", "time_s", "position_m",
           "speed_diff_kmh", "wall_s", "error"]
 _SCENARIO_KEYS = [f.name for f in dataclasses.fields(EpisodeConfig)]  # in the order of the config
-#: [scenario] keys that identify a campaign's inputs, not describe its scenario (its road's files' digest)
-_IDENTITY = ("network_sha256",)
 
 
 def pair_order(pair: str) -> tuple:
@@ -43,7 +41,7 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
     names = {cid: c.family().names for cid, c in campaigns.items()}
     systems = {cid: system_label(c.config.to_dict()) for cid, c in campaigns.items()}
     scenarios = {cid: c.config.to_dict()["scenario"] for cid, c in campaigns.items()}
-    own = sorted({k for sc in scenarios.values() for k in sc} - set(SCENARIO) - set(_IDENTITY), key=_SCENARIO_KEYS.index)
+    own = sorted({k for sc in scenarios.values() for k in sc} - set(SCENARIO) - set(IDENTITY_KEYS), key=_SCENARIO_KEYS.index)
     columns = list(dict.fromkeys(n for cid in campaigns for n in names[cid]))
     pairs = sorted({p for s in store.iter_samples(campaign_id) for p in s.min_gaps}, key=pair_order)
     writer = csv.writer(out)

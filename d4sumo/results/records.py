@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ..errors import ConfigError
-from ..model.config import TABLES, EpisodeConfig
+from ..model.config import IDENTITY_KEYS, TABLES, EpisodeConfig
 from ..model.plugins import names_only
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 
@@ -168,7 +168,7 @@ def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
     stored = config.to_dict()["scenario"]
     out = []
     for key in SCENARIO_KEYS:
-        if key in GRID_KEYS or key == "network_sha256" or (key not in stored and key in NO_EFFECT_WHEN_LEFT_OUT):
+        if key in GRID_KEYS or key in IDENTITY_KEYS or (key not in stored and key in NO_EFFECT_WHEN_LEFT_OUT):
             continue  # (a road's digest identifies its files: the road is its network's name)
         value = stored.get(key, getattr(config, key))
         out.append((key, tuple(value) if isinstance(value, (list, tuple)) else value))
