@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import D4sumoError
 from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
+from .cooperative import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
@@ -272,6 +273,8 @@ class Platoon:
         self._fed: dict[int, tuple] = {}
         self.beacons_for_sumo: list[tuple[int, bool, tuple]] = []
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
+        #: the followers and their channel stepped in C where they may be (`cooperative`): as the Python below, bit for bit
+        self._compiled = compiled_followers(self)
         self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
@@ -315,7 +318,9 @@ class Platoon:
             commands[0] = acceleration_to_command((v - speed) / self.config.step_s, self.attacker_vehicle)
             new_speeds[0] = v
         channel = self.channel
-        if channel is None:
+        if self._compiled is not None:
+            self._compiled(k, positions, speeds, pairs, commands, new_speeds)
+        elif channel is None:
             for i, command, apply, _ in self._python:
                 # nobody ahead in its lane: a free road
                 leader, gap = (i - 1, pairs[i - 1][2]) if ahead is None else ahead.get(i, (i, FREE_ROAD_GAP_M))

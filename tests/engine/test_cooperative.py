@@ -47,6 +47,27 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
             assert_same_episode(together, simulate(c, plan))
 
 
+@pytest.mark.parametrize("cls", ["cacc", "ploeg", "consensus"])
+def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls, monkeypatch):
+    """The followers stepped in C (`cooperative`) against the Python they stand for, on the knots attacks
+    of the paper (a batch of them too), crashes included."""
+    from d4sumo.model import cooperative
+
+    headway = () if cls == "cacc" else (("h_s", 0.1),)  # closely spaced behind an attacker that brakes harder
+    config = EpisodeConfig(controller=ControllerConfig(cls, headway), start="steady", setpoint_m=3.0, duration_s=20.0,
+                           vehicles={"v0": {"max_decel_mps2": 9.5}, "v1": {"max_decel_mps2": 5.0}})
+    family = make_attack("knots")
+    rng = np.random.default_rng(11)
+    plans = [attack_plan(family, family.lower + rng.random(family.dimension) * (family.upper - family.lower), config)
+             for _ in range(8)]
+    compiled = simulate_batch(config, plans)
+    monkeypatch.setattr(cooperative, "ENABLED", False)
+    python = [simulate(config, plan) for plan in plans]
+    for a, b in zip(compiled, python):
+        assert_same_episode(a, b)
+    assert any(e.collisions for e in python) and not all(e.collisions for e in python)
+
+
 def test_sumo_consensus_on_a_curving_motorway_batches_equal_alone_bit_for_bit():
     """Regression: Plexe's CONSENSUS reads GPS positions, whose rounding depends on where its road lies on the
     map; a batch's copies of SUMO's Bremen motorway lie elsewhere, and its speeds drifted from alone's by

@@ -1,0 +1,148 @@
+"""A cooperative platoon's followers stepped in C against the Python they stand for: pure code, no SUMO."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from d4sumo.engine.ballistic import integrate
+from d4sumo.model import cooperative
+from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.control import PathCACC
+from d4sumo.model.maneuvers import maneuver_of
+from d4sumo.model.messages import BeaconFalsifier
+from d4sumo.model.platoon import ControllerError, Platoon
+from d4sumo.model.sensing import RadarParams
+from d4sumo.model.v2v import ChannelParams
+
+LAWS = ("cacc", "ploeg", "consensus")
+
+
+@pytest.fixture
+def python_only(monkeypatch):
+    """Within it, every platoon is the Python's."""
+    def off():
+        monkeypatch.setattr(cooperative, "ENABLED", False)
+    return off
+
+
+def test_the_extension_is_built_with_the_package():
+    assert cooperative.Followers is not None, (
+        "d4sumo.model._cooperative was not built: install d4sumo with a C compiler (pip install -e .)")
+
+
+def _config(rng: np.random.Generator, law: str, tight: bool = False) -> EpisodeConfig:
+    """A platoon of one law with random cars, spacing, speed, step and beacon interval (``tight``: spaced
+    closely behind an attacker that brakes harder than any follower)."""
+    followers = int(rng.integers(1, 7))
+    step = float(rng.choice([0.05, 0.1]))
+    vehicles = {f"v{i}": {"length_m": float(rng.uniform(3.0, 16.0)), "actuator_lag_s": float(rng.choice([0.0, 0.3, 0.5])),
+                          "coast_decel_mps2": float(rng.choice([0.0, 0.4])), "max_decel_mps2": float(rng.uniform(4.0, 8.0))}
+                for i in range(followers + 1) if rng.random() < 0.7}
+    if tight:
+        vehicles["v0"] = {**vehicles.get("v0", {}), "max_decel_mps2": 9.5}
+    headway = float(rng.uniform(0.1, 0.3) if tight else rng.uniform(0.3, 1.2))
+    params = {"cacc": (("c1", float(rng.uniform(0.2, 0.8))),), "ploeg": (("h_s", headway),), "consensus": (("h_s", headway),)}[law]
+    setpoint = float(rng.uniform(2.0, 5.0) if tight else rng.uniform(3.0, 25.0))
+    return EpisodeConfig(followers=followers, setpoint_m=setpoint, speed_mps=float(rng.uniform(15.0, 33.0)),
+                         start=str(rng.choice(["rest", "steady"])), step_s=step, duration_s=20.0, vehicles=vehicles,
+                         controller=ControllerConfig(law, params),
+                         v2v=ChannelParams(beacon_interval_s=float(rng.choice([step, 0.1, 0.2, 0.5]))))
+
+
+@pytest.mark.parametrize("law", LAWS)
+def test_the_compiled_followers_command_what_the_python_does_bit_for_bit_whatever_they_sense(law, python_only):
+    rng = np.random.default_rng(["cacc", "ploeg", "consensus"].index(law))
+    for _ in range(25):
+        config = _config(rng, law)
+        attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
+        compiled = Platoon(config, attack, 40.0)
+        assert compiled._compiled is not None
+        python_only()
+        python = Platoon(config, attack, 40.0)
+        cooperative.ENABLED = True
+        assert python._compiled is None
+        pairs_at = maneuver_of(config).pairs
+        n = config.followers + 1
+        x = list(np.cumsum(rng.uniform(5.0, 40.0, n))[::-1] + 100.0)
+        for k in range(200):
+            # what the world senses, anything it may: a car far ahead (no leader: cruise), standing, over its limit
+            x = [xi + float(rng.uniform(0.0, 3.0)) for xi in x]
+            if rng.random() < 0.05:
+                x[0] += 2000.0
+            v = [float(rng.choice([0.0, rng.uniform(0.0, 40.0)], p=[0.05, 0.95])) for _ in range(n)]
+            pairs = pairs_at(x)
+            assert compiled.advance(k, x, v, pairs) == python.advance(k, x, v, pairs)
+        assert compiled.commands == python.commands
+
+
+@pytest.mark.parametrize("law", LAWS)
+def test_an_episode_with_compiled_followers_is_the_python_episode_bit_for_bit_crash_included(law, python_only):
+    rng = np.random.default_rng(7 + LAWS.index(law))
+    crashes = 0
+    for _ in range(12):
+        config = _config(rng, law, tight=True)
+        period = int(rng.integers(2, 6)) * int(round(1.0 / config.step_s))  # full throttle, full brake, each for 2 to 5 s
+        attack = np.tile(np.r_[np.ones(period), -np.ones(period)], config.steps)[:config.steps]
+        attack[:config.attack_start_step] = np.nan
+        compiled = integrate(config, attack)
+        python_only()
+        python = integrate(config, attack)
+        cooperative.ENABLED = True
+        assert compiled.collisions == python.collisions
+        assert compiled.min_gaps == python.min_gaps
+        assert compiled.trace.signals.keys() == python.trace.signals.keys()
+        for name, values in python.trace.signals.items():
+            np.testing.assert_array_equal(compiled.trace.signals[name], values, err_msg=name)
+        crashes += bool(python.collisions)
+    assert 3 <= crashes < 12, f"{crashes} of 12 attacks crash the platoon: the collision record is barely compared"
+
+
+def test_a_follower_command_that_is_no_number_gets_the_python_error(python_only):
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"), start="steady")
+    attack = np.full(config.steps, np.nan)
+    x, v = [100.0, 80.0, 60.0], [25.0, math.nan, 25.0]
+    errors = []
+    for compiled in (True, False):
+        if not compiled:
+            python_only()
+        platoon = Platoon(config, attack, 40.0)
+        assert (platoon._compiled is not None) == compiled
+        with pytest.raises(ControllerError) as error:
+            platoon.advance(0, x, v, maneuver_of(config).pairs(x))
+        errors.append(str(error.value))
+    assert errors[0] == errors[1] == "the controller of v1 returned nan at step 0; allowed: a command in [-1, 1]"
+
+
+class _OwnCACC(PathCACC):
+    """A user's subclass: it may change anything, so the Python plays it."""
+
+
+@pytest.mark.parametrize("change", [
+    {"radar": RadarParams(gap_noise_m=0.5)},
+    {"radar": RadarParams(latency_s=0.1)},
+    {"v2v": ChannelParams(loss=0.1)},
+    {"v2v": ChannelParams(latency_s=0.1)},
+    {"controller": ControllerConfig("cacc", (("fallback_mps", 2.0),))},
+    {"controller": (ControllerConfig("cacc"), ControllerConfig("sumo:ACC"))},
+    {"controller": (ControllerConfig("cacc"), ControllerConfig("switching"))},
+    {"maneuver": "cutin"},
+])
+def test_the_python_plays_what_the_compiled_followers_do_not(change):
+    config = EpisodeConfig(followers=2, **{"controller": ControllerConfig("cacc"), **change})
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is None
+    plain = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"))
+    assert Platoon(plain, np.full(plain.steps, np.nan), 40.0)._compiled is not None
+
+
+def test_the_python_plays_a_message_attack_and_a_user_subclass():
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"))
+    liar = BeaconFalsifier("offset", "speed", {"msg_start_s": 1.0, "msg_value": 3.0}, config.step_s, 0)
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0, beacons=liar)._compiled is None
+    platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
+    assert cooperative.compiled_followers(platoon) is not None
+    own = platoon.followers[1].controller
+    own.__class__ = _OwnCACC  # a user's subclass may change anything: the law is looked up by the exact class
+    assert cooperative.compiled_followers(platoon) is None
