@@ -34,7 +34,7 @@ campaign stores a sample, and counts the samples where any of these disagree:
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P]. Prints the counts; exits 1 if any is
+Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P]. Prints the counts; exits 1 if any is
 non-zero.
 """
 
@@ -129,6 +129,8 @@ SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), Controlle
 
 #: the share of in-lane episodes played among traffic (--traffic)
 TRAFFIC_SHARE = [0.15]
+#: the share of episodes whose every follower runs one of d4sumo's cooperative controllers, in lane (--cooperative)
+COOPERATIVE_SHARE = [0.0]
 
 
 def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
@@ -146,6 +148,10 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         return _as_run_episode(rng, setpoint, followers)
     systems = [SYSTEMS[i] for i in rng.integers(0, len(SYSTEMS), followers)]
     maneuver = lane_change(rng, followers) if rng.random() < 0.25 else {}
+    if COOPERATIVE_SHARE[0] and rng.random() < COOPERATIVE_SHARE[0]:  # (drawn only when asked: earlier seeds draw alike)
+        mitigation = float(rng.choice([0.0, 1.0, 3.0]))  # 0: none
+        systems = [ControllerConfig(str(rng.choice(["cacc", "ploeg", "consensus"])), (("fallback_mps", mitigation),))] * followers
+        maneuver = {}
     network = str(rng.choice(STRAIGHT if maneuver else ROADS))
     lanes = LANES.get(network, ())
     config = EpisodeConfig(
@@ -450,6 +456,9 @@ def main(argv=None) -> int:
                              "arrays command it) [8]; 0: not")
     parser.add_argument("--traffic", type=float, default=TRAFFIC_SHARE[0],
                         help=f"the share of in-lane episodes played among SUMO's traffic [{TRAFFIC_SHARE[0]}]")
+    parser.add_argument("--cooperative", type=float, default=COOPERATIVE_SHARE[0],
+                        help="the share of episodes whose platoon runs cacc, ploeg or consensus throughout, in lane "
+                             f"(their followers stepped in C) [{COOPERATIVE_SHARE[0]}]")
     parser.add_argument("--only", default="", help="check only these episodes of the seed's draw (comma-separated "
                                                    "indices, as --examples records them)")
     parser.add_argument("--examples", type=Path, help="write every disagreeing episode here, whole (JSON lines)")
@@ -459,6 +468,9 @@ def main(argv=None) -> int:
     if not 0.0 <= args.traffic <= 1.0:
         parser.error(f"--traffic: got {args.traffic}; allowed: a share in [0, 1]")
     TRAFFIC_SHARE[0] = args.traffic
+    if not 0.0 <= args.cooperative <= 1.0:
+        parser.error(f"--cooperative: got {args.cooperative}; allowed: a share in [0, 1]")
+    COOPERATIVE_SHARE[0] = args.cooperative
     rng = np.random.default_rng(args.seed)
     ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
     roads = {(name, lane): build_road(name, route=ROUTES.get(name, ()), lane=lane)

@@ -1,13 +1,13 @@
 """A cooperative platoon's followers stepped in C (the `_cooperative` extension, built when d4sumo is
-installed): the same commands and speeds as `platoon.Platoon.advance`'s Python, bit for bit, at a fraction
-of its cost (docs/benchmarks.md).
+installed): the same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for bit, at a
+fraction of its cost (docs/v2v.md).
 
 It plays the platoons whose every follower runs d4sumo's `cacc`, `ploeg` or `consensus` (the classes
-themselves, not a subclass) without the mitigation (``fallback_mps``), on a perfect radar, over a channel
-that delivers every beacon as it is sent (no latency, no loss, no message attack), in the paper's column
-(no lane change, no traffic). Everything else the Python plays, as it does everywhere when the extension
-could not be built (no C compiler at install). The attacker and the maneuver's other car are always
-Python's.
+themselves, not a subclass), with or without the mitigation, in the paper's column (no lane change, no
+traffic): their radars (range, noise, latency), their channel (interval, latency, loss) and a message
+attack on it, each drawing from the Python's own generators and lying with the Python's own falsifier, in
+the order the Python does. Everything else the Python plays, as it does everywhere when the extension could
+not be built (no C compiler at install). The attacker and the maneuver's other car are always Python's.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ import sys
 from typing import Callable
 
 from .control import ConsensusCACC, PathCACC, PloegCACC
+from .sensing import Radar
+from .v2v import Message
 
 try:
     from ._cooperative import Followers
@@ -32,31 +34,40 @@ if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is c
 
 
 def compiled_followers(platoon) -> Callable | None:
-    """``advance(k, positions, speeds, pairs, commands, new_speeds)`` of ``platoon``'s followers in C, or
-    None where the Python plays them (see the module)."""
+    """``advance(k, positions, speeds, pairs, commands, new_speeds, modes)`` of ``platoon``'s followers in C,
+    or None where the Python plays them (see the module). Made before the platoon's first step: it takes
+    the channel's and the radars' generators as they start."""
     channel, config = platoon.channel, platoon.config
-    if (Followers is None or not ENABLED or channel is None or not channel.direct or channel.falsify is not None
-            or not platoon._one_ahead or (config.radar is not None and not config.radar.perfect)
-            or len(platoon._python) != config.followers):
+    if (Followers is None or not ENABLED or channel is None or not platoon._one_ahead
+            or len(platoon._python) != config.followers
+            or (channel.falsify is not None and channel.liar not in channel.senders)):
         return None
     laws = []
-    for follower in platoon.followers:
+    for i, follower in enumerate(platoon.followers, start=1):
         controller = follower.controller
         law = LAWS.get(type(controller))
-        if law is None or controller.fallback is not None:
+        if law is None:
             return None
-        if law == 1:
-            gains = (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5)
-        elif law == 2:
-            gains = (controller.params.h_s, controller.params.kp, controller.params.kd, 0.0, 0.0)
-        else:
-            p = controller.params
-            gains = (p.b, p.k_leader_v1, p.k_leader, p.k_front, p.h_s)
+        p = getattr(controller, "params", None)
+        gains = {1: lambda: (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5),
+                 2: lambda: (p.h_s, p.kp, p.kd, 0.0, 0.0),
+                 3: lambda: (p.b, p.k_leader_v1, p.k_leader, p.k_front, p.h_s)}[law]()
+        fallback = controller.fallback
+        mitigation = (fallback.threshold, fallback.headway) if fallback is not None else (0.0, 0.0)
+        radar = None
+        if config.radar is not None and not config.radar.perfect:  # its own, as the Python's starts: the same draws
+            r = Radar(config.radar, config.step_s, i)
+            radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
         vehicle, actuator = controller.vehicle, follower.actuator
         laws.append((law, (controller.setpoint_m, controller.target_speed_mps, controller.step_s, vehicle.max_accel_mps2,
                            vehicle.max_decel_mps2), tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
+                     tuple(float(m) for m in mitigation),
                      (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
-                      actuator.accel_mps2, actuator.coast)))
+                      actuator.accel_mps2, actuator.coast), radar))
+    sources = [channel.sources[i] for i in range(1, config.followers + 1)]
+    randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
+    lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None
     from .platoon import checked_command  # the Python's error for a command that is not one
 
-    return Followers(channel.step_s, channel.every, list(channel.lengths), laws, checked_command).advance
+    return Followers((channel.step_s, channel.every, channel.delay, float(channel.params.loss)), list(channel.lengths), sources,
+                     randoms, lie, laws, checked_command).advance

@@ -6,7 +6,8 @@ car-following models, which the co-simulation only senses. `Platoon.advance` tak
 (positions and speeds, front to back) and returns the speed at the end of the step of each car Python
 commands: the attacker plays its attack signal (or cruises where the signal is NaN) and each Python
 follower runs its controller. The step loop (`engine.loop.play`) calls it each step, in SUMO or in the
-SUMO-free ballistic world (`engine.ballistic.integrate`, for physics tests).
+SUMO-free ballistic world (`engine.ballistic.integrate`, for physics tests). A cooperative platoon's
+followers (with their radars and channel) may be stepped in C instead (`cooperative`), bit for bit.
 """
 
 from __future__ import annotations
@@ -273,8 +274,9 @@ class Platoon:
         self._fed: dict[int, tuple] = {}
         self.beacons_for_sumo: list[tuple[int, bool, tuple]] = []
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
-        #: the followers and their channel stepped in C where they may be (`cooperative`): as the Python below, bit for bit
-        self._compiled = compiled_followers(self)
+        #: the followers, their radars and channel stepped in C where they may be (`cooperative`): as the Python below,
+        #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
+        self._compiled = compiled_followers(self) if followers is None else None
         self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
@@ -318,8 +320,8 @@ class Platoon:
             commands[0] = acceleration_to_command((v - speed) / self.config.step_s, self.attacker_vehicle)
             new_speeds[0] = v
         channel = self.channel
-        if self._compiled is not None:
-            self._compiled(k, positions, speeds, pairs, commands, new_speeds)
+        if self._compiled is not None:  # its followers' modes too
+            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
         elif channel is None:
             for i, command, apply, _ in self._python:
                 # nobody ahead in its lane: a free road
@@ -350,7 +352,7 @@ class Platoon:
             commands.append(c)
             new_speeds.append(actuator.apply(c, speeds[i]))
         self.commands.append(commands)
-        if self._with_mode:
+        if self._with_mode and self._compiled is None:
             self.modes.append([c.mode for c in self._with_mode])
         return new_speeds
 

@@ -48,15 +48,23 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
 
 
 @pytest.mark.parametrize("cls", ["cacc", "ploeg", "consensus"])
-def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls, monkeypatch):
-    """The followers stepped in C (`cooperative`) against the Python they stand for, on the knots attacks
-    of the paper (a batch of them too), crashes included."""
+@pytest.mark.parametrize("world", ["ideal", "imperfect"])
+def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls, world, monkeypatch):
+    """The followers stepped in C (`cooperative`) against the Python they stand for, on the paper's knots
+    attacks (a batch of them too), crashes included; ``imperfect``: a noisy, late radar of limited range, a
+    late and lossy channel, the mitigation, and the attacker's lies about its speed."""
     from d4sumo.model import cooperative
+    from d4sumo.model.messages import attack_box
+    from d4sumo.model.sensing import RadarParams
 
     headway = () if cls == "cacc" else (("h_s", 0.1),)  # closely spaced behind an attacker that brakes harder
-    config = EpisodeConfig(controller=ControllerConfig(cls, headway), start="steady", setpoint_m=3.0, duration_s=20.0,
-                           vehicles={"v0": {"max_decel_mps2": 9.5}, "v1": {"max_decel_mps2": 5.0}})
-    family = make_attack("knots")
+    imperfect = world == "imperfect"
+    config = EpisodeConfig(controller=ControllerConfig(cls, headway + ((("fallback_mps", 1.0),) if imperfect else ())),
+                           start="steady", setpoint_m=3.0, duration_s=20.0,
+                           vehicles={"v0": {"max_decel_mps2": 9.5}, "v1": {"max_decel_mps2": 5.0}},
+                           radar=RadarParams(range_m=120.0, gap_noise_m=0.3, speed_noise_mps=0.2, latency_s=0.1, seed=3) if imperfect else None,
+                           v2v={"latency_s": 0.1, "loss": 0.2, "seed": 4} if imperfect else None)
+    family = attack_box(config, make_attack("knots"), "offset", "speed") if imperfect else make_attack("knots")
     rng = np.random.default_rng(11)
     plans = [attack_plan(family, family.lower + rng.random(family.dimension) * (family.upper - family.lower), config)
              for _ in range(8)]
