@@ -9,10 +9,11 @@ turns it into one). Before its initialisation, wherever it has them (a parameter
 follower's vehicle. A follower's [controller] table maps other names (``gap_m = "distance"``) and sets
 the FMU's own parameters by name (``acc_kp = 1.2``); an output ``mode`` is recorded in the trace.
 
-The campaign's identity holds the FMU's content (``fmu_sha256``): a changed FMU is another system, and a
-stored campaign of it is refused, not replayed with it. Every FMU a campaign runs is kept by its content
-(`kept`): a stored campaign whose path names no file from where it is replayed (a relative path, from
-another folder; a file moved or deleted) loads that copy. Reading a database never loads an FMU
+The campaign's identity holds the FMU's content (``fmu_sha256``): a changed FMU is another system, never
+replayed as a stored campaign's. Every FMU a campaign runs is kept by its content (`kept`): a stored
+campaign whose path names no file from where it is replayed (a relative path, from another folder; a file
+moved or deleted), or a file that has changed since, loads that copy; where none is kept, a changed file
+is refused. Reading a database never loads an FMU
 (`plugins.names_only`). An FMU that ships only its C sources is built for this machine, once (fmpy's
 build: CMake and a C compiler). Unpacked and kept FMUs are in ``~/.cache/d4sumo/fmus``.
 """
@@ -220,15 +221,23 @@ def fmu_of(name: str, sha256: str | None = None) -> Fmu:
     path = _SHIPPED.get(name) or Path(given).expanduser()
     if not path.is_file():
         if sha256 and kept(sha256).is_file() and not path.is_dir():
-            if (name, sha256) not in _SAID:  # once a process: a report replays many samples
-                _SAID.add((name, sha256))
-                log.warning("no file %s here: loading the copy of the FMU the campaign ran, kept in %s", given,
-                            kept(sha256).parent)
+            _say_kept(name, sha256, f"no file {given} here")
             path = kept(sha256)
         else:
             what = "no path given" if not given else f"{given} is a folder" if path.is_dir() else f"no file {given} here"
             raise ControllerImportError(name, "an FMU file", f"{what} (a path from the current folder, or absolute)")
-    return _load(name, str(path.resolve()), file_sha256(path))
+    content = file_sha256(path)
+    if sha256 and content != sha256 and kept(sha256).is_file():  # the file here changed since: the campaign's own copy
+        _say_kept(name, sha256, f"{given} here has changed since the campaign ran")
+        path, content = kept(sha256), sha256
+    return _load(name, str(path.resolve()), content)
+
+
+def _say_kept(name: str, sha256: str, why: str) -> None:
+    """Why the copy of the FMU the campaign ran is loaded: once a process (a report replays many samples)."""
+    if (name, sha256) not in _SAID:
+        _SAID.add((name, sha256))
+        log.warning("%s: loading the copy of the FMU the campaign ran, kept in %s", why, kept(sha256).parent)
 
 
 def fmu_controller(name: str, params=()) -> type:
@@ -245,10 +254,18 @@ def _controller_class(fmu: Fmu) -> type:
     names = fmu.variables
     own = [v for v in names.values() if v.causality == "parameter" and v.name not in CONSTANTS]
     fields = [(SHA_KEY, str, dataclasses.field(default=fmu.sha256))]
-    fields += [(s, str, dataclasses.field(default=s if s in names else "")) for s in SIGNALS]
+    # its outputs' defaults are settled with the table (None: not given): an acceleration mapped alone is read
+    fields += [(s, str, dataclasses.field(default=None if s in OUTPUTS else s if s in names else "")) for s in SIGNALS]
     fields += [(v.name, float, dataclasses.field(default=v.start)) for v in own]
 
     def post_init(self) -> None:
+        command, acceleration = self.command, self.acceleration_mps2
+        if command is None:  # an acceleration mapped in the table is what it reads, whatever its other outputs
+            command = "" if acceleration else "command" if "command" in names else ""
+        if acceleration is None:
+            acceleration = "acceleration_mps2" if "acceleration_mps2" in names else ""
+        object.__setattr__(self, "command", command)
+        object.__setattr__(self, "acceleration_mps2", acceleration)
         if getattr(self, SHA_KEY) != fmu.sha256:
             raise ControllerImportError(fmu.name, f"the FMU the campaign ran ({SHA_KEY} {getattr(self, SHA_KEY)[:16]}...)",
                                         f"{fmu.path} has changed since (its sha256 is now {fmu.sha256[:16]}...): another "

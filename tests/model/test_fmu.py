@@ -86,7 +86,21 @@ def test_an_fmu_of_other_names_is_told_them_in_its_table_and_its_parameters_are_
     assert info.value.field == "controller.kp_unknown"
 
 
-def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading_loads_none(switching_fmus, tmp_path, monkeypatch):
+def test_an_acceleration_output_mapped_in_the_table_is_read_though_the_fmu_has_an_output_named_command(tmp_path, monkeypatch):
+    """Regression: the default `command` (an output of that name) was read, and the mapped acceleration ignored."""
+    fmu = variant(tmp_path, monkeypatch, "two-outputs", rename={"mode": "accel_out"})  # outputs: command, accel_out
+    mapped = ControllerConfig(f"fmu:{fmu}", (("acceleration_mps2", "accel_out"),))
+    assert dict(mapped.params)["command"] == "" and dict(mapped.params)["acceleration_mps2"] == "accel_out"
+    config = EpisodeConfig(start="steady", setpoint_m=5.0, duration_s=10.0, followers=1, controller=mapped)
+    episode = simulate(config, random_plans(config, 1, seed=2)[0])
+    # the switching controller's mode (0 cruise, 1 ACC) read as an acceleration [m/s^2]: the pedal map's 0 or 1 / 3.5
+    assert set(np.unique(episode.trace["cmd_v1"][:-1])) <= {0.0, 1.0 / 3.5}
+    assert dict(ControllerConfig(f"fmu:{fmu}").params)["command"] == "command"  # nothing mapped: its command
+    both = ControllerConfig(f"fmu:{fmu}", (("command", "command"), ("acceleration_mps2", "accel_out")))
+    assert dict(both.params)["command"] == "command"  # a stored campaign's both: the command, as it ran
+
+
+def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_where_no_copy_is_kept_and_reading_loads_none(switching_fmus, tmp_path, monkeypatch):
     fmu = tmp_path / "acc.fmu"
     shutil.copy(switching_fmus[2], fmu)
     db = tmp_path / "c.sqlite"
@@ -104,21 +118,26 @@ def test_the_campaign_holds_the_fmu_content_a_changed_fmu_is_refused_and_reading
     assert replayed.returncode == 0
     stored = db.read_bytes()
     shutil.copy(changed, fmu)
-    # the refused replay (it reads the database) side by side with a campaign of the changed FMU (it writes one)
-    replay, resumed = side_by_side([
+    never_ran = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "empty-cache")}
+    # the replays (they read the database) side by side with a campaign of the changed FMU (it writes one): where
+    # the campaign ran, its own copy of the FMU replays it (regression: the changed file here refused it); on a
+    # machine that never ran it (an empty cache) the changed file is another system, refused
+    replay, refused, resumed = side_by_side([
         lambda: run("replay", str(db), "1", cwd=tmp_path),
+        lambda: run("replay", str(db), "1", cwd=tmp_path, env=never_ran),
         lambda: run("falsify", "--controller", "fmu:acc.fmu", "--start", "steady", "--setpoint", "5", "--optimizer", "random",
                     "--samples", "6", "--db", str(db), "--quiet", cwd=tmp_path),
     ])
-    said = replay.stderr.strip().splitlines()  # the note that it loads the FMU, then why it will not
-    assert replay.returncode == 2 and said[0].startswith("d4sumo: loading fmu:acc.fmu") and len(said) == 2
-    assert "acc.fmu has changed since" in said[1] and "Traceback" not in replay.stderr
+    assert replay.returncode == 0, replay.stderr
+    assert "acc.fmu here has changed since the campaign ran: loading the copy of the FMU the campaign ran" in replay.stderr
+    said = refused.stderr.strip().splitlines()  # the note that it loads the FMU, then why it will not
+    assert refused.returncode == 2 and said[0].startswith("d4sumo: loading fmu:acc.fmu") and len(said) == 2
+    assert "acc.fmu has changed since" in said[1] and "Traceback" not in refused.stderr
     assert resumed.returncode == 0  # another system: a campaign of its own, the first one untouched
     fmu.unlink()
     (tmp_path / "elsewhere").mkdir()
     # side by side, each only reads: reading loads no FMU, it need not be there (the export); on a machine that
     # never ran it (an empty cache) the report replays none; where it ran, a sample replays from any folder
-    never_ran = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "empty-cache")}
     exported, reported, elsewhere = side_by_side([
         lambda: run("export", str(db), cwd=tmp_path),
         lambda: run("report", str(db), "--out", "rep", cwd=tmp_path, env=never_ran),
