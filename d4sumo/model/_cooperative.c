@@ -65,10 +65,12 @@ typedef struct {
     int direct;     /* no latency, no loss: each beacon straight into its receivers' inboxes */
     double loss;
     int has_last;
-    double *last, *x, *v, *acc, *length; /* each car's speed a step ago; this step's position, speed, acceleration; length */
+    double *last, *x, *v, *acc, *gap, *length; /* each car's speed a step ago; this step's position, speed, acceleration,
+                                                gap to the car ahead; length */
     int *sources;   /* receiver i's sources: sources[i * cars + j], j < n_sources[i] */
     int *n_sources;
     PyObject **random; /* each link's generator's random() (with loss), in the order of `sources` */
+    Py_ssize_t links;  /* how many */
     int *is_sender;
     int *heard;     /* heard[i * cars + s]: whether receiver i has a beacon of s */
     Beacon *inbox;  /* inbox[i * cars + s]: its newest */
@@ -358,17 +360,28 @@ static int send(Followers *self, long k) {
     return 0;
 }
 
-static int read_floats(PyObject *list, double *out, int n, const char *what) {
-    if (!PyList_Check(list) || PyList_GET_SIZE(list) < n) {
-        PyErr_Format(PyExc_TypeError, "%s: a list of at least %d floats", what, n);
+static int as_double(PyObject *o, double *out, const char *what) { /* a float (np.float64 too) or an int, as is */
+    if (!PyFloat_Check(o) && !(PyLong_Check(o) && !PyBool_Check(o))) {
+        PyErr_Format(PyExc_TypeError, "%s: a float, not %.100s", what, Py_TYPE(o)->tp_name);
         return -1;
     }
-    for (int j = 0; j < n; j++) {
-        out[j] = PyFloat_AsDouble(PyList_GET_ITEM(list, j));
-        if (out[j] == -1.0 && PyErr_Occurred())
-            return -1;
+    *out = PyFloat_AsDouble(o);
+    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+static int read_floats(PyObject *sequence, double *out, int n, const char *what) {
+    PyObject *fast = PySequence_Fast(sequence, what);
+    if (fast == NULL)
+        return -1;
+    int status = 0;
+    if (PySequence_Fast_GET_SIZE(fast) < n) {
+        PyErr_Format(PyExc_TypeError, "%s: at least %d floats", what, n);
+        status = -1;
     }
-    return 0;
+    for (int j = 0; j < n && status == 0; j++)
+        status = as_double(PySequence_Fast_GET_ITEM(fast, j), &out[j], what);
+    Py_DECREF(fast);
+    return status;
 }
 
 static int append_float(PyObject *list, double value) {
@@ -388,18 +401,41 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
         PyErr_SetString(PyExc_TypeError, "advance(k, positions, speeds, pairs, commands, new_speeds, modes)");
         return NULL;
     }
+    if (self->last == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Followers was not made (its __init__)");
+        return NULL;
+    }
     long k = PyLong_AsLong(args[0]);
     if (k == -1 && PyErr_Occurred())
         return NULL;
-    PyObject *pairs = args[3], *commands = args[4], *new_speeds = args[5], *modes = args[6];
+    PyObject *commands = args[4], *new_speeds = args[5], *modes = args[6];
     int n = self->cars;
     if (read_floats(args[1], self->x, n, "positions") < 0 || read_floats(args[2], self->v, n, "speeds") < 0)
         return NULL;
-    if (!PyList_Check(pairs) || PyList_GET_SIZE(pairs) < n - 1 || !PyList_Check(commands) || !PyList_Check(new_speeds)
-        || !PyList_Check(modes)) {
-        PyErr_SetString(PyExc_TypeError, "pairs, commands, new_speeds and modes: lists");
+    if (!PyList_Check(commands) || !PyList_Check(new_speeds) || !PyList_Check(modes)) {
+        PyErr_SetString(PyExc_TypeError, "commands, new_speeds and modes: lists");
         return NULL;
     }
+    PyObject *pairs = PySequence_Fast(args[3], "pairs: a sequence of (leader, follower, gap)");
+    if (pairs == NULL)
+        return NULL;
+    int status = PySequence_Fast_GET_SIZE(pairs) < n - 1 ? -1 : 0; /* each follower's gap, read before any Python runs */
+    if (status < 0)
+        PyErr_SetString(PyExc_TypeError, "pairs: one for every follower");
+    for (int i = 1; i < n && status == 0; i++) {
+        PyObject *pair = PySequence_Fast(PySequence_Fast_GET_ITEM(pairs, i - 1), "pairs: (leader, follower, gap)");
+        if (pair == NULL || PySequence_Fast_GET_SIZE(pair) != 3) {
+            if (pair != NULL)
+                PyErr_SetString(PyExc_TypeError, "pairs: (leader, follower, gap)");
+            status = -1;
+        } else {
+            status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &self->gap[i], "a pair's gap");
+        }
+        Py_XDECREF(pair);
+    }
+    Py_DECREF(pairs);
+    if (status < 0)
+        return NULL;
     const double *last = self->has_last ? self->last : self->v; /* Platoon._accelerations: 0 at the first step */
     for (int j = 0; j < n; j++)
         self->acc[j] = (self->v[j] - last[j]) / self->step_s;
@@ -409,14 +445,7 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
     if (send(self, k) < 0)
         return NULL;
     for (int i = 1; i < n; i++) {
-        PyObject *pair = PyList_GET_ITEM(pairs, i - 1);
-        if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 3) {
-            PyErr_SetString(PyExc_TypeError, "pairs: (leader, follower, gap) tuples");
-            return NULL;
-        }
-        double gap = PyFloat_AsDouble(PyTuple_GET_ITEM(pair, 2));
-        if (gap == -1.0 && PyErr_Occurred())
-            return NULL;
+        double gap = self->gap[i];
         Follower *f = &self->f[i];
         Reading r = {gap, self->v[i - 1], gap < FREE_ROAD_GAP_M};
         if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
@@ -452,27 +481,42 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
     Py_RETURN_NONE;
 }
 
+/* It holds Python objects (the lie, the generators' draws, Channel.sent): the cycle collector sees them. */
+static int Followers_traverse(Followers *self, visitproc visit, void *arg) {
+    Py_VISIT(self->falsify);
+    Py_VISIT(self->message);
+    Py_VISIT(self->sent);
+    Py_VISIT(self->checked);
+    for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
+        Py_VISIT(self->random[j]);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        Py_VISIT(self->f[i].normal);
+    return 0;
+}
+
+static int Followers_clear(Followers *self) {
+    Py_CLEAR(self->falsify);
+    Py_CLEAR(self->message);
+    Py_CLEAR(self->sent);
+    Py_CLEAR(self->checked);
+    for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
+        Py_CLEAR(self->random[j]);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        Py_CLEAR(self->f[i].normal);
+    return 0;
+}
+
 static void Followers_dealloc(Followers *self) {
-    if (self->f != NULL) {
-        for (int i = 1; i < self->cars; i++) {
-            Py_XDECREF(self->f[i].normal);
-            PyMem_Free(self->f[i].readings);
-        }
-    }
-    if (self->random != NULL) {
-        for (Py_ssize_t j = 0; self->random[j] != NULL; j++)
-            Py_DECREF(self->random[j]);
-    }
+    PyObject_GC_UnTrack(self);
+    Followers_clear(self);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        PyMem_Free(self->f[i].readings);
     PyMem_Free(self->random);
     PyMem_Free(self->last);
     PyMem_Free(self->sources);
     PyMem_Free(self->inbox);
     PyMem_Free(self->flights);
     PyMem_Free(self->f);
-    Py_XDECREF(self->falsify);
-    Py_XDECREF(self->message);
-    Py_XDECREF(self->sent);
-    Py_XDECREF(self->checked);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -517,7 +561,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     self->cars = n;
     self->direct = self->delay == 0 && self->loss == 0.0;
-    self->last = PyMem_Calloc(5 * (size_t)n, sizeof(double));
+    self->last = PyMem_Calloc(6 * (size_t)n, sizeof(double));
     self->sources = PyMem_Calloc(2 * (size_t)n * n + 3 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now */
     self->inbox = PyMem_Calloc((size_t)n * (n + 1), sizeof(Beacon));
     self->f = PyMem_Calloc((size_t)n, sizeof(Follower));
@@ -531,7 +575,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
         return -1;
     }
     double *d = self->last;
-    self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n;
+    self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n, self->gap = d + 5 * n;
     self->n_sources = self->sources + n * n, self->is_sender = self->n_sources + n, self->heard = self->is_sender + n;
     self->sent_now = self->heard + n * n;
     self->step_beacons = self->inbox + n * n;
@@ -565,6 +609,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
         self->random[j] = PyList_GET_ITEM(randoms, j);
         Py_INCREF(self->random[j]);
     }
+    self->links = links;
     if (lie_ == Py_None) {
         Py_INCREF(Py_None);
         self->falsify = Py_None;
@@ -603,9 +648,13 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
             if (!PyArg_ParseTuple(radar, "dddlO", &f->range_m, &f->gap_noise_m, &f->speed_noise_mps, &delay, &f->normal))
                 return -1;
             Py_INCREF(f->normal);
+            if (delay < 0 || delay > 100000) {
+                PyErr_Format(PyExc_ValueError, "a radar's latency of %ld steps", delay);
+                return -1;
+            }
             f->capacity = (int)delay + 1;
             f->readings = PyMem_Calloc((size_t)f->capacity, sizeof(Reading));
-            if (delay < 0 || f->readings == NULL) {
+            if (f->readings == NULL) {
                 PyErr_NoMemory();
                 return -1;
             }
@@ -627,7 +676,9 @@ static PyTypeObject FollowersType = {
     .tp_name = "d4sumo.model._cooperative.Followers",
     .tp_doc = "A cooperative platoon's followers and its channel, stepped in C (see d4sumo.model.cooperative)",
     .tp_basicsize = sizeof(Followers),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_traverse = (traverseproc)Followers_traverse,
+    .tp_clear = (inquiry)Followers_clear,
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Followers_init,
     .tp_dealloc = (destructor)Followers_dealloc,

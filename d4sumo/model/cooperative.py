@@ -16,6 +16,7 @@ import sys
 from typing import Callable
 
 from .control import ConsensusCACC, PathCACC, PloegCACC
+from .messages import BeaconFalsifier
 from .sensing import Radar
 from .v2v import Message
 
@@ -40,7 +41,8 @@ def compiled_followers(platoon) -> Callable | None:
     channel, config = platoon.channel, platoon.config
     if (Followers is None or not ENABLED or channel is None or not platoon._one_ahead
             or len(platoon._python) != config.followers
-            or (channel.falsify is not None and channel.liar not in channel.senders)):
+            or (channel.falsify is not None and (type(channel.falsify) is not BeaconFalsifier  # d4sumo's lies: none renames its sender
+                                                 or channel.liar not in channel.senders))):
         return None
     laws = []
     for i, follower in enumerate(platoon.followers, start=1):
@@ -59,11 +61,14 @@ def compiled_followers(platoon) -> Callable | None:
             r = Radar(config.radar, config.step_s, i)
             radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
         vehicle, actuator = controller.vehicle, follower.actuator
-        laws.append((law, (controller.setpoint_m, controller.target_speed_mps, controller.step_s, vehicle.max_accel_mps2,
-                           vehicle.max_decel_mps2), tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
-                     tuple(float(m) for m in mitigation),
-                     (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
-                      actuator.accel_mps2, actuator.coast), radar))
+        own = (controller.setpoint_m, controller.target_speed_mps, controller.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+        drive = (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
+                 actuator.accel_mps2, actuator.coast)
+        numbers = (*own, *gains, *mitigation, *drive, *(radar[:3] if radar else ()))
+        if not all(type(x) is float or type(x) is int for x in numbers):  # a numpy float32 computes otherwise in the Python
+            return None
+        laws.append((law, own, tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
+                     tuple(float(m) for m in mitigation), drive, radar))
     sources = [channel.sources[i] for i in range(1, config.followers + 1)]
     randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
     lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None

@@ -166,3 +166,49 @@ def test_the_python_plays_a_user_subclass():
     own = platoon.followers[1].controller
     own.__class__ = _OwnCACC  # a user's subclass may change anything: the law is looked up by the exact class
     assert cooperative.compiled_followers(platoon) is None
+
+
+def test_what_the_python_would_compute_otherwise_is_the_python_s():
+    """Found by review: numpy float32 parameters (the Python computes part of the law in float32) and a lie
+    of one's own (it may rename its sender) are played by the Python."""
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("ploeg", (("h_s", np.float32(0.7)),)))
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is None
+
+    class OwnLie(BeaconFalsifier):
+        pass
+
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"))
+    own = OwnLie("offset", "speed", {"msg_start_s": 1.0, "msg_value": 3.0}, config.step_s, 0)
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0, beacons=own)._compiled is None
+
+
+def test_the_extension_refuses_what_it_cannot_play_exactly_and_is_collected_in_a_cycle():
+    """Found by review: an object never made crashed on its first step; a float32 position is refused, not
+    computed in double where the Python computes in float32; a lie that refers back to it was never freed."""
+    import gc
+
+    with pytest.raises(RuntimeError):
+        cooperative.Followers.__new__(cooperative.Followers).advance(0, [], [], [], [], [], [])
+    config = EpisodeConfig(followers=1, controller=ControllerConfig("cacc"))
+    platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
+    with pytest.raises(TypeError, match="positions: a float"):
+        platoon._compiled(0, [np.float32(50.0), np.float32(40.0)], [25.0, 25.0], [(0, 1, 5.5)], [], [], [])
+    freed = []
+
+    class Lie:
+        def __call__(self, k, message):
+            return message
+
+        def __del__(self):
+            freed.append(True)
+
+    lie = Lie()
+    from d4sumo.model.platoon import checked_command
+    from d4sumo.model.v2v import Message
+
+    law = (1, (5.0, 25.0, 0.05, 3.5, 8.0), (0.5, 0.5, -0.1, -0.2, -0.04), 0.0, (0.0, 0.0), (3.5, 8.0, 0.1, 0.05, math.inf, 0.0, 0.0), None)
+    lie.followers = cooperative.Followers((0.05, 2, 0, 0.0), [4.5, 4.5], [(0,)], [], (lie, 0, Message, []), [law], checked_command)
+    lie.followers.advance(0, [50.0, 40.0], [25.0, 25.0], [(0, 1, 5.5)], [], [], [])
+    del lie
+    gc.collect()
+    assert freed == [True]
