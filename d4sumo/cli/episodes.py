@@ -133,6 +133,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     import numpy as np
 
     from ..engine.networks import opendrive_network
+    from ..model.maneuvers import lane_changes, maneuver_of
     from ..results.openscenario import read_motion
     from ..search.runner import Evaluator
     from ..search.store import campaign_key
@@ -148,9 +149,9 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
         config = dataclasses.replace(config, network=str(network), network_sha256=None, route=(), lane=None)
         campaign = campaign.replace(config=config)
     evaluator = Evaluator(campaign)
-    plan = dataclasses.replace(evaluator.plan(row.params),
-                               motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id,
-                                                  key))
+    plan = evaluator.plan(row.params)
+    plan = dataclasses.replace(plan, motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id, key,
+                                                        changes_lanes=bool(lane_changes(plan, maneuver_of(config)))))
     from ..engine.simulation import simulate
 
     episode = simulate(config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)

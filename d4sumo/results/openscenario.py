@@ -63,12 +63,16 @@ def heading_rad(sumo_angle_deg: float) -> float:
 
 
 def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sample: int | None = None,
-                campaign: str | None = None) -> np.ndarray:
+                campaign: str | None = None, changes_lanes: bool = False) -> np.ndarray:
     """The speed at each step's end of ``vehicle`` as an exported scenario has it, what `AttackPlan.motion`
-    replays: from its initial speed, and the distance between two of its trajectory's timed positions,
-    which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that stops
-    within a step ends it at 0). Past the trajectory's end it holds its last speed. ``sample``: the sample it
-    must be the export of, and ``campaign`` the key of its campaign (its header says so), where it says."""
+    replays: from its initial speed, and the distance along its lane between two of its trajectory's timed
+    positions, which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that
+    stops within a step ends it at 0). Past the trajectory's end it holds its last speed. ``sample``: the
+    sample it must be the export of, and ``campaign`` the key of its campaign (its header says so), where it
+    says. ``changes_lanes``: its heading turns away from its lane's while it changes lanes (the more, the
+    slower it drives: at a standstill it moves only across), so the distance along its lane is read along
+    the heading it starts with, in its lane: the roads lane changes are played on are straight
+    (`engine.simulation.check_road`: lanes as long as each other, no curve, no junction)."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
@@ -107,8 +111,9 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
                                                            f"of another campaign, exported from {where})")
     if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
         raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")
+    lane = np.full_like(heading, heading[0]) if changes_lanes else heading  # the direction of its lane at each position
     step = np.diff(xy, axis=0)
-    along = np.abs(step[:, 0] * np.cos(heading[:-1]) + step[:, 1] * np.sin(heading[:-1]))
+    along = np.abs(step[:, 0] * np.cos(lane[:-1]) + step[:, 1] * np.sin(lane[:-1]))
     speeds = []
     for d, dt in zip(along, np.diff(t)):
         v = max(0.0, 2.0 * d / dt - v)
