@@ -116,13 +116,16 @@ static double apply(Follower *f, double u, double speed) {
     return v;
 }
 
-static int draw(PyObject *method, PyObject *args, double *out) { /* a generator's draw, as the Python makes it */
-    PyObject *value = PyObject_CallObject(method, args);
+static int take_double(PyObject *value, double *out) { /* a new reference's value as a double, the reference released */
     if (value == NULL)
         return -1;
     *out = PyFloat_AsDouble(value);
     Py_DECREF(value);
     return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+static int draw(PyObject *method, PyObject *args, double *out) { /* a generator's draw, as the Python makes it */
+    return take_double(PyObject_CallObject(method, args), out);
 }
 
 static int normal(Follower *f, double sd, double *out) {
@@ -246,12 +249,7 @@ static double command(Followers *self, int i, Reading r, double now) {
 }
 
 static int read_attribute(PyObject *o, const char *name, double *out) {
-    PyObject *value = PyObject_GetAttrString(o, name);
-    if (value == NULL)
-        return -1;
-    *out = PyFloat_AsDouble(value);
-    Py_DECREF(value);
-    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+    return take_double(PyObject_GetAttrString(o, name), out);
 }
 
 /* the liar's beacon of step k as it sends it: the lie's answer to the true one; 0 where it sends none */
@@ -452,12 +450,7 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
             return NULL;
         double c = command(self, i, r, now);
         if (!(c >= -1.0 && c <= 1.0)) { /* not a command (NaN): its error, as the Python says it */
-            PyObject *result = PyObject_CallFunction(self->checked, "dil", c, i, k);
-            if (result == NULL)
-                return NULL;
-            c = PyFloat_AsDouble(result);
-            Py_DECREF(result);
-            if (c == -1.0 && PyErr_Occurred())
+            if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
                 return NULL;
         }
         if (append_float(commands, c) < 0 || append_float(new_speeds, apply(f, c, self->v[i])) < 0)

@@ -50,10 +50,14 @@ def compiled_followers(platoon) -> Callable | None:
         law = LAWS.get(type(controller))
         if law is None:
             return None
-        p = getattr(controller, "params", None)
-        gains = {1: lambda: (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5),
-                 2: lambda: (p.h_s, p.kp, p.kd, 0.0, 0.0),
-                 3: lambda: (p.b, p.k_leader_v1, p.k_leader, p.k_front, p.h_s)}[law]()
+        if law == 1:  # PATH's coefficients, as its constructor derived them
+            gains = (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5)
+        elif law == 2:
+            p = controller.params
+            gains = (p.h_s, p.kp, p.kd, 0.0, 0.0)
+        else:
+            p = controller.params
+            gains = (p.b, p.k_leader_v1, p.k_leader, p.k_front, p.h_s)
         fallback = controller.fallback
         mitigation = (fallback.threshold, fallback.headway) if fallback is not None else (0.0, 0.0)
         radar = None
