@@ -10,10 +10,15 @@ Both sides are timed the same way, start to close, interleaved in one run so mac
            whoever is ahead (SUMO's leader, traffic included), their controllers, actuators and speed
            commands, the collision checks and the Trace, for an attack that never crashes
 
+A real network with signals and its own demand (--corridor, on by default): SUMO's corridor example
+(tools/game/corridor, three signalised crossings, its flows given an end), its main route through them,
+an attack that crashes nothing; the episode there also measures its cars against the traffic crossing
+each junction in 2D (`engine.junctions`). The target there: ratio <= 1.5.
+
 The memory: a falsify campaign on a straight 10 km, 3-lane motorway at 1800 vehicles per hour per lane
 (a few hundred vehicles on the road at once), its peak resident set size as the kernel counts it.
 
-Usage: python tools/bench_traffic.py [--repeats 10] [--densities 600 1800] [--no-memory]
+Usage: python tools/bench_traffic.py [--repeats 10] [--densities 600 1800] [--no-corridor] [--no-memory]
 """
 
 from __future__ import annotations
@@ -74,12 +79,34 @@ def busy_motorway_peak_mib(samples: int) -> tuple[float, int]:
         return max(peak, before) / 1024.0, on_road
 
 
+#: knots that crash nothing on the corridor among its demand (tests/engine/test_junctions.py)
+CORRIDOR_KNOTS = [-0.7805306719866065, -0.5935169118252068, -0.43238702211173785, -0.3717322087953956, -0.37390428236012463,
+                  0.15339943250590404, 0.9433799512395094, 0.549328269847464, 0.5822678963456105]
+
+
+def corridor_case():
+    """SUMO's corridor example along its main route among its own demand: (label, config, road, attack)."""
+    from d4sumo.model.attacks import attack_signal, make_attack
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "corridor"
+    demand = Path(tempfile.gettempdir()) / "d4sumo-bench-corridor.rou.xml"
+    demand.write_text((game / "corridor.rou.xml").read_text().replace("<flow ", '<flow end="3600" '))
+    config = EpisodeConfig(network=str(game / "corridor.net.xml"), route=("gneE27", "gneE25", "gneE18", "gneE29"),
+                           start="steady", speed_mps=13.0, duration_s=50.0, traffic={"demand": str(demand)})
+    road = build_road(config.network, route=config.route, whole=True)
+    u = attack_signal(make_attack("knots"), CORRIDOR_KNOTS, steps=config.steps, step_s=config.step_s,
+                      start_step=config.attack_start_step)
+    return "corridor, signals, own demand", config, road, u
+
+
 def main() -> None:
     parser = Parser(__doc__)
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--densities", type=float, nargs="+", default=[600.0, 1800.0])
     parser.add_argument("--memory-samples", type=int, default=20)
     parser.add_argument("--no-memory", action="store_true")
+    parser.add_argument("--no-corridor", action="store_true", help="leave out SUMO's corridor example")
     args = parser.parse_args()
     parser.check_counts({"--repeats": (args.repeats, 1), "--memory-samples": (args.memory_samples, 1)})
     configs = [EpisodeConfig(network="highway_3lane_120kmh", start="steady", speed_mps=30.0, duration_s=40.0,
@@ -89,16 +116,25 @@ def main() -> None:
     times: dict[float, tuple[list[float], list[float]]] = {d: ([], []) for d in args.densities}
     for config in configs:
         bare(config, road), episode(config, road, attack_u)  # warm caches (and check SUMO's demand)
+    cases = [(d, config, road, attack_u) for d, config in zip(args.densities, configs)]
+    if not args.no_corridor:
+        cases.append(corridor_case())
+        times[cases[-1][0]] = ([], [])
+        bare(*cases[-1][1:3]), episode(*cases[-1][1:])
     for _ in range(args.repeats):
-        for d, config in zip(args.densities, configs):
-            times[d][0].append(bare(config, road))
-            times[d][1].append(episode(config, road, attack_u))
+        for d, config, at, u in cases:
+            times[d][0].append(bare(config, at))
+            times[d][1].append(episode(config, at, u))
     c = configs[0]
     print(f"{c.steps} steps after a {c.traffic.warmup_s:g} s warm-up, {c.followers + 1} platoon cars, "
           f"{args.repeats} repeats (median, start to close)")
-    for d in args.densities:
+    for d in times:
         mb, me = statistics.median(times[d][0]), statistics.median(times[d][1])
         ratio = me / mb
+        if isinstance(d, str):
+            print(f"{d}  bare {mb * 1e3:7.1f} ms  episode {me * 1e3:7.1f} ms  ratio {ratio:5.2f}  (target <= {TARGET}: "
+                  + ("met)" if ratio <= TARGET else f"{ratio / TARGET:.2f} times it)"))
+            continue
         print(f"{d:6g} veh/h/lane  bare {mb * 1e3:7.1f} ms  episode {me * 1e3:7.1f} ms  ratio {ratio:5.2f}  (target <= {TARGET}: "
               + ("met)" if ratio <= TARGET else f"{ratio / TARGET:.2f} times it)"))
     if not args.no_memory:

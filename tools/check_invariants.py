@@ -29,12 +29,17 @@ campaign stores a sample, and counts the samples where any of these disagree:
   coordinate) is below c (beyond that precision) before the stored collision time, nor is the
   collision pair's FCD gap above c at it; every car that keeps its lane drove the road's lane path
   (the platoon's lane on each edge, as d4sumo reads it from the network's connections);
+- among a network's own demand across signalised crossings (SUMO's corridor example, --junctions), in 2D:
+  no car of the platoon overlaps any other vehicle in SUMO's FCD (`bodies.body_gap_m` of its x, y, angle,
+  length and width) before the stored collision time, and a collision with a traffic car is a 2D
+  clearance below c in the FCD at it (there the lane gaps are not recomputed from the FCD: the traffic's
+  lane positions start again on every edge);
 - the episode played in a batch (beside --batch - 1 other random attacks, half of them of its
   configuration, half of other campaigns' that may share its SUMO: other setpoints, target speeds and
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P]. Prints the counts; exits 1 if any is
+Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]. Prints the counts; exits 1 if any is
 non-zero.
 """
 
@@ -58,8 +63,9 @@ from d4sumo.errors import ConfigError
 from d4sumo.inputs import campaign_of
 from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
+from d4sumo.model.bodies import Body, body_gap_m
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import attack_plan, lane_pairs, maneuver_of, occupied_lanes
+from d4sumo.model.maneuvers import CAR_WIDTH_M, attack_plan, lane_pairs, maneuver_of, occupied_lanes
 from d4sumo.model.messages import MESSAGE_ATTACKS, MESSAGE_FIELDS
 from d4sumo.model.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store
@@ -129,6 +135,25 @@ SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), Controlle
 
 #: the share of in-lane episodes played among traffic (--traffic)
 TRAFFIC_SHARE = [0.15]
+#: the share of in-lane episodes played on SUMO's corridor among its own demand, through its signalised crossings (--junctions)
+JUNCTION_SHARE = [0.0]
+#: SUMO's corridor example (tools/game/corridor): its main route through three signalised crossings
+CORRIDOR_ROUTE = ("gneE27", "gneE25", "gneE18", "gneE29")
+CORRIDOR: dict[str, str] = {}
+
+
+def corridor() -> tuple[str, str]:
+    """SUMO's corridor network, and its demand with an end given to each flow (a flow without one plays for ever)."""
+    from d4sumo.sumohome import sumo_home
+
+    if not CORRIDOR:
+        game = Path(sumo_home()) / "tools" / "game" / "corridor"
+        demand = Path(tempfile.gettempdir()) / "d4sumo-check-corridor.rou.xml"
+        demand.write_text((game / "corridor.rou.xml").read_text().replace("<flow ", '<flow end="3600" '))
+        CORRIDOR.update(network=str(game / "corridor.net.xml"), demand=str(demand))
+    return CORRIDOR["network"], CORRIDOR["demand"]
+
+
 #: the share of episodes whose every follower runs one of d4sumo's cooperative controllers, in lane (--cooperative)
 COOPERATIVE_SHARE = [0.0]
 
@@ -175,6 +200,11 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     if rng.random() < TRAFFIC_SHARE[0]:  # SUMO's traffic around it on the 4-lane highway, joined at speed
         config = dataclasses.replace(config, network="highway_4lane", network_sha256=None, route=(), duration_s=60.0, start="steady",
                                      traffic=traffic_table(rng))
+    if JUNCTION_SHARE[0] and not maneuver and rng.random() < JUNCTION_SHARE[0]:  # (drawn only when asked)
+        network, demand = corridor()  # through signalised crossings among the network's own demand
+        config = dataclasses.replace(config, network=network, network_sha256=None, route=CORRIDOR_ROUTE, lane=None, duration_s=50.0,
+                                     start="steady", speed_mps=float(rng.choice([8.0, 11.0, 13.0])),
+                                     traffic={"demand": demand, "seed": int(rng.integers(0, 1000))})
     if config.v2v is not None and rng.random() < 0.5:  # cooperative followers over a late or lossy channel
         config = dataclasses.replace(config, v2v={"beacon_interval_s": float(rng.choice([0.05, 0.1, 0.2])),
                                                   "latency_s": float(rng.choice([0.0, 0.1, 0.3])),
@@ -199,7 +229,7 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
 #: the traffic's vehicle types drawn from, and their lengths [m] (SUMO's passenger car is 5 m)
 TRAFFIC_TYPES = {"car": {"share": 0.8, "speedDev": 0.1}, "truck": {"share": 0.2, "vClass": "truck", "length": 12.0, "maxSpeed": 25.0},
                  "idm": {"share": 0.5, "carFollowModel": "IDM", "tau": 1.2}}
-TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0}
+TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0, "DEFAULT_VEHTYPE": 5.0}
 
 
 def traffic_table(rng: np.random.Generator) -> dict:
@@ -373,6 +403,8 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > rounding:
         broken.append("FCD/trace positions")
         return broken
+    if config.traffic is not None and not road.one_edge:  # across junctions among a network's demand: in 2D
+        return broken + fcd_bodies_differ(config, fcd, episode, c, crash)
     if config.traffic is not None and config.maneuver_class.lateral:
         pairs = fcd_lateral_traffic_pairs(config, positions, y, traffic, road.lane_width_m)
     elif config.traffic is not None:
@@ -402,6 +434,32 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         x = episode.trace["pos_v0"]  # only the end distance may end it early: the attacker there, not before
         if not (config.end_distance_m and x[-1] - x[0] >= config.end_distance_m > x[-2] - x[0]):
             broken.append("no collision but the episode ended early")
+    return broken
+
+
+def fcd_bodies_differ(config: EpisodeConfig, fcd: Path, episode, collision: dict | None, crash: float) -> list[str]:
+    """In 2D, from SUMO's FCD alone: no car of the platoon within c of any other vehicle before the stored
+    collision (or the episode's end), and the stored collision's pair within c at it."""
+    ids = config.vehicle_ids
+    sizes = {vid: (v.length_m, CAR_WIDTH_M) for vid, v in zip(ids, config.car_vehicles)}
+    steps: dict[float, dict[str, Body]] = {}
+    for step, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "x", "y", "angle", "type"]):
+        length, width = sizes.get(v.id, (TRAFFIC_LENGTHS.get(v.type, 5.0), CAR_WIDTH_M))  # the demand's: SUMO's passenger car
+        steps.setdefault(float(step.time), {})[v.id] = Body(float(v.x), float(v.y), float(v.angle), length, width)
+    times = [t for t in sorted(steps) if "v0" in steps[t]][:len(episode.trace)]
+    broken = []
+    for k, t in enumerate(times):
+        cars = steps[t]
+        near = min((body_gap_m(cars[vid], body), vid, other) for vid in ids for other, body in cars.items()
+                   if other != vid and not (other in ids and ids.index(other) < ids.index(vid)))
+        if k < len(times) - 1 and near[0] < crash - FCD_TOLERANCE_M:
+            broken.append("FCD 2D collision before the end")
+            break
+    if collision is not None and times:
+        a, b = collision["pair"].split("-", 1)
+        if body_gap_m(steps[times[-1]][a], steps[times[-1]][b]) > crash + FCD_TOLERANCE_M and any(
+                "traffic" in car for car in (a, b)):
+            broken.append("collision pair/2D gap")
     return broken
 
 
@@ -459,6 +517,9 @@ def main(argv=None) -> int:
     parser.add_argument("--cooperative", type=float, default=COOPERATIVE_SHARE[0],
                         help="the share of episodes whose platoon runs cacc, ploeg or consensus throughout, in lane "
                              f"(their followers stepped in C) [{COOPERATIVE_SHARE[0]}]")
+    parser.add_argument("--junctions", type=float, default=JUNCTION_SHARE[0],
+                        help="the share of in-lane episodes played on SUMO's corridor among its own demand, through its "
+                             f"signalised crossings (checked in 2D) [{JUNCTION_SHARE[0]}]")
     parser.add_argument("--only", default="", help="check only these episodes of the seed's draw (comma-separated "
                                                    "indices, as --examples records them)")
     parser.add_argument("--examples", type=Path, help="write every disagreeing episode here, whole (JSON lines)")
@@ -471,10 +532,15 @@ def main(argv=None) -> int:
     if not 0.0 <= args.cooperative <= 1.0:
         parser.error(f"--cooperative: got {args.cooperative}; allowed: a share in [0, 1]")
     COOPERATIVE_SHARE[0] = args.cooperative
+    if not 0.0 <= args.junctions <= 1.0:
+        parser.error(f"--junctions: got {args.junctions}; allowed: a share in [0, 1]")
+    JUNCTION_SHARE[0] = args.junctions
     rng = np.random.default_rng(args.seed)
     ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
     roads = {(name, lane): build_road(name, route=ROUTES.get(name, ()), lane=lane)
              for name in ROADS for lane in (None, *LANES.get(name, ()))}
+    if JUNCTION_SHARE[0]:  # the corridor built whole: its demand drives every way of it
+        roads[corridor()[0], None] = build_road(corridor()[0], route=CORRIDOR_ROUTE, whole=True)
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
     examples: dict[str, str] = {}

@@ -3,7 +3,8 @@ play one episode (`simulate`) or many side by side in one SUMO (`simulate_batch`
 `engine.loop.play`; everything that talks to SUMO is in `engine.sumo`.
 
 A collision is any bumper overlap at the end of a step, measured on SUMO's positions along the route
-(`platoon.collisions_at`): SUMO's own reports miss overlaps of 1 mm or less. The episode ends at the
+(`platoon.collisions_at`): SUMO's own reports miss overlaps of 1 mm or less; among traffic, inside a
+junction, any overlap of two bodies in 2D (`junctions`). The episode ends at the
 first one: SUMO lets the cars drive through each other afterwards, so later data are not physical.
 """
 

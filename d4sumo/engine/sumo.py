@@ -32,6 +32,7 @@ from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_xml, type_elements
 from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary, sumo_home
+from .junctions import JunctionCrossings
 from .scenarios import Road, default_cache_dir
 
 ROUTE_ID = "platoon"
@@ -775,6 +776,11 @@ class SumoWorld:
         self._traffic_collisions: list[tuple[float, str, str]] = []
         self._seen: set[tuple[str, str]] = set()
         self._k, self._step_s = -1, config.step_s  # the samples sensed (the first at t = 0)
+        #: with traffic on a route of several edges, each platoon's collisions inside its junctions (`junctions`)
+        self.crossings = None
+        if config.traffic is not None and not road.one_edge:
+            self.crossings = [JunctionCrossings(api, road.route(e), road.platoon_path, ids, config.collision_gap_m)
+                              for e, ids in enumerate(platoons)]
         if config.traffic is not None:
             self.traffic = [_LateralTrafficSense(api, config, ids, self.laterals[e], road) if self.laterals
                             else _TrafficSense(api, config, ids) for e, ids in enumerate(platoons)]
@@ -797,14 +803,18 @@ class SumoWorld:
 
     def sense(self, e: int, x: list[float], v: list[float]) -> tuple[list, list[str], list[float], list[float]]:
         """With traffic: the pairs of episode ``e`` at this step and the ids, positions and speeds they index
-        (`_TrafficSense`); and the collisions among the traffic SUMO reported in the step, kept."""
+        (`_TrafficSense`), a collision inside a junction in 2D among them (`junctions.JunctionCrossings`); and
+        the collisions among the traffic SUMO reported in the step, kept."""
         self._k += 1  # traffic plays one episode to a SUMO: each call is the next sample
         for c in self.api.simulation.getCollisions():
             pair = (c.collider, c.victim)
             if self._platoon.isdisjoint(pair) and pair not in self._seen:  # SUMO reports an overlap every step it lasts
                 self._seen.add(pair)
                 self._traffic_collisions.append((self._k * self._step_s, *pair))
-        return self.traffic[e](x, v)
+        pairs, names, xs, vs = self.traffic[e](x, v)
+        if self.crossings is not None:
+            pairs += self.crossings[e](x, pairs, names, xs, vs)
+        return pairs, names, xs, vs
 
     def feed_beacons(self, ids: tuple[str, ...], beacons) -> None:
         """Give SUMO's cooperative followers (Plexe's CC model) the newest beacons they read, as Plexe's own

@@ -7,7 +7,8 @@ Signals (N followers; cars v0 = attacker, v1 .. vN, and in a cut-in `lead`, in a
     cmd_X         throttle/brake command applied from this sample on [-1, 1]
     gap_X         bumper gap from car X to the car ahead of it in its lane, whoever that is [m]
                   (1000 m with nobody ahead; a car changing lanes covers both)
-    victim_gap    the smallest gap between two cars neither of which is the attacker [m]
+    victim_gap    the smallest gap between two cars neither of which is the attacker [m] (among traffic, at a
+                  collision inside a junction, the 2D clearance of the two bodies: `engine.junctions`)
     attacker_gap  the smallest gap between the attacker and the car ahead of or behind it [m]
     mode_vI       follower controller mode (0 cruise, 1 ACC), I >= 1, when the controller has one
 The paper's maneuver (`inlane`: the attacker leads the platoon in its lane) also has
