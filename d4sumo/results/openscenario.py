@@ -122,6 +122,15 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
     return np.concatenate([speeds, np.full(max(0, steps - speeds.size), speeds[-1])])[:steps]
 
 
+class NotExported(ConfigError):
+    """A sample this version does not export as OpenSCENARIO: the sample is the value refused, ``why`` says
+    what its campaign has."""
+
+    def __init__(self, sample_id: int, why: str, allowed: str):
+        self.why = why
+        super().__init__("sample", f"{sample_id} ({why})", allowed)
+
+
 def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | None = None) -> tuple[Path, Path]:
     """Write the sample's ``road.xodr`` and ``scenario.xosc`` into ``out_dir`` (created; files already there
     are replaced whole, never half-written). ``fcd``: its replay's FCD where one was written already (its
@@ -132,12 +141,13 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
     evaluator = evaluator_of(record)
     campaign = evaluator.campaign
     config = campaign.config
-    if config.traffic is not None:
-        raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without [traffic] (this version writes "
-                                                          "the platoon, not the traffic around it)")
+    if config.traffic is not None:  # the sample is what cannot be exported, not the folder
+        raise NotExported(record.sample_id, "its campaign plays among traffic", "a sample of a campaign without [traffic] "
+                          "(this version writes the platoon, not the traffic around it)")
     if campaign.message:  # another simulator would see the attacker's motion, and none of its lies
-        raise ConfigError("--openscenario", str(out_dir), "a sample of a campaign without a message attack (OpenSCENARIO "
-                                                          "carries the cars' motion, not what their V2V beacons said)")
+        raise NotExported(record.sample_id, f"its campaign has a message attack, {campaign.message}", "a sample of a "
+                          "campaign without a message attack (OpenSCENARIO carries the cars' motion, not what their V2V "
+                          "beacons said)")
     with tempfile.TemporaryDirectory(prefix="d4sumo-xosc-") as tmp:
         if fcd is None:
             fcd = Path(tmp) / "fcd.xml"

@@ -310,11 +310,13 @@ def _replayed(record: Record, fcd_path: Path, name: Path) -> dict | str:
 def _openscenario_links(record: Record, out: Path, name: str, fcd: Path) -> str:
     """The sample as OpenSCENARIO on its road as OpenDRIVE (`openscenario`), written beside the report, as links;
     a sample this version does not export (among traffic) says so."""
-    from .openscenario import export_openscenario
+    from .openscenario import NotExported, export_openscenario
 
     folder = f"openscenario/{name}"
     try:
         export_openscenario(record, out / folder, fcd)  # from the FCD the report replayed it into
+    except NotExported as exc:  # says what the campaign has, not what it would need
+        return f"not exported as OpenSCENARIO ({html.escape(exc.why)}); "
     except ConfigError as exc:
         return f"not exported as OpenSCENARIO ({html.escape(exc.allowed)}); "
     return (f"OpenSCENARIO: <a href='{folder}/scenario.xosc'><code>{folder}/scenario.xosc</code></a> on "

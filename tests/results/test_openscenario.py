@@ -197,6 +197,8 @@ def test_a_message_attack_is_refused_and_an_honest_cooperative_platoon_exports_i
     assert main(["export", str(lies), "1", "--openscenario", str(tmp_path / "lie")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "without a message attack" in err and not (tmp_path / "lie").exists()
+    # issue 48: the sample is the value refused, not the folder it was to be written into
+    assert "sample: got '1 (its campaign has a message attack, offset)'" in err and str(tmp_path / "lie") not in err
     assert main(["export", str(honest), "1", "--openscenario", str(tmp_path / "ok")]) == 0
     text = (tmp_path / "ok" / "scenario.xosc").read_text()
     assert 'name="v2v.latency_s" value="0.2"' in text and 'name="v2v.beacon_interval_s" value="0.1"' in text
