@@ -21,9 +21,14 @@ from ..model.maneuvers import Pair
 
 #: how far before and after a junction's stretch of the route a car's body is looked at [m]
 NEAR_M = 5.0
-#: a vehicle on a lane into a junction this near its end, or on a lane out of it with its rear this near
-#: its start, may reach into the junction [m]
+#: a vehicle on a lane out of a junction with its rear this near the lane's start may still reach into it [m]
+#: (one on a lane into it has its whole body behind the stop line)
 EDGE_M = 2.0
+
+
+def _call(api, domain: str, name: str):
+    """``api.<domain>.<name>``; for libsumo its C function itself, without the Python wrapper around it."""
+    return getattr(getattr(api, "_libsumo", None), f"{domain}_{name}", None) or getattr(getattr(api, domain), name)
 
 
 def _via_length(api, lane: str, to_lane: str) -> float:
@@ -46,8 +51,8 @@ class JunctionCrossings:
         self.api, self.ids, self.crash_m = api, ids, collision_gap_m
         self.platoon = set(ids)
         self.lengths = [api.vehicle.getLength(vid) for vid in ids]
-        #: (start, end, internal lanes, lanes into it, lanes out of it) of each junction along the route
-        self.spans: list[tuple[float, float, list[str], list[str], list[str]]] = []
+        #: (start, end, internal lanes, lanes out of it) of each junction along the route
+        self.spans: list[tuple[float, float, list[str], list[str]]] = []
         along = 0.0
         for k, (edge, to) in enumerate(zip(route, route[1:])):
             lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
@@ -58,12 +63,14 @@ class JunctionCrossings:
             internal = sorted({e for e in (*edges_in, *edges_out) if e.startswith(":")})
             lanes = lambda edges: [f"{e}_{i}" for e in edges for i in range(api.edge.getLaneNumber(e))]  # noqa: E731
             self.spans.append((along - NEAR_M, along + length + NEAR_M, lanes(internal),
-                               lanes([e for e in edges_in if not e.startswith(":")]),
                                lanes([e for e in edges_out if not e.startswith(":")])))
             along += length
         self.next = [0] * len(ids)  # each car's next junction: cars never drive backwards
-        self.get_position, self.get_angle = api.vehicle.getPosition, api.vehicle.getAngle
-        self.get_width, self.get_length = api.vehicle.getWidth, api.vehicle.getLength
+        vehicle = lambda name: _call(api, "vehicle", name)  # noqa: E731
+        self.get_position, self.get_angle, self.get_width = vehicle("getPosition"), vehicle("getAngle"), vehicle("getWidth")
+        self.get_length, self.get_lane_position, self.get_speed = vehicle("getLength"), vehicle("getLanePosition"), vehicle("getSpeed")
+        self.on_lane = _call(api, "lane", "getLastStepVehicleIDs")
+        self.sizes: dict[str, tuple[float, float]] = {}
 
     def __call__(self, x: list[float], pairs: list[Pair], names: list[str], xs: list[float], vs: list[float]) -> list[Pair]:
         """The step's 2D collisions of the platoon's cars at positions ``x`` along the route; a foe not yet
@@ -83,42 +90,43 @@ class JunctionCrossings:
                 found.extend(self._collisions(b, foes_of[j], x, pairs, names, xs, vs))
         return found
 
-    def _foes(self, span) -> list[str]:
-        """The vehicles, none of the platoon's, in a junction or reaching into it."""
-        api = self.api
-        _, _, internal, lanes_in, lanes_out = span
-        foes = [v for lane in internal for v in api.lane.getLastStepVehicleIDs(lane)]
-        for lane in lanes_in:
-            end = api.lane.getLength(lane) - EDGE_M
-            foes += [v for v in api.lane.getLastStepVehicleIDs(lane) if api.vehicle.getLanePosition(v) > end]
+    def _foes(self, span) -> list[tuple[str, tuple[float, float]]]:
+        """The vehicles, none of the platoon's, in a junction or reaching into it, each with its front bumper's position."""
+        _, _, internal, lanes_out = span
+        on_lane, position, length = self.on_lane, self.get_lane_position, self.get_length
+        foes = [v for lane in internal for v in on_lane(lane)]
         for lane in lanes_out:
-            foes += [v for v in api.lane.getLastStepVehicleIDs(lane)
-                     if api.vehicle.getLanePosition(v) - api.vehicle.getLength(v) < EDGE_M]
-        return sorted(set(foes) - self.platoon)
+            foes += [v for v in on_lane(lane) if position(v) - length(v) < EDGE_M]
+        return [(v, self.get_position(v)) for v in sorted(set(foes) - self.platoon)]
 
-    def _body(self, vid: str) -> Body:
-        x, y = self.get_position(vid)
-        return Body(x, y, self.get_angle(vid), self.get_length(vid), self.get_width(vid))
+    def _size(self, vid: str) -> tuple[float, float]:
+        """A vehicle's length and width [m] (read once: nothing changes them during an episode)."""
+        if vid not in self.sizes:
+            self.sizes[vid] = (self.get_length(vid), self.get_width(vid))
+        return self.sizes[vid]
+
+    def _body(self, vid: str, front: tuple[float, float] | None = None) -> Body:
+        x, y = front or self.get_position(vid)
+        return Body(x, y, self.get_angle(vid), *self._size(vid))
 
     def _collisions(self, b: int, foes: list[str], x: list[float], pairs: list[Pair], names: list[str],
                     xs: list[float], vs: list[float]) -> list[Pair]:
         paired = {names[a] for a, c, _ in pairs if c == b} | {names[c] for a, c, _ in pairs if a == b}  # on a lane: its gap counts
-        mine, found = None, []
-        for foe in foes:
+        mine, found = self._body(self.ids[b]), []
+        for foe, (fx, fy) in foes:
             if foe in paired:
                 continue
-            theirs = self._body(foe)
-            mine = mine or self._body(self.ids[b])
-            reach = mine.length_m + mine.width_m + theirs.length_m + theirs.width_m + self.crash_m
-            if math.hypot(theirs.x_m - mine.x_m, theirs.y_m - mine.y_m) > reach:
-                continue  # too far apart to touch: no need to measure
+            # front bumpers farther apart than both bodies' length and width: the bodies cannot touch
+            if math.hypot(fx - mine.x_m, fy - mine.y_m) > mine.length_m + mine.width_m + sum(self._size(foe)) + self.crash_m:
+                continue
+            theirs = self._body(foe, (fx, fy))
             gap = body_gap_m(mine, theirs)
             if gap >= self.crash_m:
                 continue
             if foe not in names:  # at the platoon car's place along the route: where the collision is recorded
                 names.append(foe)
                 xs.append(x[b])
-                vs.append(self.api.vehicle.getSpeed(foe))
+                vs.append(self.get_speed(foe))
             t = names.index(foe)
             found.append((b, t, gap) if struck_by(mine, theirs) == 1 else (t, b, gap))
         return found
