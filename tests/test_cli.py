@@ -608,6 +608,22 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
 
 
 @pytest.mark.sumo
+def test_falsify_names_a_campaign_on_a_road_of_ones_own_an_earlier_version_ran_through_red_lights(tmp_path):
+    """d4sumo 0.18 drove the platoon through red lights: its campaign on a road of one's own is another one now, and
+    falsify with the same flags says so, with the flag that goes on with it (which then resumes it)."""
+    road = str(Path(__file__).resolve().parent.parent / "examples" / "roads" / "three_edges")
+    flags = ["--network", road, "--start", "steady", "--duration", "10", "--optimizer", "random", "--samples", "2",
+             "--db", str(tmp_path / "r.sqlite"), "--quiet"]
+    assert main(["falsify", *flags, "--set", "scenario.signals=ignore"]) == 0  # as 0.18 stored it
+    now = run("falsify", *flags)
+    assert now.returncode == 0, now.stderr
+    assert "holds this campaign as d4sumo 0.18 or before ran it (the platoon driving through red lights)" in now.stderr
+    assert now.stderr.rstrip().endswith("To go on with that one: --set scenario.signals=ignore")
+    again = run("falsify", *[a if a != "2" else "3" for a in flags[:-1]], "--set", "scenario.signals=ignore")
+    assert again.returncode == 0 and "2 of 3 samples stored already: resuming" in again.stderr, again.stderr
+
+
+@pytest.mark.sumo
 @pytest.mark.parametrize("given", ["folder", "network file"])
 def test_a_sample_on_a_road_of_ones_own_replays_from_another_folder_and_after_the_road_moved(tmp_path, given):
     """Regression: the summary's "replay it:" line failed from any folder but the one the campaign ran in

@@ -17,9 +17,12 @@ def _as_earlier_versions_ran(campaign):
     """The campaign as earlier versions of d4sumo ran it (its optimiser, that optimiser's options, its inputs,
     in every combination), each with what differed and the flags that go on with it."""
     inputs = campaign.with_inputs_of_before()
+    lights = campaign.with_lights_of_before()
+    lights_flags = ["--set scenario.signals=ignore"] if lights is not campaign else []
     input_flags = [*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
-                   *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else [])]
-    for base, flags in [(campaign, []), *([(inputs, input_flags)] if inputs is not campaign else [])]:
+                   *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else []), *lights_flags]
+    for base, flags in [(campaign, []), *([(lights, lights_flags)] if lights is not campaign else []),
+                        *([(inputs, input_flags)] if inputs is not campaign else [])]:
         if campaign.optimizer == DEFAULT_OPTIMIZER:
             default_before = base.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
             for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
@@ -30,9 +33,11 @@ def _as_earlier_versions_ran(campaign):
         for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
             if (before := base.with_options(earlier)) != campaign:
                 yield before, "as an earlier d4sumo ran it; this starts a new one", [as_set_flags(campaign.optimizer, earlier), *flags]
-        if base is not campaign:
+        if base is lights:
+            yield base, "as d4sumo 0.18 or before ran it (the platoon driving through red lights); this starts a new one", flags
+        elif base is not campaign:
             yield (base, "as d4sumo 0.16 or before ran it (a road of one's own taken as found, traffic entering after the "
-                         "warm-up unchecked); this starts a new one", flags)
+                         "warm-up unchecked, the platoon driving through red lights); this starts a new one", flags)
 
 
 def cmd_falsify(args: argparse.Namespace) -> int:

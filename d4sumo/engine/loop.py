@@ -83,10 +83,11 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         recorded[e].append([(min(a, n), min(b, n), gap) for a, b, gap in pairs])  # any traffic car as one: index n
         return pairs, (ids_, x_, v_)
 
+    lights = getattr(world, "lights", None) is not None  # the route's traffic lights, which the platoon obeys
     batch = None
     end_m = config.end_distance_m  # an episode also ends once its attacker is this far from its start
     crash_m = config.collision_gap_m  # the same in every episode of a batch (`batch.batch_key`)
-    if (m > detach_at and detach_at_step != 0 and config.batch_arrays  # the arrays play the model as printed ...
+    if (m > detach_at and detach_at_step != 0 and config.batch_arrays and not lights  # the arrays play the model as printed ...
             and all(p.motion is None for p in plans)):  # ... with the attacker's pedals
         batch = PlatoonBatch(configs, np.array([p.u for p in plans]), attacker_max_speed_mps=max_speed)
         arrayed = list(range(m))  # still commanded by the batch's arrays
@@ -105,7 +106,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         for e, (c, plan, ids) in enumerate(zip(configs, plans, platoons)):
             x, v = [get_position(vid) for vid in ids], [get_speed(vid) for vid in ids]
             pairs, sensed = sense_traffic(e, x, v) if traffic else (sense_pairs(e, x), None)
-            solo.append(_Alone(e, Platoon(c, plan.u, max_speed, beacons=plan.beacons, motion=plan.motion), ids, 0, x, v, pairs, sensed))
+            solo.append(_Alone(e, Platoon(c, plan.u, max_speed, beacons=plan.beacons, motion=plan.motion, lights=lights),
+                               ids, 0, x, v, pairs, sensed))
 
     def end(e: int, steps_done: int, collisions: tuple, error: Exception | None = None) -> None:
         nonlocal solo, sensed, commanding
@@ -169,6 +171,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
                 pass
         for alone in solo:
             try:
+                if lights:  # what its drivers see of the lights ahead
+                    alone.platoon.stops = world.stops(alone.e, alone.x)
                 out = alone.platoon.advance(k, alone.x, alone.sensed[2] if traffic else alone.v, alone.pairs)
             except Exception as exc:  # a user's controller: as alone, the episode ends with its error
                 end(alone.e, k, (), exc)

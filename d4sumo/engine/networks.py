@@ -178,8 +178,8 @@ def network_source(name: str, root: Path | None = None, route: tuple[str, ...] =
 def _note_signals(source: NetworkSource, route: tuple[str, ...]) -> None:
     """Say once that a network file's own signal plans do not reach the road built from it: its plain
     nodes and edges keep which junctions are traffic lights, and netconvert gives each its default
-    program (the programs themselves, in netconvert's plain .tll.xml, are not loaded); and that the
-    platoon does not stop for them. Only lights the road drives through are named."""
+    program (the programs themselves, in netconvert's plain .tll.xml, are not loaded). Only lights the
+    road drives through are named."""
     from xml.etree import ElementTree as ET
 
     if (source.name, route) in _SAID:
@@ -193,8 +193,7 @@ def _note_signals(source: NetworkSource, route: tuple[str, ...]) -> None:
         several = len(lights) > 1
         log.warning("%s: the road d4sumo builds from it gives its %d traffic light%s %s(%s) netconvert's default "
                     "program%s, not the network's own: it is rebuilt from the network's plain nodes, edges and connections, "
-                    "without the programs netconvert writes beside them; and the platoon's cars, which d4sumo drives, do not "
-                    "stop for red (SUMO's traffic does)", source.name, len(lights), "s" if several else "",
+                    "without the programs netconvert writes beside them", source.name, len(lights), "s" if several else "",
                     "on the route " if route else "", ", ".join(lights[:5]) + (", ..." if len(lights) > 5 else ""),
                     "s" if several else "")
 

@@ -33,6 +33,7 @@ from ..model.traffic import demand_xml, type_elements
 from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary, sumo_home
 from .junctions import JunctionCrossings
+from .lights import RouteLights, route_signals
 from .scenarios import Road, default_cache_dir
 
 ROUTE_ID = "platoon"
@@ -776,6 +777,12 @@ class SumoWorld:
         self._traffic_collisions: list[tuple[float, str, str]] = []
         self._seen: set[tuple[str, str]] = set()
         self._k, self._step_s = -1, config.step_s  # the samples sensed (the first at t = 0)
+        #: on a route through traffic lights the platoon obeys, what each platoon's cars see of them (`lights`); else None
+        self.lights = None
+        if config.signals != "ignore" and not road.one_edge:
+            signals = [route_signals(api, road.route(e), road.platoon_path) for e in range(len(platoons))]
+            if any(signals):
+                self.lights = [RouteLights(api, found, len(ids)) for found, ids in zip(signals, platoons)]
         #: with traffic on a route of several edges, each platoon's collisions inside its junctions (`junctions`)
         self.crossings = None
         if config.traffic is not None and not road.one_edge:
@@ -815,6 +822,11 @@ class SumoWorld:
         if self.crossings is not None:
             pairs += self.crossings[e](x, pairs, names, xs, vs)
         return pairs, names, xs, vs
+
+    def stops(self, e: int, x: list[float]):
+        """What each car of episode ``e``, at positions ``x`` along its route, sees of the next traffic light
+        (`signals.Stop`, or None), where the platoon obeys them (`lights`)."""
+        return self.lights[e](x)
 
     def feed_beacons(self, ids: tuple[str, ...], beacons) -> None:
         """Give SUMO's cooperative followers (Plexe's CC model) the newest beacons they read, as Plexe's own

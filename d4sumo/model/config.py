@@ -175,6 +175,10 @@ class EpisodeConfig:
     #: a pair of cars has collided (the episode ends, and the outcome is theirs) once its bumper gap is
     #: below this [m]; 0: once they overlap. The authors' code: 0.05 (centres within 5 m of 4.95 m cars)
     collision_gap_m: float = 0.0
+    #: traffic lights along the route (`signals`): every car of the platoon stops for red as SUMO's drivers do
+    #: ("obey"); the attacker runs red, as part of its attack, and the followers stop ("attacker_runs_red");
+    #: or every car of the platoon drives through, as d4sumo 0.18 and before did ("ignore")
+    signals: str = "obey"
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -196,6 +200,10 @@ class EpisodeConfig:
         fix("speed_mps", check_number("scenario.speed_mps", self.speed_mps, 0.0, 70.0, "m/s", low_open=True))
         if self.start not in START_MODES:
             raise ConfigError("scenario.start", self.start, f"one of {', '.join(START_MODES)}")
+        if self.signals not in SIGNAL_RULES:
+            raise ConfigError("scenario.signals", self.signals, f"one of {', '.join(SIGNAL_RULES)}")
+        if not is_network_path(self.network):  # d4sumo's own roads have no traffic lights: one configuration, whatever it says
+            fix("signals", "obey")
         fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
         fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
         fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
@@ -441,6 +449,10 @@ class EpisodeConfig:
             scenario["route"] = list(scenario["route"])
         if scenario["lane"] is None:  # the road's own choice: earlier campaigns keep their identity
             del scenario["lane"]
+        # d4sumo's own roads have no traffic lights; a platoon driving through red is what campaigns stored
+        # before it was a key (`EARLIER_SCENARIO`) hold
+        if not is_network_path(self.network) or self.signals == "ignore":
+            del scenario["signals"]
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         vehicle = self.vehicle.to_dict()
@@ -516,7 +528,9 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 #: what a stored definition's [scenario] table without a key held: the scenario as that version played it
-EARLIER_SCENARIO = {"network_sha256": ""}
+EARLIER_SCENARIO = {"network_sha256": "", "signals": "ignore"}
+#: what the platoon does at a red light (`EpisodeConfig.signals`)
+SIGNAL_RULES = ("obey", "attacker_runs_red", "ignore")
 #: [scenario] keys that identify a campaign's inputs (its road's files' digest), not describe its scenario
 IDENTITY_KEYS = ("network_sha256",)
 

@@ -22,6 +22,7 @@ from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .cooperative import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
+from .signals import SignalDriver
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
@@ -222,7 +223,8 @@ class Platoon:
     lead that cruises at the target speed, or an obstacle at its constant speed)."""
 
     def __init__(self, config: EpisodeConfig, attack_u: np.ndarray, attacker_max_speed_mps: float,
-                 followers: list[PythonFollower | SumoFollower] | None = None, beacons=None, motion=None):
+                 followers: list[PythonFollower | SumoFollower] | None = None, beacons=None, motion=None,
+                 lights: bool = False):
         attack_u = np.asarray(attack_u, dtype=float)
         if attack_u.shape != (config.steps,):
             raise ValueError(f"attack signal has shape {attack_u.shape}, expected ({config.steps},)")
@@ -276,11 +278,30 @@ class Platoon:
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         #: the followers, their radars and channel stepped in C where they may be (`cooperative`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
-        self._compiled = compiled_followers(self) if followers is None else None
+        self._compiled = compiled_followers(self) if followers is None and not lights else None
+        #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
+        #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
+        self.stops: list = []
+        self._drivers: dict[int, SignalDriver] = {}
+        if lights and config.signals != "ignore":
+            obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
+            self._drivers = {i: SignalDriver(config.vehicle_of(i), dt) for i in obeying}
+            self._python = [(i, self._obeying(i, command), apply, inbox) for i, command, apply, inbox in self._python]
         self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
         self.pairs: list[list[Pair]] = []  # per sample, lane-changing maneuvers only: who followed whom
+
+    def _obeying(self, i: int, command):
+        """Follower ``i``'s command, which its driver holds below what the signal ahead allows (`signals`)."""
+        limit = self._drivers[i].limit
+
+        def obeyed(gap, speed, *rest):
+            c = command(gap, speed, *rest)
+            if type(c) is not float or not -1.0 <= c <= 1.0:  # a user's command: said as without lights
+                c = checked_command(c, i, len(self.commands))
+            return min(c, limit(self.stops[i], speed))
+        return obeyed
 
     def advance(self, k: int, positions: list[float], speeds: list[float], pairs: list[Pair]) -> list[float]:
         """Commands for step k from the sensed state and the maneuver's ``pairs`` (who follows whom in
@@ -313,6 +334,8 @@ class Platoon:
             u = acceleration_to_command(self.attacker_cruise.acceleration(speed), self.attacker_vehicle)
         else:
             self._attacking = True
+        if 0 in self._drivers:  # its driver stops it for red, attacking or not
+            u = min(u, self._drivers[0].limit(self.stops[0], speed))
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speed)]
         if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
@@ -349,6 +372,8 @@ class Platoon:
                 new_speeds.append(self.config.obstacle_speed_mps)
                 continue
             c = acceleration_to_command(cruise.acceleration(speeds[i]), vehicle)
+            if i in self._drivers:
+                c = min(c, self._drivers[i].limit(self.stops[i], speeds[i]))
             commands.append(c)
             new_speeds.append(actuator.apply(c, speeds[i]))
         self.commands.append(commands)

@@ -179,6 +179,7 @@ def scenario_of(config: EpisodeConfig) -> tuple[tuple[str, Any], ...]:
 #: the [scenario] keys: every field of EpisodeConfig but those of its [vehicle] and [controller] tables
 SCENARIO_KEYS = tuple(f.name for f in dataclasses.fields(EpisodeConfig) if f.name not in TABLES)
 #: the keys a definition leaves out where they have no effect: the warm-up's length without a warm-up, the
-#: attacker's declared deceleration without a SUMO model to read it, another maneuver's settings
-NO_EFFECT_WHEN_LEFT_OUT = frozenset({"warmup_s", "attacker_declared_decel_mps2"} | {
+#: attacker's declared deceleration without a SUMO model to read it, another maneuver's settings, what the
+#: platoon does at red lights on d4sumo's own roads (they have none)
+NO_EFFECT_WHEN_LEFT_OUT = frozenset({"warmup_s", "attacker_declared_decel_mps2", "signals"} | {
     k for m in MANEUVERS.values() for k in m.settings if k != "maneuver"})

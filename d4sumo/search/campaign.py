@@ -177,11 +177,19 @@ class Campaign:
 
     def with_inputs_of_before(self) -> "Campaign":
         """The campaign as d4sumo 0.16 and before ran it: its road's files without a digest, its traffic entering
-        after the warm-up without insertion checks (`EARLIER_SCENARIO`, `EARLIER_TRAFFIC`)."""
+        after the warm-up without insertion checks, its platoon driving through red lights (`EARLIER_SCENARIO`,
+        `EARLIER_TRAFFIC`)."""
         config = dataclasses.replace(self.config, **EARLIER_SCENARIO)
         if config.traffic is not None:
             config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
         return self if config == self.config else self.replace(config=config)
+
+    def with_lights_of_before(self) -> "Campaign":
+        """The campaign as d4sumo 0.18 and before ran it on a road of one's own: its platoon driving through red
+        lights (`EpisodeConfig.signals`); itself where that is what it does, or it plays on d4sumo's own roads."""
+        if "signals" not in self.config.to_dict()["scenario"]:
+            return self
+        return self.replace(config=dataclasses.replace(self.config, signals="ignore"))
 
     def with_options(self, options: dict) -> "Campaign":
         """The campaign with ``options`` of its optimiser changed (as an earlier version ran it, say)."""

@@ -63,8 +63,14 @@ class Sweep:
 
     def with_inputs_of_before(self) -> "Sweep":
         """The sweep as d4sumo 0.16 and before ran it: its roads' files without a digest, its traffic entering
-        after the warm-up without insertion checks (`EARLIER_SCENARIO`, `EARLIER_TRAFFIC`)."""
+        after the warm-up without insertion checks, its platoons driving through red lights (`EARLIER_SCENARIO`,
+        `EARLIER_TRAFFIC`)."""
         campaigns = tuple(c.with_inputs_of_before() for c in self.campaigns)
+        return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
+
+    def with_lights_of_before(self) -> "Sweep":
+        """The sweep as d4sumo 0.18 and before ran it: the platoon driving through red lights on roads of one's own."""
+        campaigns = tuple(c.with_lights_of_before() for c in self.campaigns)
         return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 
     def with_default_of_before(self) -> "Sweep":

@@ -45,10 +45,13 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
     if theirs["name"] != sweep.name:
         return None
     inputs = sweep.with_inputs_of_before()
+    lights = sweep.with_lights_of_before()
+    lights_keys = ["`signals = \"ignore\"` in [scenario]"] if lights is not sweep else []
     input_keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
                   *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"]
-                    if any(c.config.traffic for c in sweep.campaigns) else [])]
-    for base, keys in [(sweep, []), *([(inputs, input_keys)] if inputs is not sweep else [])]:
+                    if any(c.config.traffic for c in sweep.campaigns) else []), *lights_keys]
+    for base, keys in [(sweep, []), *([(lights, lights_keys)] if lights is not sweep else []),
+                       *([(inputs, input_keys)] if inputs is not sweep else [])]:
         names = list(EARLIER_OPTIONS)
         # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
         for choice in itertools.product(*[(None, *EARLIER_OPTIONS[o]) for o in names]):
@@ -58,8 +61,10 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
                 before = before.as_run_before(optimizer, earlier)
             if (changed or keys) and theirs["fingerprint"] == before.fingerprint():
                 tables = [", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed]
-                version = "d4sumo 0.16 or before, which took a road of one's own as it found it and let traffic enter after " \
-                          "the warm-up unchecked" if keys and not changed else "an earlier d4sumo"
+                version = ("an earlier d4sumo" if changed or not keys else
+                           "d4sumo 0.18 or before, whose platoon drove through red lights" if base is lights else
+                           "d4sumo 0.16 or before, which took a road of one's own as it found it, let traffic enter after "
+                           "the warm-up unchecked and drove the platoon through red lights")
                 wanted = "; ".join([*tables, *([" and ".join(keys)] if keys else [])])
                 return f"It was run by {version}: set {wanted} of the sweep file to go on with it, or use another --db"
         default_before = base.with_default_of_before()

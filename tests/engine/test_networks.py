@@ -55,7 +55,7 @@ def test_a_network_files_signal_plans_that_the_built_road_drops_are_said_once(tm
         network_source(str(net), route=("e2",))  # starts past the light
     notes = [r.getMessage() for r in caplog.records if "traffic light" in r.getMessage()]
     assert len(notes) == 1 and "its 1 traffic light (b) netconvert's default program, not the network's own" in notes[0]
-    assert "do not stop for red" in notes[0] and "keep no signal plans" not in notes[0]  # issue 48: said truly
+    assert "without the programs netconvert writes" in notes[0] and "keep no signal plans" not in notes[0]  # issue 48: said truly
     caplog.clear()
     network_source(str(tmp_path / "r.nod.xml").replace("r.nod.xml", ""))  # the same nodes as a folder: the user's own plan
     assert not [r for r in caplog.records if "traffic light" in r.getMessage()]

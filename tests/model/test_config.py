@@ -135,3 +135,17 @@ def test_an_empty_route_is_refused_not_read_as_no_route():
     with pytest.raises(ConfigError, match=r"^scenario.route: got \[\]; allowed: a list of one edge id or more"):
         EpisodeConfig.from_dict({"scenario": {"route": []}})
     assert EpisodeConfig.from_dict({"scenario": {}}).route == ()
+
+
+def test_what_the_platoon_does_at_red_lights_is_checked_and_stored_only_on_a_road_of_ones_own():
+    from pathlib import Path
+
+    with pytest.raises(ConfigError, match=r"^scenario.signals: got 'stop'; allowed: one of obey, attacker_runs_red, ignore$"):
+        EpisodeConfig(signals="stop")
+    road = str(Path(__file__).resolve().parent.parent.parent / "examples" / "roads" / "three_edges")
+    assert EpisodeConfig(network=road).to_dict()["scenario"]["signals"] == "obey"
+    assert EpisodeConfig(network=road, signals="attacker_runs_red").to_dict()["scenario"]["signals"] == "attacker_runs_red"
+    assert "signals" not in EpisodeConfig(network=road, signals="ignore").to_dict()["scenario"]  # as stored before 0.19
+    # d4sumo's own roads have no lights: one configuration whatever is said, stored without the key
+    assert EpisodeConfig(signals="ignore") == EpisodeConfig()
+    assert "signals" not in EpisodeConfig().to_dict()["scenario"]

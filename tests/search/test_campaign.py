@@ -445,6 +445,25 @@ def test_a_traffic_campaign_an_earlier_version_stored_keeps_its_identity_and_its
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
 
 
+def test_a_campaign_on_a_road_of_ones_own_an_earlier_version_stored_keeps_its_identity_and_drives_through_red():
+    """d4sumo 0.18 and before stored no ``signals``: its platoon drove through red lights, and its campaigns on a
+    road of one's own replay and resume so, under the same key; on d4sumo's own roads (no lights) nothing changed."""
+    from d4sumo.search.store import campaign_key
+
+    road = str(Path(__file__).resolve().parent.parent.parent / "examples" / "roads" / "three_edges")
+    new = Campaign(config=EpisodeConfig(network=road, start="steady"))
+    assert new.definition()["config"]["scenario"]["signals"] == "obey"
+    old = copy.deepcopy(new.definition())
+    del old["config"]["scenario"]["signals"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert stored.config.signals == "ignore" and stored.config == new.with_lights_of_before().config
+    assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
+    shipped = Campaign(config=EpisodeConfig(start="steady"))
+    assert "signals" not in shipped.definition()["config"]["scenario"]
+    assert Campaign.from_definition(shipped.definition(), samples=100) == shipped  # the same campaign, as it ran
+    assert shipped.with_lights_of_before() is shipped
+
+
 @pytest.mark.parametrize("version, removed, kept", [
     ("0.2", ("batch_size", "gp_version"), {"batch_size": 1, "gp_version": 1}),
     ("0.3", ("gp_version",), {"batch_size": 5, "gp_version": 1})])

@@ -1,0 +1,64 @@
+"""The traffic lights along a platoon's route, as its drivers see them each step (`signals.Stop`).
+
+Each junction of the route whose link from the platoon's lane to its lane on the next edge a traffic
+light controls is a signal: its stop line is where that lane ends, a distance along the route (as a car's
+position is: where it started plus SUMO's odometer). Each step, a car whose front bumper is before a stop
+line within `LOOKAHEAD_M` sees that signal's state for its link (SUMO's link state letter); once past the
+line it sees the next one. Only what SUMO says of the lights is read here: what a driver does about them
+is the model's (`model.signals`).
+"""
+
+from __future__ import annotations
+
+from ..model.signals import Stop
+
+#: how far ahead of a car a signal is seen [m]: more than stopping from 45 m/s comfortably takes
+LOOKAHEAD_M = 300.0
+
+
+def route_signals(api, route: tuple[str, ...], path: tuple[int, ...]) -> list[tuple[float, str, int]]:
+    """The signals along the route: (stop line's distance along the route [m], light's id, link index), in order."""
+    links: dict[tuple[str, str], tuple[str, int]] = {}
+    for tls in api.trafficlight.getIDList():
+        for index, controlled in enumerate(api.trafficlight.getControlledLinks(tls)):
+            for into, out, _ in controlled:
+                links.setdefault((into, out), (tls, index))
+    found, along = [], 0.0
+    for k, (edge, to) in enumerate(zip(route, route[1:])):
+        lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
+        along += api.lane.getLength(lane)
+        if (lane, to_lane) in links:
+            found.append((along, *links[lane, to_lane]))
+        via = next((link[4] for link in api.lane.getLinks(lane) if link[0] == to_lane), "")
+        while via:  # the junction's lanes, through an internal junction where there is one
+            along += api.lane.getLength(via)
+            via = next((link[4] for link in api.lane.getLinks(via) if link[0] == to_lane), "")
+    return found
+
+
+class RouteLights:
+    """What each car of one platoon sees of the route's signals, step by step (see the module)."""
+
+    def __init__(self, api, signals: list[tuple[float, str, int]], cars: int):
+        self.signals = signals
+        self.next = [0] * cars  # each car's next signal: cars never drive backwards
+        self.get_state = api.trafficlight.getRedYellowGreenState
+
+    def __call__(self, x: list[float]) -> list[Stop | None]:
+        """The signal each car at positions ``x`` along the route sees, or None (none within reach)."""
+        states: dict[str, str] = {}
+        out: list[Stop | None] = []
+        signals = self.signals
+        for i, front in enumerate(x):
+            j = self.next[i]
+            while j < len(signals) and front > signals[j][0]:
+                j += 1
+            self.next[i] = j
+            if j == len(signals) or signals[j][0] - front > LOOKAHEAD_M:
+                out.append(None)
+                continue
+            line, tls, index = signals[j]
+            if tls not in states:
+                states[tls] = self.get_state(tls)
+            out.append(Stop(j, line - front, states[tls][index]))
+        return out
