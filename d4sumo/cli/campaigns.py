@@ -17,8 +17,8 @@ def _as_earlier_versions_ran(campaign):
     """The campaign as earlier versions of d4sumo ran it (its optimiser, that optimiser's options, its inputs,
     in every combination), each with what differed and the flags that go on with it."""
     inputs = campaign.with_inputs_of_before()
-    lights = campaign.with_lights_of_before()
-    lights_flags = ["--set scenario.signals=ignore"] if lights is not campaign else []
+    lights = campaign.with_inputs_of_0_18()
+    lights_flags = [f"--set {key}={value}" for key, value, _ in campaign.changes_of_0_18()]
     input_flags = [*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
                    *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else []), *lights_flags]
     for base, flags in [(campaign, []), *([(lights, lights_flags)] if lights is not campaign else []),
@@ -34,10 +34,12 @@ def _as_earlier_versions_ran(campaign):
             if (before := base.with_options(earlier)) != campaign:
                 yield before, "as an earlier d4sumo ran it; this starts a new one", [as_set_flags(campaign.optimizer, earlier), *flags]
         if base is lights:
-            yield base, "as d4sumo 0.18 or before ran it (the platoon driving through red lights); this starts a new one", flags
+            what = ", ".join(did for _, _, did in campaign.changes_of_0_18())
+            yield base, f"as d4sumo 0.18 or before ran it ({what}); this starts a new one", flags
         elif base is not campaign:
             yield (base, "as d4sumo 0.16 or before ran it (a road of one's own taken as found, traffic entering after the "
-                         "warm-up unchecked, the platoon driving through red lights); this starts a new one", flags)
+                         "warm-up unchecked, the platoon driving through red lights, demand files one after the other); "
+                         "this starts a new one", flags)
 
 
 def cmd_falsify(args: argparse.Namespace) -> int:

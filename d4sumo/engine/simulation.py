@@ -28,7 +28,7 @@ from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, build_road
-from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_file, traffic_state
+from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +91,7 @@ def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
     """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters.
     Returns the followers' checked vehicle-type file (None when no follower is SUMO-driven)."""
     check_road(config, road)
-    traffic_file(config, road)  # a demand SUMO refuses is refused before any episode runs
+    traffic_files(config, road)  # a demand SUMO refuses is refused before any episode runs
     return followers_file(config, road)
 
 

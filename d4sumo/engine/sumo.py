@@ -29,7 +29,7 @@ from ..model.config import EpisodeConfig
 from ..model.maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, Pair, lane_pairs, maneuver_of, occupied_lanes
 from ..model.carfollowing import beacon_parameters, vehicle_data
 from ..model.platoon import SumoFollower, followers_of
-from ..model.traffic import demand_xml, type_elements
+from ..model.traffic import demand_files_xml, type_elements
 from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary, sumo_home
 from .junctions import JunctionCrossings
@@ -96,20 +96,27 @@ _DEMANDS: dict[tuple, str] = {}  # the traffic's demand text, by what makes it (
 DEMAND_CHECK = 2
 
 
-def traffic_file(config: EpisodeConfig, road: Road) -> Path | None:
-    """The traffic's demand (`traffic.demand_xml`), checked by loading it in SUMO once (cached like the
-    followers' types): a vehicle type SUMO refuses is a ConfigError naming its table, a demand file SUMO
-    refuses (routes over edges the network lacks, say) one naming the file. None without traffic."""
+def traffic_files(config: EpisodeConfig, road: Road) -> list[Path] | None:
+    """The traffic's demand as SUMO's route files (`traffic.demand_files_xml`: one for each demand file and
+    one for d4sumo's flow, which SUMO merges by departure), checked by loading them together in SUMO once
+    (cached like the followers' types): a vehicle type SUMO refuses is a ConfigError naming its table, a
+    demand file SUMO refuses (routes over edges the network lacks, say) one naming the file. None without
+    traffic."""
     if config.traffic is None:
         return None
     # the user's demand files are read and parsed once a version of them, not at every episode
     files = tuple((p, os.stat(p).st_mtime_ns, os.stat(p).st_size) for p in config.traffic.demand if os.path.isfile(p))
     key = (config.traffic, road.route(0), road.through_lanes, config.traffic.warmup_s + config.total_s + 1.0, files)
     if key not in _DEMANDS:
-        _DEMANDS[key] = demand_xml(*key[:4])
-    text = _DEMANDS[key]
-    return _checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: _check_demand(config, road, sumo, tmp),
-                         version=DEMAND_CHECK)
+        _DEMANDS[key] = demand_files_xml(*key[:4])
+    texts = _DEMANDS[key]
+    check = lambda paths: lambda sumo, tmp: _check_demand(config, road, sumo, paths or [tmp])  # noqa: E731
+    if len(texts) == 1:  # (named as before: a campaign's warm-up, named after it, stays where it is cached)
+        return [_checked_file(texts[0], "traffic", "traffic demand", ".rou.xml", check(None), version=DEMAND_CHECK)]
+    parts = [_checked_file(text, "traffic", "traffic demand", ".rou.xml", lambda sumo, tmp: None) for text in texts]
+    # checked together, as SUMO plays them: a file of their names says they passed
+    _checked_file("\n".join(p.name for p in parts), "traffic", "traffic demand", ".together", check(parts), version=DEMAND_CHECK)
+    return parts
 
 
 def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[[str, str], None], version: int = 1) -> Path:
@@ -172,22 +179,25 @@ def _sumo_home_known() -> bool:
     return True
 
 
-def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: str) -> None:
+def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: list) -> None:
+    # played as far as the episodes play it: a flow without an end ends with the simulation, and one that
+    # begins after an earlier end is refused ("ends before its begin time"), which SUMO plays without one
+    horizon = config.traffic.warmup_s + config.total_s + 1.0
     cmd = [sumo, "--net-file", str(road.net_file), "--step-length", repr(config.step_s),
-           "--end", "1", "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+           "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
     message = None
     xsd = Path(sumo_home(), "data", "xsd") if _sumo_home_known() else None
     if config.traffic.types and config.traffic.vehicles_per_hour is not None and xsd is not None and xsd.is_dir():
         # the types first, alone, against SUMO's schema (found in SUMO_HOME): a misspelt attribute
         # ("speedfactor") is otherwise taken without a word
-        types = f"{demand}.types.rou.xml"
+        types = f"{demand[-1]}.types.rou.xml"
         try:
             Path(types).write_text("\n".join([_VALIDATED_ROUTES, *type_elements(config.traffic), "</routes>"]) + "\n")
             message = _sumo_errors(cmd + ["--route-files", types], "the traffic's vehicle types",
                                    env={**os.environ, "SUMO_HOME": sumo_home()})
         finally:
             Path(types).unlink(missing_ok=True)
-    message = message or _sumo_errors(cmd + ["--route-files", demand], "the traffic's demand")
+    message = message or _sumo_errors(cmd + ["--route-files", ",".join(str(p) for p in demand)], "the traffic's demand")
     if message is None:
         return
     named = re.search(r"[Aa]ttribute '?(\w+)'?", message)
@@ -222,10 +232,10 @@ def _check_types(config: EpisodeConfig, road: Road, sumo: str, types_file: str) 
 
 
 def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None = None, binary: str = "sumo", *,
-                 types_file: Path | None = None, demand_file: Path | None = None,
+                 types_file: Path | None = None, demand_files: list[Path] | None = None,
                  state_file: Path | None = None) -> list[str]:
     """The SUMO command line, as one explicit list; ``types_file``: the followers' vehicle types, as
-    `check_episode` returns them; ``demand_file``: the traffic's (`traffic_file`), to warm it up;
+    `check_episode` returns them; ``demand_files``: the traffic's (`traffic_files`), to warm it up;
     ``state_file``: the warmed-up traffic (`traffic_state`), to play an episode in it."""
     cmd = [
         binary,
@@ -248,8 +258,8 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     ]
     if types_file is not None:
         cmd += ["--additional-files", str(types_file)]
-    if demand_file is not None:
-        cmd += ["--route-files", str(demand_file)]
+    if demand_files:  # SUMO merges them by departure
+        cmd += ["--route-files", ",".join(str(p) for p in demand_files)]
     if state_file is not None:  # the traffic's vehicles, flows and random streams at the end of its warm-up
         cmd += ["--load-state", str(state_file)]
     if config.traffic is not None:  # a traffic car queued to enter must not hold the platoon back in the queue
@@ -447,9 +457,9 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     neither is the platoon's doing."""
     if config.traffic is None:
         return None
-    demand = traffic_file(config, road)
+    demands = traffic_files(config, road)
     sumo = sumo_binary("sumo")
-    key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, demand.name,
+    key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, ",".join(d.name for d in demands),
                      str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s),
                      *(["insertion-checks", "a process of its own"] if config.traffic.insertion_checks else [])])
     folder = Path(default_cache_dir()).parent / "traffic-states"
@@ -462,11 +472,11 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
         os.close(fd)
     except OSError as exc:
         raise SumoError(f"cannot write the traffic's warm-up under {folder}: {exc.strerror or exc}") from None
-    cmd = sumo_command(config, road, demand_file=demand) + ["--save-state.rng", "true", "--save-state.precision", "17"]
+    cmd = sumo_command(config, road, demand_files=demands) + ["--save-state.rng", "true", "--save-state.precision", "17"]
     try:
         _warm_up_alone(cmd, config, road, tmp)
         if config.traffic.insertion_checks:
-            _keep_insertion_checks(Path(tmp), demand)
+            _keep_insertion_checks(Path(tmp), demands)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -522,14 +532,14 @@ def _warm_up_here(given: str, said: str) -> None:
     Path(said).write_bytes(pickle.dumps(outcome))
 
 
-def _keep_insertion_checks(state: Path, demand: Path) -> None:
+def _keep_insertion_checks(state: Path, demands: list[Path]) -> None:
     """SUMO's saved state drops what the demand says of its flows' and vehicles' insertion checks (1.28), and
     the episode inserts with none (the platoon's cars are placed where they are put): each flow and vehicle
     in the state is given back its demand's (`traffic.demand_xml`: all of them where a user's sets none; a
     flow's vehicle, its flow's), so that a car entering after the warm-up does not land on the one before it."""
     import xml.etree.ElementTree as ET
 
-    checks = {e.get("id"): e.get("insertionChecks", "all") for e in ET.parse(demand).getroot() if e.get("id")}
+    checks = {e.get("id"): e.get("insertionChecks", "all") for demand in demands for e in ET.parse(demand).getroot() if e.get("id")}
 
     def given(match: re.Match) -> bytes:
         vid = xml_unescape(match.group(1).decode())

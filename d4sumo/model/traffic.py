@@ -49,7 +49,7 @@ TRAFFIC_ID = "traffic"
 #: a vehicle type's name: SUMO's ids allow more, a flow's id is built from it
 _TYPE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 #: what a stored definition's [traffic] table without a key held: the traffic as that version played it
-EARLIER_TRAFFIC = {"insertion_checks": False}
+EARLIER_TRAFFIC = {"insertion_checks": False, "merge_by_departure": False}
 #: <vType> attributes d4sumo sets itself (the type's id)
 _OWN_ATTRIBUTES = ("id",)
 
@@ -77,6 +77,10 @@ class TrafficParams:
     #: checks, as in the warm-up (false: with none, as d4sumo 0.16 and before played it: a car then entered
     #: onto the one before it; their stored campaigns replay so)
     insertion_checks: bool = True
+    #: several demand files (and d4sumo's flow beside them) are SUMO's route files each, which SUMO merges by
+    #: departure, as ``sumo -r a,b`` does (false: one after the other in one file, as d4sumo 0.18 and before
+    #: played them: the second file's vehicles entered once the first's had; their stored campaigns replay so)
+    merge_by_departure: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -97,10 +101,12 @@ class TrafficParams:
         fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
         fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
         fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
-        for name in ("per_sample", "insertion_checks"):
+        for name in ("per_sample", "insertion_checks", "merge_by_departure"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"traffic.{name}", getattr(self, name), "true or false")
         fix("types", _checked_types(self.types))
+        if not self.merges:  # one route file: nothing to merge, one configuration whatever it says
+            fix("merge_by_departure", True)
 
     @classmethod
     def from_table(cls, table: Any) -> "TrafficParams":
@@ -120,9 +126,16 @@ class TrafficParams:
             del out["per_sample"]
         if not self.insertion_checks:  # as campaigns stored before it was a key (`EARLIER_TRAFFIC`) hold it
             del out["insertion_checks"]
+        if not self.merge_by_departure or not self.merges:  # likewise; and without effect where there is one file
+            del out["merge_by_departure"]
         if self.types and self.vehicles_per_hour is not None:
             out["types"] = {name: dict(attributes) for name, attributes in self.types}
         return out
+
+    @property
+    def merges(self) -> bool:
+        """Whether the traffic is more than one route file: several demand files, or one beside d4sumo's flow."""
+        return len(self.demand) + (self.vehicles_per_hour is not None) > 1
 
     def for_sample(self, index: int) -> "TrafficParams":
         """The traffic sample ``index`` of a campaign meets: this one, or with ``per_sample`` its own, seeded
@@ -224,19 +237,44 @@ def user_demand_xml(path: str) -> list[str]:
 
 
 def demand_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequence[int], end_s: float) -> str:
-    """The traffic's demand as SUMO reads it (one route file): the user's demand files' elements
-    (`user_demand_xml`), then d4sumo's flow where there is one: its vehicle types as one distribution, its
-    route (the platoon's), and a flow per lane of the first edge (``lanes``, SUMO's indices) from t = 0 to
-    ``end_s``. Every traffic vehicle's id starts with `TRAFFIC_ID`. A demand file whose content is not
-    the campaign's (``params.demand_sha256``) is refused."""
+    """The traffic's demand in one route file, as d4sumo 0.18 and before wrote it: the user's demand files'
+    elements one file after the other, then d4sumo's flow (`demand_files_xml`)."""
+    _check_demand_content(params)
+    return _routes([line for path in params.demand for line in _user_lines(path)]
+                   + _flow_lines(params, route_edges, lanes, end_s))
+
+
+def demand_files_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequence[int], end_s: float) -> list[str]:
+    """The traffic's demand as SUMO reads it: one route file for each of the user's demand files
+    (`user_demand_xml`), which SUMO merges by departure as ``sumo -r a,b`` does, then one of d4sumo's flow
+    where there is one: its vehicle types as one distribution, its route (the platoon's), and a flow per lane
+    of the first edge (``lanes``, SUMO's indices) from t = 0 to ``end_s``. Without ``merge_by_departure``, all
+    of it in one file, one after the other (`demand_xml`). Every traffic vehicle's id starts with
+    `TRAFFIC_ID`. A demand file whose content is not the campaign's (``params.demand_sha256``) is refused."""
+    if not params.merge_by_departure or not params.merges:
+        return [demand_xml(params, route_edges, lanes, end_s)]
+    _check_demand_content(params)
+    files = [_routes(_user_lines(path)) for path in params.demand]
+    flow = _flow_lines(params, route_edges, lanes, end_s)
+    return files + ([_routes(flow)] if flow else [])
+
+
+def _check_demand_content(params: TrafficParams) -> None:
     if params.demand and demand_digest(params.demand) != params.demand_sha256:
         raise ConfigError("traffic.demand", list(params.demand), "the demand files this campaign was run with (their "
                                                                   "content has changed since: other traffic)")
-    lines = ["<routes>"] + [f"    {element}" for path in params.demand for element in user_demand_xml(path)]
+
+
+def _user_lines(path: str) -> list[str]:
+    return [f"    {element}" for element in user_demand_xml(path)]
+
+
+def _flow_lines(params: TrafficParams, route_edges: Sequence[str], lanes: Sequence[int], end_s: float) -> list[str]:
+    """d4sumo's flow, where there is one, as the lines of a route file."""
     if params.vehicles_per_hour is None:
-        return "\n".join([*lines, "</routes>"]) + "\n"
+        return []
     shares = params.type_shares
-    lines += [f"    {element}" for element in type_elements(params)]
+    lines = [f"    {element}" for element in type_elements(params)]
     distribution = " ".join(f"{TRAFFIC_ID}_{name}" for name, _, _ in shares)
     probabilities = " ".join(repr(p) for _, p, _ in shares)
     lines.append(f'    <vTypeDistribution id="{TRAFFIC_ID}" vTypes="{distribution}" probabilities="{probabilities}"/>')
@@ -246,8 +284,11 @@ def demand_xml(params: TrafficParams, route_edges: Sequence[str], lanes: Sequenc
         lines.append(f'    <flow id="{TRAFFIC_ID}.{lane}" type="{TRAFFIC_ID}" route="{TRAFFIC_ID}" begin="0" end={quoteattr(repr(end_s))} '
                      f'period="exp({params.vehicles_per_hour / 3600.0!r})" departLane="{lane}" departPos="base" '
                      f'departSpeed="max" insertionChecks="all"/>')
-    lines.append("</routes>")
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _routes(lines: list[str]) -> str:
+    return "\n".join(["<routes>", *lines, "</routes>"]) + "\n"
 
 
 def type_elements(params: TrafficParams) -> list[str]:

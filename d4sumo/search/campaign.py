@@ -184,12 +184,25 @@ class Campaign:
             config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
         return self if config == self.config else self.replace(config=config)
 
-    def with_lights_of_before(self) -> "Campaign":
-        """The campaign as d4sumo 0.18 and before ran it on a road of one's own: its platoon driving through red
-        lights (`EpisodeConfig.signals`); itself where that is what it does, or it plays on d4sumo's own roads."""
-        if "signals" not in self.config.to_dict()["scenario"]:
-            return self
-        return self.replace(config=dataclasses.replace(self.config, signals="ignore"))
+    def with_inputs_of_0_18(self) -> "Campaign":
+        """The campaign as d4sumo 0.18 and before ran it: its platoon driving through red lights on a road of one's
+        own, its demand files one after the other (`EpisodeConfig.signals`, `TrafficParams.merge_by_departure`);
+        itself where that is what it does."""
+        config = self.config
+        if "signals" in config.to_dict()["scenario"]:
+            config = dataclasses.replace(config, signals="ignore")
+        if config.traffic is not None and config.traffic.merges and config.traffic.merge_by_departure:
+            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, merge_by_departure=False))
+        return self if config == self.config else self.replace(config=config)
+
+    def changes_of_0_18(self) -> list[tuple[str, str, str]]:
+        """What `with_inputs_of_0_18` changes: (the key, its value then, what it did), each."""
+        changes = []
+        if "signals" in self.config.to_dict()["scenario"]:
+            changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
+        if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:
+            changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
+        return changes
 
     def with_options(self, options: dict) -> "Campaign":
         """The campaign with ``options`` of its optimiser changed (as an earlier version ran it, say)."""

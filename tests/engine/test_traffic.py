@@ -272,10 +272,10 @@ def test_a_traffic_type_an_earlier_check_passed_is_checked_again(tmp_path, monke
     with monkeypatch.context() as earlier:  # as 0.16 checked it: the types not against SUMO's schema
         earlier.setattr(sumo, "DEMAND_CHECK", 1)
         earlier.setattr(sumo, "_check_demand", lambda *args: None)
-        assert sumo.traffic_file(config, road).is_file()
+        assert all(f.is_file() for f in sumo.traffic_files(config, road))
     sumo._CHECKED.clear()
     with pytest.raises(ConfigError) as info:
-        sumo.traffic_file(config, road)
+        sumo.traffic_files(config, road)
     assert info.value.field == "traffic.types.truck.speedfactor"
 
 
@@ -325,3 +325,40 @@ def test_a_lane_changing_attacker_among_traffic_on_a_road_of_several_edges_gets_
         check_road(config, road)
     assert info.value.field == "scenario.maneuver" and "a road of one edge" in info.value.allowed
     check_road(dataclasses.replace(config, maneuver="inlane"), road)  # in lane it plays there
+
+
+@pytest.mark.parametrize("merged", [True, False])
+def test_several_demand_files_are_merged_by_departure_as_sumo_merges_its_route_files(tmp_path, merged):
+    """Issue 48: two demand files of vehicles each sorted by departure were written one after the other into one
+    route file, which SUMO reads ahead by departure: the second file's vehicles entered only once the first's
+    had (none of them in a 600 s demand's first 80 s); as ``sumo -r a,b`` does, both drive from the start.
+    ``merge_by_departure = false`` plays them as d4sumo 0.18 did (its stored campaigns)."""
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "corridor"
+    for name, edges, every in (("a", "gneE20 gneE19", 2), ("b", "gneE23 gneE16", 3)):
+        (tmp_path / f"{name}.rou.xml").write_text("<routes>\n" + "".join(
+            f'    <vehicle id="{name}{k}" depart="{k * every}"><route edges="{edges}"/></vehicle>\n' for k in range(600 // every))
+            + "</routes>\n")
+    config = EpisodeConfig(network=str(game / "corridor.net.xml"), route=("gneE27", "gneE25", "gneE18", "gneE29"),
+                           start="steady", speed_mps=13.0, duration_s=20.0, signals="ignore",
+                           traffic={"demand": [str(tmp_path / "a.rou.xml"), str(tmp_path / "b.rou.xml")], "warmup_s": 60.0,
+                                    "merge_by_departure": merged})
+    assert ("merge_by_departure" in config.to_dict()["traffic"]) is merged  # as 0.18 stored it: no such key
+    simulate(config, np.full(config.steps, np.nan), fcd_path=tmp_path / "fcd.xml")
+    seen = {v.id.split(".")[1][0] for _, v in parse_fast_nested(str(tmp_path / "fcd.xml"), "timestep", ["time"], "vehicle", ["id"])
+            if v.id.startswith("traffic.")}
+    assert seen == ({"a", "b"} if merged else {"a"})
+
+
+def test_a_demand_whose_flows_have_no_end_plays_as_sumo_plays_it():
+    """Issue 48: SUMO's corridor example's own demand, flows without an end beginning after 1 s, was refused
+    ("Flow 'traffic.W30' ends before its begin time"): the check loaded it with SUMO's end at 1 s, which a flow
+    without one takes for its own. SUMO plays the file; so does d4sumo."""
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "corridor"
+    config = EpisodeConfig(network=str(game / "corridor.net.xml"), route=("gneE27", "gneE25", "gneE18", "gneE29"),
+                           start="steady", speed_mps=13.0, duration_s=20.0, traffic={"demand": str(game / "corridor.rou.xml")})
+    episode = simulate(config, np.full(config.steps, np.nan))
+    assert "traffic-v0" in episode.min_gaps  # traffic ahead of the attacker: the demand drives

@@ -456,12 +456,12 @@ def test_a_campaign_on_a_road_of_ones_own_an_earlier_version_stored_keeps_its_id
     old = copy.deepcopy(new.definition())
     del old["config"]["scenario"]["signals"]
     stored = Campaign.from_definition(old, samples=12)
-    assert stored.config.signals == "ignore" and stored.config == new.with_lights_of_before().config
+    assert stored.config.signals == "ignore" and stored.config == new.with_inputs_of_0_18().config
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
     shipped = Campaign(config=EpisodeConfig(start="steady"))
     assert "signals" not in shipped.definition()["config"]["scenario"]
     assert Campaign.from_definition(shipped.definition(), samples=100) == shipped  # the same campaign, as it ran
-    assert shipped.with_lights_of_before() is shipped
+    assert shipped.with_inputs_of_0_18() is shipped
 
 
 @pytest.mark.parametrize("version, removed, kept", [
