@@ -60,7 +60,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                              maneuver=config.maneuver, traffic=config.traffic is not None)  # as a campaign scores
     fcd = check_output_file("--fcd", args.fcd)
     check_display(args.gui)
-    road = build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
+    road = build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network, given=config.network_given)
     plan = episode_plan(family, params, config)
     episode = simulate(config, plan, road=road, fcd_path=fcd, gui=args.gui)
     robustness = spec.robustness(episode.trace) if spec else None

@@ -146,9 +146,17 @@ class NetworkSource:
     edges_xml: bytes
     connections_xml: bytes = b""
     types_xml: bytes = b""
+    #: a network file run as given (`EpisodeConfig.rebuild` false): its content, uncompressed; then nothing above
+    net_xml: bytes = b""
+
+    @property
+    def given(self) -> bool:
+        return bool(self.net_xml)
 
     @property
     def digest(self) -> str:
+        if self.net_xml:
+            return hashlib.sha256(self.net_xml).hexdigest()[:16]
         parts = [self.nodes_xml, self.edges_xml] + ([self.connections_xml, self.types_xml]
                                                    if self.connections_xml or self.types_xml else [])
         return hashlib.sha256(b"\0".join(parts)).hexdigest()[:16]
@@ -164,10 +172,13 @@ class NetworkSource:
             raise ConfigError("scenario.network", self.name, f"node and edge XML that parses ({exc})") from None
 
 
-def network_source(name: str, root: Path | None = None, route: tuple[str, ...] = ()) -> NetworkSource:
+def network_source(name: str, root: Path | None = None, route: tuple[str, ...] = (), given: bool = False) -> NetworkSource:
     """The XML of a named variant, of a folder given directly, or of a lone network file (netgenerate's,
     an OSM import's, netconvert's), taken back to plain XML by netconvert; with a ``route``, only its
-    edges (the road the platoon drives, and each copy of it in a batch)."""
+    edges (the road the platoon drives, and each copy of it in a batch). ``given``: a network file as it
+    is, for SUMO to run (its route is a way through it)."""
+    if given:
+        return _given_source(name, root)
     source = _network_source(name, root)
     source = _restrict(source, tuple(route)) if route else source
     if scenario_folder(name, root).is_file():
@@ -210,6 +221,26 @@ def _network_source(name: str, root: Path | None = None) -> NetworkSource:
         raise ConfigError("scenario.network", name, f"a readable folder ({exc.strerror}: {exc.filename})") from None
 
 
+def _given_source(name: str, root: Path | None = None) -> NetworkSource:
+    """A network file as SUMO runs it, its content read once a file version (uncompressed)."""
+    import gzip
+
+    net_file = scenario_folder(name, root)
+    if not net_file.is_file():
+        raise ConfigError("scenario.network", name, "a network file (*.net.xml or *.net.xml.gz) to run as given")
+    stat = net_file.stat()
+    key = (str(net_file), stat.st_size, stat.st_mtime_ns, "given")
+    if key not in _PLAIN:
+        try:
+            data = net_file.read_bytes()
+            if data[:2] == b"\x1f\x8b":
+                data = gzip.decompress(data)
+        except (OSError, EOFError) as exc:
+            raise ConfigError("scenario.network", name, f"a readable network file ({exc})") from None
+        _PLAIN[key] = NetworkSource(name, _stem(net_file.name), b"", b"", net_xml=data)
+    return dataclasses.replace(_PLAIN[key], name=name)
+
+
 def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
     """The route's edges alone, with their nodes and the connections from each to the next."""
     from xml.etree import ElementTree as ET
@@ -240,7 +271,7 @@ def _restrict(source: NetworkSource, route: tuple[str, ...]) -> NetworkSource:
                          source.types_xml)
 
 
-_PLAIN: dict[tuple[str, int, int], NetworkSource] = {}  # a network file, by path, size and time -> its plain XML
+_PLAIN: dict[tuple, NetworkSource] = {}  # a network file, by path, size and time -> its plain XML (or itself, given)
 
 
 def _stem(file_name: str) -> str:

@@ -102,14 +102,16 @@ def default_cache_dir() -> Path:
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,
                netconvert: str | None = None, route: tuple[str, ...] = (), lane: int | None = None,
-               whole: bool = False) -> Road:
+               whole: bool = False, given: bool = False) -> Road:
     """Build (or take from the cache) the network of a variant and describe its road (with a ``route``:
     the road of those edges, which must lead on one to the next) as the platoon drives it from ``lane``
     of the first edge (none: the rightmost lane that leads on through the route). ``whole``: the network
     is built whole, every way of it, the route's edges the road through it (traffic of a user's demand
-    drives the other ways too); else it is the route's edges alone."""
-    whole = whole and bool(route)
-    source = name if isinstance(name, NetworkSource) else network_source(name, root, () if whole else route)
+    drives the other ways too); else it is the route's edges alone. ``given``: a network file SUMO runs as it
+    is (`EpisodeConfig.rebuild`), whole."""
+    given = given or isinstance(name, NetworkSource) and name.given
+    whole = (whole or given) and bool(route)
+    source = name if isinstance(name, NetworkSource) else network_source(name, root, () if whole else route, given=given)
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     net_file = cache / f"{source.stem}-{source.digest}.net.xml"
     info_file = (net_file.with_suffix(f".{hashlib.sha256(' '.join(route).encode()).hexdigest()[:12]}.json") if whole
@@ -172,6 +174,13 @@ def _with_earlier_keys(info: dict) -> dict:
 
 
 def _build(source: NetworkSource, net_file: Path, netconvert: str | None = None) -> None:
+    if source.given:  # the network file itself, kept in the cache by its content
+        net_file.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=net_file.parent, suffix=".partial")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(source.net_xml)
+        os.replace(tmp, net_file)
+        return
     build_net(net_file, source.name, source.nodes_xml, source.edges_xml, source.connections_xml, source.types_xml,
               binary=netconvert)
 
@@ -181,7 +190,7 @@ MAX_COPIES = 64
 
 
 def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None,
-               route: tuple[str, ...] = (), lane: int | None = None) -> Road:
+               route: tuple[str, ...] = (), lane: int | None = None, given: bool = False) -> Road:
     """The road of a variant ``copies`` times side by side, apart and unconnected, each copy's edges
     named with `copy_prefix`: the platoons of a batch share one SUMO instance and never meet. Copies are
     rounded up to a power of two (fewer networks to build and cache). Each copy is the variant's road
@@ -190,6 +199,9 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
     play one at a time."""
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies: got {copies}; allowed: 1 .. {MAX_COPIES}")
+    if given or isinstance(name, NetworkSource) and name.given:  # the network as it is has no copies: one at a time
+        road = build_road(name, root=root, cache_dir=cache_dir, route=route, lane=lane, given=True)
+        return road if copies == 1 else dataclasses.replace(road, copies_unlike=True)
     source = name if isinstance(name, NetworkSource) else network_source(name, root, route)
     road = build_road(source, cache_dir=cache_dir, route=route, lane=lane)
     if copies == 1:

@@ -113,7 +113,8 @@ def simulate(
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
     plan = checked_plan(config, attack)
-    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
+    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network,
+                              given=config.network_given)
     types_file = check_episode(config, road)
     with fcd_file(fcd_path) as part:
         with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
@@ -220,7 +221,8 @@ def shares_sumo(config: EpisodeConfig) -> bool:
 
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
-    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network)
+    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network,
+                              given=config.network_given)
     check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):
@@ -261,7 +263,8 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     distinct = list({id(c): c for c in configs}.values())
     batched = shares_sumo(config)
     if batched and (road is None or road.copies < len(plans) and not road.copies_unlike):
-        road = batch_road(config.network, len(plans), route=config.route, lane=config.lane)  # alone where copies differ
+        road = batch_road(config.network, len(plans), route=config.route, lane=config.lane,  # alone where copies differ
+                          given=config.network_given)
     if not batched or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:

@@ -179,6 +179,9 @@ class EpisodeConfig:
     #: ("obey"); the attacker runs red, as part of its attack, and the followers stop ("attacker_runs_red");
     #: or every car of the platoon drives through, as d4sumo 0.18 and before did ("ignore")
     signals: str = "obey"
+    #: a network file (*.net.xml) taken back to plain XML and rebuilt by netconvert, as d4sumo 0.18 and before did
+    #: (its signal programmes netconvert's defaults, its coordinates moved); false: SUMO runs the file as given
+    rebuild: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -204,6 +207,10 @@ class EpisodeConfig:
             raise ConfigError("scenario.signals", self.signals, f"one of {', '.join(SIGNAL_RULES)}")
         if not is_network_path(self.network):  # d4sumo's own roads have no traffic lights: one configuration, whatever it says
             fix("signals", "obey")
+        if not isinstance(self.rebuild, bool):
+            raise ConfigError("scenario.rebuild", self.rebuild, "true or false")
+        if not self.network.endswith(NETWORK_FILE_SUFFIXES):  # node and edge files are built by netconvert: nothing else to do
+            fix("rebuild", True)
         fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
         fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
         fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
@@ -411,9 +418,15 @@ class EpisodeConfig:
 
     @property
     def whole_network(self) -> bool:
-        """Whether the road is the route through the network built whole (`scenarios.build_road`): a user's
-        traffic demand drives its other ways too. Else a route's edges alone are the road."""
-        return bool(self.route) and self.traffic is not None and bool(self.traffic.demand)
+        """Whether the road is the route through the network whole (`scenarios.build_road`): a network file run
+        as given, or a user's traffic demand that drives its other ways too. Else a route's edges alone are the road."""
+        return bool(self.route) and (self.network_given or self.traffic is not None and bool(self.traffic.demand))
+
+    @property
+    def network_given(self) -> bool:
+        """Whether SUMO runs the network file as given (`rebuild`): its signal programmes, connections,
+        priorities, coordinates and geo-reference; a route through it, the whole network around."""
+        return not self.rebuild
 
     @property
     def world_label(self) -> str:
@@ -453,6 +466,8 @@ class EpisodeConfig:
         # before it was a key (`EARLIER_SCENARIO`) hold
         if not is_network_path(self.network) or self.signals == "ignore":
             del scenario["signals"]
+        if self.rebuild:  # what campaigns stored before it was a key hold, and all a road of node and edge files does
+            del scenario["rebuild"]
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         vehicle = self.vehicle.to_dict()
@@ -528,7 +543,7 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 #: what a stored definition's [scenario] table without a key held: the scenario as that version played it
-EARLIER_SCENARIO = {"network_sha256": "", "signals": "ignore"}
+EARLIER_SCENARIO = {"network_sha256": "", "signals": "ignore", "rebuild": True}
 #: what the platoon does at a red light (`EpisodeConfig.signals`)
 SIGNAL_RULES = ("obey", "attacker_runs_red", "ignore")
 #: [scenario] keys that identify a campaign's inputs (its road's files' digest), not describe its scenario

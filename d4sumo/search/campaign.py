@@ -185,12 +185,14 @@ class Campaign:
         return self if config == self.config else self.replace(config=config)
 
     def with_inputs_of_0_18(self) -> "Campaign":
-        """The campaign as d4sumo 0.18 and before ran it: its platoon driving through red lights on a road of one's
-        own, its demand files one after the other (`EpisodeConfig.signals`, `TrafficParams.merge_by_departure`);
-        itself where that is what it does."""
+        """The campaign as d4sumo 0.18 and before ran it: its network file rebuilt from plain XML, its platoon driving
+        through red lights on a road of one's own, its demand files one after the other (`EpisodeConfig.rebuild`,
+        `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`); itself where that is what it does."""
         config = self.config
         if "signals" in config.to_dict()["scenario"]:
             config = dataclasses.replace(config, signals="ignore")
+        if not config.rebuild:
+            config = dataclasses.replace(config, rebuild=True)
         if config.traffic is not None and config.traffic.merges and config.traffic.merge_by_departure:
             config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, merge_by_departure=False))
         return self if config == self.config else self.replace(config=config)
@@ -198,6 +200,8 @@ class Campaign:
     def changes_of_0_18(self) -> list[tuple[str, str, str]]:
         """What `with_inputs_of_0_18` changes: (the key, its value then, what it did), each."""
         changes = []
+        if not self.config.rebuild:
+            changes.append(("scenario.rebuild", "true", "its network file rebuilt from plain XML"))
         if "signals" in self.config.to_dict()["scenario"]:
             changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
         if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:

@@ -33,14 +33,14 @@ def campaign_network(config: EpisodeConfig) -> NetworkSource | str:
     traffic demand drives its other ways (`EpisodeConfig.whole_network`)."""
     if not config.route:
         return config.network
-    return network_source(config.network, route=() if config.whole_network else config.route)
+    return network_source(config.network, route=() if config.whole_network else config.route, given=config.network_given)
 
 
 def campaign_road(network: NetworkSource | str, config: EpisodeConfig) -> Road:
     """The road a campaign's episodes play alone on, from `campaign_network`'s ``network``."""
     if config.whole_network:
-        return build_road(network, route=config.route, lane=config.lane, whole=True)
-    return build_road(network, lane=config.lane)
+        return build_road(network, route=config.route, lane=config.lane, whole=True, given=config.network_given)
+    return build_road(network, lane=config.lane, given=config.network_given)
 
 
 class Evaluator:
@@ -90,7 +90,9 @@ class Evaluator:
     def batch_road(self, episodes: int) -> Road:
         """The road with at least this many copies side by side (built once, then grown as needed)."""
         if self._batch_road is None or self._batch_road.copies < episodes and not self._batch_road.copies_unlike:
-            self._batch_road = batch_road(self.network, episodes, lane=self.campaign.config.lane)
+            config = self.campaign.config  # (a network whole is driven along the route; else the route is all of it)
+            self._batch_road = batch_road(self.network, episodes, lane=config.lane, given=config.network_given,
+                                          route=config.route if config.whole_network else ())
         return self._batch_road
 
     def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:

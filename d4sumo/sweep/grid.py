@@ -142,10 +142,10 @@ class Sweep:
         """Build every road and check every campaign fits it, and every formula parses: before running."""
         roads = {}
         for c in self.campaigns:
-            key = c.config.network, c.config.route, c.config.lane, c.config.whole_network  # whole: a demand drives it all
+            key = c.config.network, c.config.route, c.config.lane, c.config.whole_network, c.config.network_given  # whole: a demand drives it all
             if key not in roads:
                 roads[key] = build_road(c.config.network, route=c.config.route, lane=c.config.lane,
-                                         whole=c.config.whole_network)
+                                         whole=c.config.whole_network, given=c.config.network_given)
             check_episode(c.config, roads[key])
             check_traffic(c.config, roads[key])
         seen = set()

@@ -153,9 +153,10 @@ def run_sweep(
             cid = store.open_campaign(c.definition(), c.samples, sweep.name)
             stored = stored_results(store, cid, c.samples)
             if len(stored) < c.samples:
-                key = c.config.network, c.config.route, c.config.whole_network
+                key = c.config.network, c.config.route, c.config.whole_network, c.config.network_given
                 if key not in sources:
-                    sources[key] = network_source(c.config.network, route=() if c.config.whole_network else c.config.route)
+                    sources[key] = network_source(c.config.network, route=() if c.config.whole_network else c.config.route,
+                                                  given=c.config.network_given)
                 fmus = shipment(c.config) if client is not None else ()  # local workers see the client's files
                 todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch, fmus=fmus))
         total = sweep.samples

@@ -81,3 +81,64 @@ def test_a_compressed_network_file_is_the_network_it_holds(tmp_path):
     a, b = (simulate(EpisodeConfig(network=str(p), start="steady"), u) for p in (plain, packed))
     assert a.outcome == b.outcome and all(np.array_equal(a.trace[k], b.trace[k]) for k in a.trace.names)
     assert network_source(str(packed)).stem == "three"
+
+
+@pytest.mark.sumo
+def test_a_network_file_runs_as_given_its_signal_programmes_and_coordinates_kept(tmp_path, caplog):
+    """Issue 48: a network file was taken back to plain XML and rebuilt by netconvert: its signal programmes
+    became netconvert's defaults (SUMO's corridor example's gneJ12: y3 / r3 / G10005 in the file, 42 / 3 / 42 / 3
+    in d4sumo) and its coordinates moved. SUMO now runs the file itself; ``rebuild = true`` plays it as 0.18 did."""
+    import gzip
+    from xml.etree import ElementTree as ET
+
+    import numpy as np
+    from sumolib.xml import parse_fast_nested
+
+    from d4sumo.engine.scenarios import build_road
+    from d4sumo.engine.simulation import simulate
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.sumohome import sumo_home
+
+    net = Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml"
+    route = ("gneE27", "gneE25", "gneE18", "gneE29")
+    given = EpisodeConfig(network=str(net), route=route, start="steady", speed_mps=13.0, duration_s=20.0)
+    assert given.network_given and given.to_dict()["scenario"]["rebuild"] is False
+    with caplog.at_level("WARNING"):
+        road = build_road(given.network, route=route, whole=given.whole_network, given=True)
+    assert road.net_file.read_bytes() == net.read_bytes()  # the file itself
+    assert not [r for r in caplog.records if "traffic light" in r.getMessage()]  # nothing to say: its own programmes
+    programme = lambda f: [p.get("duration") for p in ET.parse(f).getroot().find("tlLogic[@id='gneJ12']")]  # noqa: E731
+    rebuilt = build_road(str(net), route=route)
+    assert programme(road.net_file) == ["3", "3", "10005", "3", "3", "10005"][:len(programme(road.net_file))]
+    assert programme(rebuilt.net_file) != programme(road.net_file)
+    simulate(given, np.full(given.steps, np.nan), road=road, fcd_path=tmp_path / "fcd.xml")
+    first = next(v for _, v in parse_fast_nested(str(tmp_path / "fcd.xml"), "timestep", ["time"], "vehicle", ["id", "x", "y"]))
+    lane = ET.parse(net).getroot().find("edge[@id='gneE27']/lane")
+    start = [float(c) for c in lane.get("shape").split()[0].split(",")]
+    assert float(first.y) == pytest.approx(start[1])  # the file's own coordinates (its lane runs along y = 1.6)
+    assert 207.0 <= float(first.x) <= start[0]
+    # compressed, the same file
+    packed = tmp_path / "corridor.net.xml.gz"
+    packed.write_bytes(gzip.compress(net.read_bytes()))
+    assert build_road(str(packed), route=route, given=True).net_file.read_bytes() == net.read_bytes()
+    assert EpisodeConfig(network=str(net), rebuild=True).to_dict()["scenario"].get("rebuild") is None  # as 0.18 stored it
+
+
+@pytest.mark.sumo
+def test_a_batch_on_a_network_as_given_plays_its_episodes_one_at_a_time_each_as_alone():
+    import numpy as np
+
+    from d4sumo.engine.simulation import simulate, simulate_batch
+    from d4sumo.model.attacks import make_attack
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.model.maneuvers import attack_plan
+    from d4sumo.sumohome import sumo_home
+
+    net = Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml"
+    config = EpisodeConfig(network=str(net), route=("gneE27", "gneE25", "gneE18", "gneE29"), start="steady",
+                           speed_mps=13.0, duration_s=30.0)
+    plans = [attack_plan(make_attack("knots"), knots, config) for knots in ([0.6] * 9, [-0.8, 0.9] * 4 + [0.0], [0.1] * 9)]
+    for batched, plan in zip(simulate_batch(config, plans), plans):
+        alone = simulate(config, plan)
+        assert batched.outcome == alone.outcome
+        assert all(np.array_equal(batched.trace[n], alone.trace[n]) for n in alone.trace.names)

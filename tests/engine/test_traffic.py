@@ -336,7 +336,7 @@ def test_several_demand_files_are_merged_by_departure_as_sumo_merges_its_route_f
     from d4sumo.sumohome import sumo_home
 
     game = Path(sumo_home()) / "tools" / "game" / "corridor"
-    for name, edges, every in (("a", "gneE20 gneE19", 2), ("b", "gneE23 gneE16", 3)):
+    for name, edges, every in (("a", "gneE28 gneE10 gneE11 gneE26", 4), ("b", "gneE28 gneE10 gneE11 gneE26", 6)):
         (tmp_path / f"{name}.rou.xml").write_text("<routes>\n" + "".join(
             f'    <vehicle id="{name}{k}" depart="{k * every}"><route edges="{edges}"/></vehicle>\n' for k in range(600 // every))
             + "</routes>\n")

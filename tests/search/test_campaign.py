@@ -589,3 +589,20 @@ def test_a_stored_point_another_machine_proposed_past_a_gap_is_said_once(tmp_pat
         assert sorted(s.index for s in store.samples()) == list(range(16))
     notes = [r.getMessage() for r in caplog.records if "numerics differ" in r.getMessage()]
     assert len(notes) == 1 and "stored sample 12" in notes[0]
+
+
+def test_a_campaign_on_a_network_file_an_earlier_version_stored_replays_on_the_network_rebuilt():
+    """d4sumo 0.18 and before rebuilt a network file from plain XML: its stored campaigns (no ``rebuild``) replay
+    and resume so, under their key; a new campaign runs the file as given, another campaign."""
+    from d4sumo.search.store import campaign_key
+    from d4sumo.sumohome import sumo_home
+
+    net = str(Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml")
+    new = Campaign(config=EpisodeConfig(network=net, route=("gneE27", "gneE25"), start="steady"))
+    old = copy.deepcopy(new.definition())
+    del old["config"]["scenario"]["rebuild"], old["config"]["scenario"]["signals"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert stored.config.rebuild is True and not stored.config.network_given and stored.config.signals == "ignore"
+    assert stored.config == new.with_inputs_of_0_18().config
+    assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
+    assert [key for key, _, _ in new.changes_of_0_18()] == ["scenario.rebuild", "scenario.signals"]
