@@ -31,6 +31,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import sumocfg
 from .errors import ConfigError, is_number
 from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
@@ -158,7 +159,7 @@ def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
-    return EpisodeConfig.from_dict(apply_preset(doc))
+    return EpisodeConfig.from_dict(apply_preset(sumocfg.expand(doc)))
 
 
 def link_collision_distance(doc: Mapping[str, Any]) -> dict:

@@ -34,7 +34,7 @@ from pathlib import Path
 import libsumo
 import numpy as np
 
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import build_road, config_road
 from d4sumo.engine.simulation import check_episode
 from d4sumo.engine.sumo import clear_platoon_places, load_platoon, sumo_command, traffic_state
 from d4sumo.model.config import EpisodeConfig
@@ -94,7 +94,7 @@ def corridor_case():
     demand.write_text((game / "corridor.rou.xml").read_text().replace("<flow ", '<flow end="3600" '))
     config = EpisodeConfig(network=str(game / "corridor.net.xml"), route=("gneE27", "gneE25", "gneE18", "gneE29"),
                            start="steady", speed_mps=13.0, duration_s=50.0, traffic={"demand": str(demand)})
-    road = build_road(config.network, route=config.route, whole=True)
+    road = config_road(config)
     u = attack_signal(make_attack("knots"), CORRIDOR_KNOTS, steps=config.steps, step_s=config.step_s,
                       start_step=config.attack_start_step)
     return "corridor, signals, own demand", config, road, u

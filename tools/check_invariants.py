@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.engine.scenarios import MAX_COPIES, build_road
+from d4sumo.engine.scenarios import MAX_COPIES, config_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.engine.sumo import traffic_state
 from d4sumo.errors import ConfigError
@@ -203,7 +203,7 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     if JUNCTION_SHARE[0] and not maneuver and rng.random() < JUNCTION_SHARE[0]:  # (drawn only when asked)
         network, demand = corridor()  # through signalised crossings among the network's own demand
         config = dataclasses.replace(config, network=network, network_sha256=None, route=CORRIDOR_ROUTE, lane=None, duration_s=50.0,
-                                     start="steady", speed_mps=float(rng.choice([8.0, 11.0, 13.0])),
+                                     start="steady", speed_mps=float(rng.choice([8.0, 11.0, 13.0])), rebuild=True,
                                      traffic={"demand": demand, "seed": int(rng.integers(0, 1000))})
     if config.v2v is not None and rng.random() < 0.5:  # cooperative followers over a late or lossy channel
         config = dataclasses.replace(config, v2v={"beacon_interval_s": float(rng.choice([0.05, 0.1, 0.2])),
@@ -537,10 +537,11 @@ def main(argv=None) -> int:
     JUNCTION_SHARE[0] = args.junctions
     rng = np.random.default_rng(args.seed)
     ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
-    roads = {(name, lane): build_road(name, route=ROUTES.get(name, ()), lane=lane)
+    roads = {(name, lane): config_road(EpisodeConfig(network=name, route=ROUTES.get(name, ()), lane=lane))
              for name in ROADS for lane in (None, *LANES.get(name, ()))}
-    if JUNCTION_SHARE[0]:  # the corridor built whole: its demand drives every way of it
-        roads[corridor()[0], None] = build_road(corridor()[0], route=CORRIDOR_ROUTE, whole=True)
+    if JUNCTION_SHARE[0]:  # the corridor rebuilt (netconvert's programmes: red lights on its main road), whole
+        roads[corridor()[0], None] = config_road(EpisodeConfig(network=corridor()[0], route=CORRIDOR_ROUTE, rebuild=True,
+                                                               traffic={"demand": corridor()[1]}))
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
     examples: dict[str, str] = {}

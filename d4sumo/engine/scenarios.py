@@ -55,6 +55,8 @@ class Road:
     #: the lanes of the first edge that lead on through the route without a lane change (SUMO's indices):
     #: where traffic enters
     through_lanes: tuple[int, ...] = (0,)
+    #: a network file SUMO runs as it is (`EpisodeConfig.network_given`), not rebuilt from plain XML
+    given: bool = False
 
     @property
     def platoon_lane(self) -> int:
@@ -146,6 +148,7 @@ def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir
         lane_path=path if any(path) else (),
         forks=corridor["forks"],
         through_lanes=tuple(sorted(int(lane) for lane in info["corridors"])),
+        given=given,
     )
 
 
@@ -187,6 +190,13 @@ def _build(source: NetworkSource, net_file: Path, netconvert: str | None = None)
 
 #: the largest batch of episodes one SUMO instance plays side by side
 MAX_COPIES = 64
+
+
+def config_road(config) -> Road:
+    """The road an episode of ``config`` (`EpisodeConfig`) plays on alone: its network as it says (a network
+    file as given or rebuilt, a route's edges alone or the network whole around them), from its lane."""
+    return build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network,
+                      given=config.network_given)
 
 
 def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = None, cache_dir: Path | None = None,

@@ -27,8 +27,8 @@ from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
 from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
-from .scenarios import MAX_COPIES, Road, batch_road, build_road
-from .sumo import followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
+from .scenarios import MAX_COPIES, Road, batch_road, config_road
+from .sumo import check_additional, followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +90,11 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
 def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
     """Everything an episode needs checked before it runs: the road, and SUMO's models' parameters.
     Returns the followers' checked vehicle-type file (None when no follower is SUMO-driven)."""
+    if road.given != config.network_given:  # a caller's mistake, never a user's: the episode would be another one
+        raise ValueError(f"a road {'run as given' if road.given else 'rebuilt'} for a configuration whose network is "
+                         f"{'run as given' if config.network_given else 'rebuilt'} (`scenarios.config_road` builds its own)")
     check_road(config, road)
+    check_additional(config, road)  # and additional files it refuses
     traffic_files(config, road)  # a demand SUMO refuses is refused before any episode runs
     return followers_file(config, road)
 
@@ -113,8 +117,7 @@ def simulate(
     command at each step's start (``config.steps`` values in [-1, 1], NaN where the attacker cruises).
     A user's follower controller's error in it is raised."""
     plan = checked_plan(config, attack)
-    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network,
-                              given=config.network_given)
+    road = road or config_road(config)
     types_file = check_episode(config, road)
     with fcd_file(fcd_path) as part:
         with open_world(config, road, [config], fcd_path=part, gui=gui, types_file=types_file) as world:
@@ -221,8 +224,7 @@ def shares_sumo(config: EpisodeConfig) -> bool:
 
 def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Road | None, on_episode) -> list:
     """`simulate_batch`'s results, each episode played alone."""
-    road = road or build_road(config.network, route=config.route, lane=config.lane, whole=config.whole_network,
-                              given=config.network_given)
+    road = road or config_road(config)
     check_episode(config, road)
     results: list = []
     for i, plan in enumerate(plans):

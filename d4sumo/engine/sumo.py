@@ -152,6 +152,77 @@ def _checked_file(text: str, kind: str, what: str, suffix: str, check: Callable[
     return path
 
 
+#: the outputs an additional file's elements write, by element: (the attribute naming the file)
+_OUTPUTS = {"edgeData": "file", "laneData": "file", "timedEvent": "dest", "e1Detector": "file", "inductionLoop": "file",
+            "e2Detector": "file", "laneAreaDetector": "file", "e3Detector": "file", "entryExitDetector": "file",
+            "instantInductionLoop": "file", "routeProbe": "file", "calibrator": "output", "edgeRelations": "file",
+            "tazRelations": "file", "vTypeProbe": "file"}
+_ADDITIONAL: dict[tuple[str, ...], list[str]] = {}
+
+
+def additional_files(config: EpisodeConfig) -> list[str]:
+    """The scenario's additional files as every episode loads them: copies, kept by their content in d4sumo's
+    cache, whose outputs (a detector's file, an edgeData dump, a saved switch state) go nowhere. Many episodes
+    run side by side, each of which would write them anew, into the folder the file is in; a replay's FCD is
+    d4sumo's output."""
+    if not config.additional:
+        return []
+    key = (config.additional_sha256, *config.additional)
+    if key not in _ADDITIONAL:
+        import xml.etree.ElementTree as ET
+
+        folder = Path(default_cache_dir()).parent / "additional"
+        out = []
+        for i, path in enumerate(config.additional):
+            try:
+                tree = ET.parse(path)
+            except (ET.ParseError, OSError) as exc:
+                raise ConfigError("scenario.additional", path, f"a SUMO additional file that parses ({exc})") from None
+            for element in tree.getroot().iter():
+                if _OUTPUTS.get(element.tag) in element.attrib:
+                    element.set(_OUTPUTS[element.tag], os.devnull)
+            text = ET.tostring(tree.getroot(), encoding="unicode")
+            copy = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}-{Path(path).name}"
+            if not copy.is_file():
+                try:
+                    folder.mkdir(parents=True, exist_ok=True)
+                    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".partial")
+                    with os.fdopen(fd, "w", encoding="utf-8") as f:
+                        f.write(text)
+                    os.replace(tmp, copy)
+                except OSError as exc:
+                    raise SumoError(f"cannot write SUMO's additional files under {folder}: {exc.strerror or exc}") from None
+            out.append(str(copy))
+        _ADDITIONAL[key] = out
+    return _ADDITIONAL[key]
+
+
+def check_additional(config: EpisodeConfig, road: Road) -> None:
+    """The scenario's additional files (`EpisodeConfig.additional`), loaded once in SUMO on the road with its options
+    (cached like the followers' types): one it refuses, or whose content has changed since the campaign took it, is
+    a ConfigError naming them."""
+    if not config.additional:
+        return
+    from ..model.config import files_digest
+
+    if files_digest("scenario.additional", config.additional) != config.additional_sha256:
+        raise ConfigError("scenario.additional", list(config.additional), "the additional files this campaign was run "
+                                                                           "with (their content has changed since)")
+    text = "\n".join([str(road.net_file), config.additional_sha256, *config.additional,
+                      *(f"{k}={v}" for k, v in config.sumo_options)])
+
+    def check(sumo: str, _: str) -> None:
+        horizon = (config.traffic.warmup_s if config.traffic is not None else 0.0) + config.total_s + 1.0  # meandata ends with it
+        cmd = [sumo, "--net-file", str(road.net_file), "--additional-files", ",".join(additional_files(config)),
+               "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true",
+               *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
+        message = _sumo_errors(cmd, "the additional files")
+        if message is not None:
+            raise ConfigError("scenario.additional", list(config.additional), f"additional files SUMO loads on {road.name} "
+                                                                               f"(SUMO: {message})")
+    _checked_file(text, "additional", "additional files", ".checked", check)
+
+
 def _sumo_errors(cmd: list[str], what: str, env: dict | None = None) -> str | None:
     """SUMO's first error loading ``cmd`` (None: it loaded)."""
     try:
@@ -184,7 +255,9 @@ def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: list) ->
     # begins after an earlier end is refused ("ends before its begin time"), which SUMO plays without one
     horizon = config.traffic.warmup_s + config.total_s + 1.0
     cmd = [sumo, "--net-file", str(road.net_file), "--step-length", repr(config.step_s),
-           "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+           "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true",
+           *(["--additional-files", ",".join(additional_files(config))] if config.additional else []),
+           *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
     message = None
     xsd = Path(sumo_home(), "data", "xsd") if _sumo_home_known() else None
     if config.traffic.types and config.traffic.vehicles_per_hour is not None and xsd is not None and xsd.is_dir():
@@ -256,8 +329,11 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
         # that writes FCD is the campaign's episode.
         "--precision", str(FCD_PRECISION),
     ]
-    if types_file is not None:
-        cmd += ["--additional-files", str(types_file)]
+    additional = [*([str(types_file)] if types_file is not None else []), *additional_files(config)]
+    if additional:  # the followers' vehicle types, and the scenario's own files (a .sumocfg's)
+        cmd += ["--additional-files", ",".join(additional)]
+    for name, value in config.sumo_options:  # a .sumocfg's options that change nothing d4sumo decides
+        cmd += [f"--{name}", value]
     if demand_files:  # SUMO merges them by departure
         cmd += ["--route-files", ",".join(str(p) for p in demand_files)]
     if state_file is not None:  # the traffic's vehicles, flows and random streams at the end of its warm-up

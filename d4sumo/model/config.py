@@ -182,6 +182,12 @@ class EpisodeConfig:
     #: a network file (*.net.xml) taken back to plain XML and rebuilt by netconvert, as d4sumo 0.18 and before did
     #: (its signal programmes netconvert's defaults, its coordinates moved); false: SUMO runs the file as given
     rebuild: bool = False
+    #: SUMO additional files every episode loads (a .sumocfg's: detectors, variable speed signs, rerouters, signal
+    #: programmes of one's own), and their content (sha256 over them, in order), taken when first read
+    additional: tuple[str, ...] = ()
+    additional_sha256: str = ""
+    #: SUMO options given as they are (a .sumocfg's that change nothing d4sumo decides: `sumocfg.PASSED`)
+    sumo_options: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.network, str) or not self.network:
@@ -207,6 +213,17 @@ class EpisodeConfig:
             raise ConfigError("scenario.signals", self.signals, f"one of {', '.join(SIGNAL_RULES)}")
         if not is_network_path(self.network):  # d4sumo's own roads have no traffic lights: one configuration, whatever it says
             fix("signals", "obey")
+        if isinstance(self.additional, str):
+            fix("additional", (self.additional,))
+        if not isinstance(self.additional, (list, tuple)) or not all(isinstance(p, str) and p for p in self.additional):
+            raise ConfigError("scenario.additional", self.additional, "SUMO additional files, e.g. [\"detectors.add.xml\"]")
+        fix("additional", tuple(self.additional))
+        if self.additional and not self.additional_sha256:
+            fix("additional_sha256", files_digest("scenario.additional", self.additional))
+        if not isinstance(self.additional_sha256, str) or (self.additional_sha256 and not self.additional):
+            raise ConfigError("scenario.additional_sha256", self.additional_sha256, "the digest d4sumo takes of "
+                                                                                    "scenario.additional (leave it out)")
+        fix("sumo_options", _sumo_options(self.sumo_options))
         if not isinstance(self.rebuild, bool):
             raise ConfigError("scenario.rebuild", self.rebuild, "true or false")
         if not self.network.endswith(NETWORK_FILE_SUFFIXES):  # node and edge files are built by netconvert: nothing else to do
@@ -468,6 +485,13 @@ class EpisodeConfig:
             del scenario["signals"]
         if self.rebuild:  # what campaigns stored before it was a key hold, and all a road of node and edge files does
             del scenario["rebuild"]
+        for key in ("additional", "additional_sha256", "sumo_options"):  # stored where set: earlier campaigns keep their identity
+            if not scenario[key]:
+                del scenario[key]
+        if "additional" in scenario:
+            scenario["additional"] = list(scenario["additional"])
+        if "sumo_options" in scenario:
+            scenario["sumo_options"] = dict(scenario["sumo_options"])
         controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
                       else [c.to_dict() for c in self.controller])
         vehicle = self.vehicle.to_dict()
@@ -544,10 +568,26 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
 #: what a stored definition's [scenario] table without a key held: the scenario as that version played it
 EARLIER_SCENARIO = {"network_sha256": "", "signals": "ignore", "rebuild": True}
+#: SUMO options given as they are (`EpisodeConfig.sumo_options`): they change what SUMO's traffic does, nothing
+#: d4sumo decides
+SUMO_OPTIONS_PASSED = ("time-to-teleport", "time-to-teleport.highways", "max-depart-delay", "ignore-route-errors",
+                       "default.speeddev", "default.action-step-length", "ignore-junction-blocker",
+                       "device.rerouting.probability", "device.rerouting.period", "routing-algorithm",
+                       "lanechange.overtake-right", "time-to-impatience", "scale", "default.carfollowmodel",
+                       "max-num-vehicles", "tls.all-off", "device.emissions.probability")
+#: ... and the options of these SUMO devices (`device.rerouting.adaptation-steps`)
+SUMO_OPTION_GROUPS_PASSED = ("device.rerouting.", "device.emissions.", "device.battery.")
+
+
+def passed_option(name: str) -> bool:
+    """Whether d4sumo gives SUMO option ``name`` as it is (`EpisodeConfig.sumo_options`)."""
+    return name in SUMO_OPTIONS_PASSED or name.startswith(SUMO_OPTION_GROUPS_PASSED)
+
+
 #: what the platoon does at a red light (`EpisodeConfig.signals`)
 SIGNAL_RULES = ("obey", "attacker_runs_red", "ignore")
 #: [scenario] keys that identify a campaign's inputs (its road's files' digest), not describe its scenario
-IDENTITY_KEYS = ("network_sha256",)
+IDENTITY_KEYS = ("network_sha256", "additional_sha256")
 
 
 #: the names of SUMO's network files (netconvert's, netgenerate's, SUMO's own examples': compressed)
@@ -591,6 +631,34 @@ def folder_files(folder: Path) -> tuple[list[Path], list[Path], list[Path]]:
     network file (`engine.networks` builds it from them)."""
     return tuple(sorted(f for pattern in patterns for f in folder.glob(pattern) if f.is_file())
                  for patterns in (("*.nod.xml",), ("*.edg.xml",), tuple(f"*{s}" for s in NETWORK_FILE_SUFFIXES)))
+
+
+def files_digest(field: str, paths) -> str:
+    """sha256 over files' bytes, in order; an unreadable file is a ConfigError naming ``field`` and it."""
+    digest = hashlib.sha256()
+    for path in paths:
+        try:
+            digest.update(Path(path).read_bytes())
+        except OSError as exc:
+            raise ConfigError(field, path, f"a readable file ({exc.strerror or exc})") from None
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+def _sumo_options(options: Any) -> tuple[tuple[str, str], ...]:
+    """SUMO options to give as they are, by name (`sumocfg.PASSED`), as sorted (name, value) pairs of strings."""
+    pairs = options.items() if isinstance(options, Mapping) else options
+    try:
+        pairs = [(k, v) for k, v in pairs]
+    except (TypeError, ValueError):
+        raise ConfigError("scenario.sumo_options", options, "a table of SUMO options, e.g. {time-to-teleport = \"-1\"}") from None
+    for name, value in pairs:
+        if not passed_option(name):
+            raise ConfigError(f"scenario.sumo_options.{name}", value,
+                              f"an option d4sumo can honour, one of {', '.join(SUMO_OPTIONS_PASSED)}")
+        if not isinstance(value, (str, int, float)) or isinstance(value, bool):
+            raise ConfigError(f"scenario.sumo_options.{name}", value, "a value as SUMO takes it (a string or a number)")
+    return tuple(sorted((k, str(v)) for k, v in pairs))
 
 
 def network_digest(network: str) -> str:

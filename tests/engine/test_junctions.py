@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import config_road
 from d4sumo.engine.simulation import simulate
 from d4sumo.model.attacks import attack_signal, make_attack
 from d4sumo.model.bodies import Body, body_gap_m
@@ -42,10 +42,11 @@ def corridor(tmp_path_factory):
     folder = tmp_path_factory.mktemp("corridor")
     demand = folder / "corridor_end.rou.xml"
     demand.write_text((game / "corridor.rou.xml").read_text().replace("<flow ", '<flow end="3600" '))
-    # the platoon driving through red, as d4sumo 0.18 did (its samples below): into the crossing traffic
+    # the network rebuilt and the platoon driving through red, as d4sumo 0.18 played them (its samples below):
+    # into the crossing traffic
     config = EpisodeConfig(network=str(game / "corridor.net.xml"), route=ROUTE, start="steady", speed_mps=13.0,
-                           duration_s=50.0, traffic={"demand": str(demand)}, signals="ignore")
-    return config, build_road(config.network, route=config.route, whole=True)
+                           duration_s=50.0, traffic={"demand": str(demand)}, signals="ignore", rebuild=True)
+    return config, config_road(config)
 
 
 def _play(config, road, knots, fcd_path=None):

@@ -88,7 +88,7 @@ def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path
     """Issue 37: every motorway tried was refused at its first ramp. The Bremen motorway's main route
     (1.9 km) now plays: the platoon is in lane 0, then 1 where the ramp's lane joins, then 0; batches
     equal episodes alone; and a lane change there is refused in one line."""
-    road = build_road(str(BREMEN), route=BREMEN_ROUTE, cache_dir=tmp_path / "cache")
+    road = build_road(str(BREMEN), route=BREMEN_ROUTE, cache_dir=tmp_path / "cache", given=True)  # as SUMO runs the file
     assert road.lane_path == (0, 0, 1, 0) and road.lanes == 3 and 1850 < road.length_m < 1870
     config = EpisodeConfig(network=str(BREMEN), route=BREMEN_ROUTE, speed_mps=30.0, start="steady", duration_s=40.0,
                            followers=3)
@@ -106,7 +106,7 @@ def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path
 
 
 def test_sumos_osm_motorway_interchange_plays_a_route_past_two_on_ramps(tmp_path):
-    road = build_road(str(A10), route=A10_ROUTE, cache_dir=tmp_path / "cache")
+    road = build_road(str(A10), route=A10_ROUTE, cache_dir=tmp_path / "cache", given=True)
     assert road.lane_path == (0, 1, 0, 1, 0) and road.lanes == 3 and road.length_m > 2700
     config = EpisodeConfig(network=str(A10), route=A10_ROUTE, speed_mps=25.0, start="steady", duration_s=80.0, followers=3)
     fcd = tmp_path / "fcd.xml"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from d4sumo.engine import lights
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import config_road
 from d4sumo.engine.simulation import simulate
 from d4sumo.model.config import EpisodeConfig
 
@@ -53,12 +53,13 @@ def _config(corridor, **changes):
     without a vehicle): through gneJ12 at green, gneJ11 ahead turns red."""
     empty = Path(corridor[1]).with_name("nobody.rou.xml")
     empty.write_text("<routes/>\n")
+    changes.setdefault("rebuild", True)  # netconvert's programmes: its own give the main road green for 10005 s
     return EpisodeConfig(network=corridor[0], route=ROUTE, start="steady", speed_mps=11.0, duration_s=45.0, setpoint_m=8.0,
                          traffic={"demand": str(empty), "warmup_s": 60.0}, **changes)
 
 
 def test_a_cruising_platoon_stops_for_red_where_before_it_drove_through(corridor, passes):
-    road = build_road(corridor[0], route=ROUTE, whole=True)
+    road = config_road(_config(corridor))
     cruise = np.full(_config(corridor).steps, np.nan)
     obeying = simulate(_config(corridor), cruise, road=road)
     assert passes and not [p for p in passes if p[2] in "rRu"]  # lines crossed, none on red
@@ -70,8 +71,8 @@ def test_a_cruising_platoon_stops_for_red_where_before_it_drove_through(corridor
 
 
 def test_an_attacker_that_runs_red_does_so_and_its_followers_stop(corridor, passes):
-    road = build_road(corridor[0], route=ROUTE, whole=True)
     config = _config(corridor, signals="attacker_runs_red")
+    road = config_road(config)
     simulate(config, np.full(config.steps, np.nan), road=road)
     red = [p for p in passes if p[2] in "rRu"]
     assert red and {car for car, _, _ in red} == {0}  # the check can fail: the attacker crossed on red
@@ -80,8 +81,8 @@ def test_an_attacker_that_runs_red_does_so_and_its_followers_stop(corridor, pass
 def test_among_its_demand_a_cruising_platoon_that_ran_red_into_crossing_traffic_now_waits(corridor):
     network, demand = corridor
     config = EpisodeConfig(network=network, route=ROUTE, start="steady", speed_mps=13.0, duration_s=50.0,
-                           traffic={"demand": demand, "seed": 1})
-    road = build_road(network, route=ROUTE, whole=True)
+                           traffic={"demand": demand, "seed": 1}, rebuild=True)
+    road = config_road(config)
     cruise = np.full(config.steps, np.nan)
     import dataclasses
 

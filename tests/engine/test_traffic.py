@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import build_road, config_road
 from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.engine.sumo import open_world
 from d4sumo.errors import ConfigError
@@ -124,7 +124,7 @@ def test_sumo_own_bremen_motorway_plays_with_its_own_demand_the_ramp_traffic_mer
     config = EpisodeConfig(network=str(game / "highway.net.xml"), route=("145354574", "189597495", "E0", "191842213"),
                            start="steady", speed_mps=30.0, duration_s=20.0, traffic={"demand": str(game / "highway.rou.xml")})
     assert config.whole_network
-    road = build_road(config.network, route=config.route, whole=True)
+    road = config_road(config)
     assert road.lane_path == (0, 0, 1, 0) and road.through_lanes == (0, 1, 2)
     u = np.full(config.steps, np.nan)
     u[:100] = -0.5
