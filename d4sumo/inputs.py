@@ -214,6 +214,12 @@ def attack_of(doc: Mapping[str, Any]) -> tuple[AttackFamily | None, np.ndarray |
     if "family" not in attack:
         if "params" in attack:
             raise ConfigError("attack.params", _short(attack["params"]), "parameters with an attack family (--attack or [attack] family)")
+        lie = next((k for k in MESSAGE_KEYS if k in attack), None)
+        if lie is not None:  # checked as a campaign checks it, then refused: with no attack, nothing lies
+            _attack_box({**doc, "attack": {**attack, "message": attack.get("message", "offset")}})
+            raise ConfigError(f"attack.{lie}", _short(attack[lie]), "a message attack beside an attack family and its "
+                                                                    "params (--attack FAMILY --params ...): with no attack the "
+                                                                    "attacker only cruises, and its beacons tell the truth")
         return None, None
     family = _attack_box(doc)
     if "params" not in attack:

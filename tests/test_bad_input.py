@@ -44,6 +44,14 @@ SIMULATE = [
     ["--set", "vehicle.v2=3"], ["--set", "vehicle.vclass=rail"], ["--set", "vehicle.shape={a=1}"],
     # the paper's psi and the collisions draw their line at one distance
     ["--set", "scenario.collision_gap_m=0.5", "--d-safe", "0.2"], ["--d-safe", "-1"], ["--d-safe", "7"],
+    # issue 48: a lie with no attack played was taken without a word, whatever it said
+    ["--set", "attack.message=teleport"], ["--controller", "cacc", "--set", "attack.message_field=colour"],
+    ["--controller", "cacc", "--set", "attack.message_sender=9"], ["--set", "attack.message=offset"],
+    ["--controller", "cacc", "--set", "attack.message=offset"],
+    # a .sumocfg that is none, and the keys it fills
+    ["--network", "/nonexistent/scenario.sumocfg"], ["--set", "scenario.signals=stop"], ["--set", "scenario.rebuild=1"],
+    ["--set", "scenario.sumo_options={lateral-resolution=0.8}"], ["--set", 'scenario.additional=["/nonexistent.add.xml"]'],
+    ["--set", "traffic.merge_by_departure=2"],
 ]
 
 
