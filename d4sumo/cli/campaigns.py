@@ -108,6 +108,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         "seed": campaign.seed,
         "samples": len(summary.samples),
         "outcomes": counts,
+        **({"nearest_traffic_m": _nearest(summary, campaign.config)} if campaign.config.traffic is not None else {}),
         "best": None if top is None else {
             "sample_id": top.id, "index": top.index, "robustness": top.robustness, "outcome": top.outcome,
             "params": list(top.params), "collision": top.collision,
@@ -126,6 +127,15 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     print(f"campaign {summary.campaign_id} ({attack}, {where}{sensing}{campaign.optimizer}, seed {campaign.seed}) in {args.db}: "
           f"{len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if config.traffic is not None:
+        from ..results.analysis import TRAFFIC_MEETS_M, traffic_nearness_text
+
+        text, met = traffic_nearness_text((s.min_gaps for s in summary.samples), config.vehicle_ids)
+        print(f"  {text}")
+        if not met:  # labelled traffic, played alone: said (its demand's vehicles drive elsewhere, or later)
+            print(f"d4sumo: note: the traffic never came within {TRAFFIC_MEETS_M:g} m of a car of the platoon in "
+                  f"{len(summary.samples)} samples: this campaign played as if alone (place the platoon where the "
+                  "demand drives: scenario.route, traffic.warmup_s)", file=sys.stderr)
     if campaign.formula is not None:  # the outcomes count crashes; a formula of one's own is falsified where rho < 0
         broken = sum(s.robustness is not None and s.robustness < 0 for s in summary.samples)
         print(f"  formula falsified (robustness < 0) by {broken} of {len(summary.samples)} samples")
@@ -136,6 +146,12 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
         print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
     return 0
+
+
+def _nearest(summary, config) -> dict[str, float]:
+    from ..results.analysis import nearest_traffic
+
+    return nearest_traffic((s.min_gaps for s in summary.samples), config.vehicle_ids)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

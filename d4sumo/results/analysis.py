@@ -266,3 +266,31 @@ def most_severe(records: Sequence[Record], count: int = 3) -> list[Record]:
         chosen.setdefault(r.configuration, r)
     return list(chosen.values())
 
+
+
+#: traffic this near a car of the platoon is traffic it meets [m]: within what its ACC and the attacker's careful
+#: driver react to (a 1.5 s time gap at 40 m/s is 60 m; the radars d4sumo draws reach 60 to 150 m)
+TRAFFIC_MEETS_M = 100.0
+
+
+def nearest_traffic(min_gaps: Iterable[dict[str, float]], cars: Sequence[str]) -> dict[str, float]:
+    """Each car of the platoon's nearest traffic car over the samples' minimum gaps [m] (``traffic-v0``: a traffic car
+    ahead of v0; ``v3-traffic``: one behind v3); a car no traffic car ever followed or led is left out."""
+    nearest: dict[str, float] = {}
+    for gaps in min_gaps:
+        for pair, gap in gaps.items():
+            leader, _, follower = pair.partition("-")
+            car = follower if leader == "traffic" else leader if follower == "traffic" else None
+            if car in cars and gap < nearest.get(car, float("inf")):
+                nearest[car] = gap
+    return {car: nearest[car] for car in cars if car in nearest}
+
+
+def traffic_nearness_text(min_gaps: Iterable[dict[str, float]], cars: Sequence[str]) -> tuple[str, bool]:
+    """How near the traffic came to each car of the platoon, in a line; and whether it ever came within
+    `TRAFFIC_MEETS_M` of one (else the campaign played as if alone)."""
+    nearest = nearest_traffic(min_gaps, cars)
+    if not nearest:
+        return "traffic: none ever ahead of or behind a car of the platoon, in its lane", False
+    parts = ", ".join(f"{car} {gap:.1f} m" for car, gap in nearest.items())
+    return f"traffic: nearest to {parts}", min(nearest.values()) < TRAFFIC_MEETS_M

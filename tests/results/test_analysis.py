@@ -255,3 +255,28 @@ def test_campaigns_alone_and_among_traffic_are_other_scenarios_and_their_crashes
     rows = {row[0]: row[1:] for row in table.rows}
     busy_row = next(v for k, v in rows.items() if "1500" in k)
     assert busy_row == ("3", "0", "1", "1", "0", "1", "0")  # samples, then each kind in CRASH_KINDS' order
+
+
+def test_how_near_the_traffic_came_to_each_car_of_the_platoon_and_whether_it_ever_met_it():
+    from d4sumo.results.analysis import TRAFFIC_MEETS_M, nearest_traffic, traffic_nearness_text
+
+    cars = ("v0", "v1", "v2", "v3")
+    samples = [{"traffic-v0": 40.0, "v0-v1": 3.0, "v3-traffic": 250.0}, {"traffic-v0": 25.5, "v1-traffic": 80.0, "traffic-v2": 12.0}]
+    assert nearest_traffic(samples, cars) == {"v0": 25.5, "v1": 80.0, "v2": 12.0, "v3": 250.0}
+    text, met = traffic_nearness_text(samples, cars)
+    assert text == "traffic: nearest to v0 25.5 m, v1 80.0 m, v2 12.0 m, v3 250.0 m" and met
+    far = [{"traffic-v0": TRAFFIC_MEETS_M + 805.0}]  # a demand that departs far from the platoon (issue 48: 905 m)
+    assert traffic_nearness_text(far, cars) == ("traffic: nearest to v0 905.0 m", False)
+    assert traffic_nearness_text([{"v0-v1": 3.0}], cars)[1] is False
+
+
+@pytest.mark.sumo
+def test_falsify_among_traffic_that_never_meets_the_platoon_says_so(tmp_path, capsys):
+    from d4sumo.cli import main
+
+    assert main(["falsify", "--start", "steady", "--duration", "10", "--set", "traffic.vehicles_per_hour=1",
+                 "--set", "traffic.warmup_s=5", "--optimizer", "random", "--samples", "2", "--db", str(tmp_path / "r.sqlite"),
+                 "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "traffic: none ever ahead of or behind a car of the platoon" in captured.out
+    assert "the traffic never came within 100 m of a car of the platoon in 2 samples: this campaign played as if alone" in captured.err
