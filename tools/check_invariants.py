@@ -540,7 +540,7 @@ def main(argv=None) -> int:
     roads = {(name, lane): config_road(EpisodeConfig(network=name, route=ROUTES.get(name, ()), lane=lane))
              for name in ROADS for lane in (None, *LANES.get(name, ()))}
     if JUNCTION_SHARE[0]:  # the corridor rebuilt (netconvert's programmes: red lights on its main road), whole
-        roads[corridor()[0], None] = config_road(EpisodeConfig(network=corridor()[0], route=CORRIDOR_ROUTE, rebuild=True,
+        roads[corridor()[0], None] = config_road(EpisodeConfig(network=corridor()[0], route=CORRIDOR_ROUTE, rebuild=True, start="steady",
                                                                traffic={"demand": corridor()[1]}))
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()

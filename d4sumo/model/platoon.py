@@ -22,7 +22,7 @@ from . import carfollowing
 from .config import ControllerConfig, EpisodeConfig
 from .cooperative import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
-from .signals import SignalDriver
+from .signals import SignalDriver, light_code
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
 from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
@@ -282,6 +282,8 @@ class Platoon:
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
         #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
         self.stops: list = []
+        #: each step, what each car saw of the next light (`signals.light_code`): the trace's light_X
+        self.lights: list[list[float]] = []
         self._drivers: dict[int, SignalDriver] = {}
         if lights and config.signals != "ignore":
             obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
@@ -334,6 +336,8 @@ class Platoon:
             u = acceleration_to_command(self.attacker_cruise.acceleration(speed), self.attacker_vehicle)
         else:
             self._attacking = True
+        if self.stops:  # on a route through traffic lights: what each car sees of the next one, recorded
+            self.lights.append([light_code(stop) for stop in self.stops])
         if 0 in self._drivers:  # its driver stops it for red, attacking or not
             u = min(u, self._drivers[0].limit(self.stops[0], speed))
         commands = [u]
@@ -410,6 +414,9 @@ class Platoon:
                                                           speeds, commands, modes, self.pairs, lateral_m)
         if self.channel is not None and self.channel.falsify is not None:
             trace.signals.update(sent_signals(self.channel.sent, times_s.size, self.channel.liar))
+        if self.lights:  # on a route through traffic lights: what each car saw of the next one
+            seen = _hold_last(np.array(self.lights, dtype=float), times_s.size)
+            trace.signals.update({f"light_{vid}": seen[:, i] for i, vid in enumerate(self.ids)})
         return trace, min_gaps, warmup_min_gaps
 
 

@@ -46,6 +46,14 @@ class Stop(NamedTuple):
     state: str
 
 
+def light_code(stop: Stop | None) -> float:
+    """What a car sees of the next light, as a number a trace holds: 2 red (or red-yellow), 1 amber, 0 green or
+    none within reach."""
+    if stop is None:
+        return 0.0
+    return 2.0 if stop.state in RED else 1.0 if stop.state in YELLOW else 0.0
+
+
 class SignalDriver:
     """One car's driver at the route's signals: the command its signals allow (see the module)."""
 

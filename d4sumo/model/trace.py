@@ -11,6 +11,8 @@ Signals (N followers; cars v0 = attacker, v1 .. vN, and in a cut-in `lead`, in a
                   collision inside a junction, the 2D clearance of the two bodies: `engine.junctions`)
     attacker_gap  the smallest gap between the attacker and the car ahead of or behind it [m]
     mode_vI       follower controller mode (0 cruise, 1 ACC), I >= 1, when the controller has one
+    light_X       on a route through traffic lights the platoon obeys: the next light car X sees within 300 m
+                  (2 red, 1 amber, 0 green or none)
 The paper's maneuver (`inlane`: the attacker leads the platoon in its lane) also has
     gap_I         bumper gap between vI and vI+1, I = 0..N-1 (gap_0: attacker to v1) [m]
 and the lane-changing ones (`cutin`, `cutout`)

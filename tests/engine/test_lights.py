@@ -54,7 +54,8 @@ def _config(corridor, **changes):
     empty = Path(corridor[1]).with_name("nobody.rou.xml")
     empty.write_text("<routes/>\n")
     changes.setdefault("rebuild", True)  # netconvert's programmes: its own give the main road green for 10005 s
-    return EpisodeConfig(network=corridor[0], route=ROUTE, start="steady", speed_mps=11.0, duration_s=45.0, setpoint_m=8.0,
+    changes = {"duration_s": 45.0, **changes}
+    return EpisodeConfig(network=corridor[0], route=ROUTE, start="steady", speed_mps=11.0, setpoint_m=8.0,
                          traffic={"demand": str(empty), "warmup_s": 60.0}, **changes)
 
 
@@ -65,6 +66,8 @@ def test_a_cruising_platoon_stops_for_red_where_before_it_drove_through(corridor
     assert passes and not [p for p in passes if p[2] in "rRu"]  # lines crossed, none on red
     assert obeying.trace["speed_v0"].min() < 0.1  # it stopped, and waited
     assert obeying.trace["cmd_v0"].min() < 0  # its driver braked: the trace's command is what the pedals did
+    red = obeying.trace["light_v0"] == 2.0  # what it saw of the lights, in the trace
+    assert red.any() and obeying.trace["speed_v0"][red].min() < 0.1 and "light_v0" not in ignoring_names(corridor)
     assert obeying.outcome == "no_crash"
     ignoring = simulate(_config(corridor, signals="ignore"), cruise, road=road)
     assert ignoring.trace["speed_v0"].min() > 10.0  # before: on through red at the target speed
@@ -102,3 +105,9 @@ def test_a_road_without_lights_plays_bit_for_bit_whatever_the_rule(tmp_path):
     a, b = episodes
     assert a.trace.names == b.trace.names
     assert all(np.array_equal(a.trace[n], b.trace[n]) for n in a.trace.names)
+
+
+def ignoring_names(corridor) -> tuple[str, ...]:
+    """The signals of an episode through the same lights, driven through: no light_X (nobody looked)."""
+    config = _config(corridor, signals="ignore", duration_s=2.0)
+    return simulate(config, np.full(config.steps, np.nan), road=config_road(config)).trace.names
