@@ -51,7 +51,7 @@ SIMULATE = [
     # a .sumocfg that is none, and the keys it fills
     ["--network", "/nonexistent/scenario.sumocfg"], ["--set", "scenario.signals=stop"], ["--set", "scenario.rebuild=1"],
     ["--set", "scenario.sumo_options={lateral-resolution=0.8}"], ["--set", 'scenario.additional=["/nonexistent.add.xml"]'],
-    ["--set", "traffic.merge_by_departure=2"],
+    ["--set", "traffic.merge_by_departure=2"], ["--set", "scenario.join_m=4990"], ["--set", "scenario.join_m=-1"],
 ]
 
 

@@ -23,7 +23,7 @@ from ..errors import ConfigError, SumoError
 from ..files import part_of, remove_stale_parts
 from ..model.batch import episode_configs
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import AttackPlan, check_road_lanes, maneuver_of
+from ..model.maneuvers import REAR_START_M, AttackPlan, check_road_lanes, maneuver_of
 from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
@@ -67,6 +67,10 @@ def check_road(config: EpisodeConfig, road: Road) -> None:
     if config.speed_mps > road.speed_limit_mps + 1e-9:
         raise ConfigError("scenario.speed_mps", config.speed_mps, f"at most the speed limit of {road.name}: {road.speed_limit_mps:g} m/s")
     start = max(car.position_m for car in maneuver_of(config).cars())
+    if start > road.first_edge_m and config.join_m != REAR_START_M:  # placed by the user: off the route
+        raise ConfigError("scenario.join_m", config.join_m, f"a place on the route's first edge {road.route_edges[0]} "
+                                                            f"({road.first_edge_m:g} m) the whole platoon fits behind (at most "
+                                                            f"{config.join_m - (start - road.first_edge_m):.1f} m)")
     if start > road.first_edge_m:
         raise ConfigError(
             "scenario.network",

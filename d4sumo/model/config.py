@@ -30,7 +30,7 @@ from .sensing import RadarParams
 from .traffic import TrafficParams
 from .v2v import ChannelParams
 from .vehicle import VehicleParams
-from .maneuvers import MANEUVERS as MANEUVER_CLASSES, SWERVE_KNOTS, SWERVE_LANES
+from .maneuvers import MANEUVERS as MANEUVER_CLASSES, REAR_START_M, SWERVE_KNOTS, SWERVE_LANES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
 #: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);
@@ -182,6 +182,9 @@ class EpisodeConfig:
     #: a network file (*.net.xml) taken back to plain XML and rebuilt by netconvert, as d4sumo 0.18 and before did
     #: (its signal programmes netconvert's defaults, its coordinates moved); false: SUMO runs the file as given
     rebuild: bool = False
+    #: where the platoon joins its route: its rearmost car's rear bumper this far along the route's first edge [m]
+    #: (before a merge, inside dense traffic); the platoon must fit on that edge
+    join_m: float = REAR_START_M
     #: SUMO additional files every episode loads (a .sumocfg's: detectors, variable speed signs, rerouters, signal
     #: programmes of one's own), and their content (sha256 over them, in order), taken when first read
     additional: tuple[str, ...] = ()
@@ -224,6 +227,7 @@ class EpisodeConfig:
             raise ConfigError("scenario.additional_sha256", self.additional_sha256, "the digest d4sumo takes of "
                                                                                     "scenario.additional (leave it out)")
         fix("sumo_options", _sumo_options(self.sumo_options))
+        fix("join_m", check_number("scenario.join_m", self.join_m, 0.0, 100_000.0, "metres along the route's first edge"))
         if not isinstance(self.rebuild, bool):
             raise ConfigError("scenario.rebuild", self.rebuild, "true or false")
         if not self.network.endswith(NETWORK_FILE_SUFFIXES):  # node and edge files are built by netconvert: nothing else to do
@@ -485,6 +489,8 @@ class EpisodeConfig:
             del scenario["signals"]
         if self.rebuild:  # what campaigns stored before it was a key hold, and all a road of node and edge files does
             del scenario["rebuild"]
+        if self.join_m == REAR_START_M:  # where every earlier campaign started
+            del scenario["join_m"]
         for key in ("additional", "additional_sha256", "sumo_options"):  # stored where set: earlier campaigns keep their identity
             if not scenario[key]:
                 del scenario[key]

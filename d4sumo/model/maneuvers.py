@@ -51,6 +51,8 @@ class EpisodeSettings(Protocol):
     @property
     def followers(self) -> int: ...
     @property
+    def join_m(self) -> float: ...
+    @property
     def setpoint_m(self) -> float: ...
     @property
     def speed_mps(self) -> float: ...
@@ -107,7 +109,7 @@ def initial_state(config: EpisodeSettings, front: int = 0) -> tuple[list[float],
     ``front`` the index of another car (a cut-in's benign lead) in the attacker's place."""
     n = config.followers + 1
     lengths = [config.vehicle_of(i).length_m for i in (front, *range(1, n))]
-    rear = lengths[-1] + REAR_START_M
+    rear = lengths[-1] + config.join_m
     if len(set(lengths)) == 1:  # one vehicle for all: the arithmetic every stored campaign was played with
         positions = [rear + (lengths[0] + config.setpoint_m) * (n - 1 - i) for i in range(n)]
     else:
@@ -119,7 +121,7 @@ def initial_state(config: EpisodeSettings, front: int = 0) -> tuple[list[float],
     return positions, [speed] * n
 
 
-#: The rearmost car's front bumper starts this far from the road's start [m].
+#: The rearmost car's rear bumper starts this far from the road's start [m], unless scenario.join_m says.
 REAR_START_M = 10.0
 
 

@@ -149,3 +149,14 @@ def test_what_the_platoon_does_at_red_lights_is_checked_and_stored_only_on_a_roa
     # d4sumo's own roads have no lights: one configuration whatever is said, stored without the key
     assert EpisodeConfig(signals="ignore") == EpisodeConfig()
     assert "signals" not in EpisodeConfig().to_dict()["scenario"]
+
+
+def test_where_the_platoon_joins_its_route_moves_every_car_and_is_stored_only_where_set():
+    from d4sumo.model.maneuvers import maneuver_of
+
+    here, there = EpisodeConfig(), EpisodeConfig(join_m=510.0)
+    moved = [b.position_m - a.position_m for a, b in zip(maneuver_of(here).cars(), maneuver_of(there).cars())]
+    assert moved == [500.0] * 4
+    assert "join_m" not in here.to_dict()["scenario"] and there.to_dict()["scenario"]["join_m"] == 510.0
+    with pytest.raises(ConfigError, match=r"^scenario.join_m: got -1; allowed: "):
+        EpisodeConfig(join_m=-1)
