@@ -36,29 +36,49 @@ def route_signals(api, route: tuple[str, ...], path: tuple[int, ...]) -> list[tu
     return found
 
 
+#: the link states a driver drives on at (green, off, blinking): where every light within reach shows one, nobody
+#: needs to be told more
+_GO = frozenset("GgsoO")
+
+
 class RouteLights:
     """What each car of one platoon sees of the route's signals, step by step (see the module)."""
 
     def __init__(self, api, signals: list[tuple[float, str, int]], cars: int):
         self.signals = signals
+        self.first = 0  # the first signal ahead of the rearmost car
         self.next = [0] * cars  # each car's next signal: cars never drive backwards
         self.get_state = api.trafficlight.getRedYellowGreenState
 
-    def __call__(self, x: list[float]) -> list[Stop | None]:
-        """The signal each car at positions ``x`` along the route sees, or None (none within reach)."""
+    def __call__(self, x: list[float]) -> list[Stop | None] | None:
+        """The signal each car at positions ``x`` along the route sees, or None (none within reach); None for
+        all of them where every light within their reach lets them on."""
+        signals, get_state = self.signals, self.get_state
+        j, rear, front = self.first, min(x), max(x)
+        while j < len(signals) and rear > signals[j][0]:
+            j += 1
+        self.first = j
         states: dict[str, str] = {}
+        demands = False
+        for line, tls, index in signals[j:]:
+            if line - front > LOOKAHEAD_M:
+                break
+            if tls not in states:
+                states[tls] = get_state(tls)
+            demands = demands or states[tls][index] not in _GO
+        if not demands:
+            return None
         out: list[Stop | None] = []
-        signals = self.signals
-        for i, front in enumerate(x):
-            j = self.next[i]
-            while j < len(signals) and front > signals[j][0]:
-                j += 1
-            self.next[i] = j
-            if j == len(signals) or signals[j][0] - front > LOOKAHEAD_M:
+        for i, car in enumerate(x):
+            k = self.next[i]
+            while k < len(signals) and car > signals[k][0]:
+                k += 1
+            self.next[i] = k
+            if k == len(signals) or signals[k][0] - car > LOOKAHEAD_M:
                 out.append(None)
                 continue
-            line, tls, index = signals[j]
+            line, tls, index = signals[k]
             if tls not in states:
-                states[tls] = self.get_state(tls)
-            out.append(Stop(j, line - front, states[tls][index]))
+                states[tls] = get_state(tls)
+            out.append(Stop(k, line - car, states[tls][index]))
         return out

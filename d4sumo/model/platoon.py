@@ -281,9 +281,11 @@ class Platoon:
         self._compiled = compiled_followers(self) if followers is None and not lights else None
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
         #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
-        self.stops: list = []
+        self.stops: list | None = None  # (None: nobody sees a light that asks anything of it)
         #: each step, what each car saw of the next light (`signals.light_code`): the trace's light_X
         self.lights: list[list[float]] = []
+        self._lit = lights
+        self._dark = [0.0] * len(self.ids)
         self._drivers: dict[int, SignalDriver] = {}
         if lights and config.signals != "ignore":
             obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
@@ -302,7 +304,8 @@ class Platoon:
             c = command(gap, speed, *rest)
             if type(c) is not float or not -1.0 <= c <= 1.0:  # a user's command: said as without lights
                 c = checked_command(c, i, len(self.commands))
-            return min(c, limit(self.stops[i], speed))
+            stops = self.stops
+            return min(c, limit(stops[i] if stops else None, speed))
         return obeyed
 
     def advance(self, k: int, positions: list[float], speeds: list[float], pairs: list[Pair]) -> list[float]:
@@ -336,10 +339,11 @@ class Platoon:
             u = acceleration_to_command(self.attacker_cruise.acceleration(speed), self.attacker_vehicle)
         else:
             self._attacking = True
-        if self.stops:  # on a route through traffic lights: what each car sees of the next one, recorded
-            self.lights.append([light_code(stop) for stop in self.stops])
+        stops = self.stops
+        if self._lit:  # on a route through traffic lights: what each car sees of the next one, recorded
+            self.lights.append([light_code(stop) for stop in stops] if stops else self._dark)
         if 0 in self._drivers:  # its driver stops it for red, attacking or not
-            u = min(u, self._drivers[0].limit(self.stops[0], speed))
+            u = min(u, self._drivers[0].limit(stops[0] if stops else None, speed))
         commands = [u]
         new_speeds = [self.attacker_actuator.apply(u, speed)]
         if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
@@ -377,7 +381,7 @@ class Platoon:
                 continue
             c = acceleration_to_command(cruise.acceleration(speeds[i]), vehicle)
             if i in self._drivers:
-                c = min(c, self._drivers[i].limit(self.stops[i], speeds[i]))
+                c = min(c, self._drivers[i].limit(stops[i] if stops else None, speeds[i]))
             commands.append(c)
             new_speeds.append(actuator.apply(c, speeds[i]))
         self.commands.append(commands)

@@ -71,7 +71,10 @@ class SignalDriver:
 
     def limit(self, stop: Stop | None, speed_mps: float) -> float:
         """The highest command the signal ahead allows: 1.0 (full throttle) where it does not demand a stop."""
-        if stop is None or stop.signal == self.committed:
+        if stop is None:  # no light within reach asks anything: a stop decided at amber is over
+            self.stopping = -1
+            return 1.0
+        if stop.signal == self.committed:
             return 1.0
         red = stop.state in RED
         if not red and stop.state not in YELLOW:

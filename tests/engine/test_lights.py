@@ -31,17 +31,20 @@ def corridor(tmp_path_factory):
 
 @pytest.fixture
 def passes(monkeypatch):
-    """Each stop line a car of the platoon crosses: (car, signal, the state it showed the step before)."""
+    """Each stop line a car of the platoon crosses: (car, signal, the state it showed the car the step before;
+    "G" where every light within reach let the platoon on)."""
     seen: list[tuple[int, int, str]] = []
     measured = lights.RouteLights.__call__
 
     def call(self, x):
-        before = list(self.next)
         out = measured(self, x)
-        last = getattr(self, "_last", [None] * len(x))
-        seen.extend((i, last[i].signal, last[i].state) for i, (b, a) in enumerate(zip(before, self.next))
-                    if a > b and last[i] is not None)
-        self._last = out
+        before, last = getattr(self, "_x", None), getattr(self, "_last", None)
+        for i, car in enumerate(x if before is not None else ()):
+            for k, (line, _, _) in enumerate(self.signals):
+                if before[i] <= line < car:
+                    stop = last[i] if last else None
+                    seen.append((i, k, stop.state if stop is not None and stop.signal == k else "G"))
+        self._x, self._last = list(x), out
         return out
 
     monkeypatch.setattr(lights.RouteLights, "__call__", call)
