@@ -201,7 +201,8 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         tables.append(table_crash_kinds(records))
     for t in tables:
         parts.append(_table_html(t))
-    (out / "tables.txt").write_text("\n\n".join(t.to_text() for t in tables) + "\n")
+    # a table of a few columns whole (its headers say much), a sweep of many systems in blocks of columns
+    (out / "tables.txt").write_text("\n\n".join(t.to_text(width=TEXT_WIDTH) for t in tables) + "\n")
     parts.append("<p>The tables as text: <a href='tables.txt'>tables.txt</a>. Times count from the attack's start "
                  "(after the warm-up drive for start mode warmup).</p>")
 
@@ -305,6 +306,10 @@ def _replayed(record: Record, fcd_path: Path, name: Path) -> dict | str:
         return replay_to_fcd(record, fcd_path, name)
     except NotSimulable as exc:
         return str(exc)
+
+
+#: the widest line tables.txt holds before a table goes on in blocks of columns
+TEXT_WIDTH = 200
 
 
 def _openscenario_links(record: Record, out: Path, name: str, fcd: Path) -> str:

@@ -280,3 +280,13 @@ def test_falsify_among_traffic_that_never_meets_the_platoon_says_so(tmp_path, ca
     captured = capsys.readouterr()
     assert "traffic: none ever ahead of or behind a car of the platoon" in captured.out
     assert "the traffic never came within 100 m of a car of the platoon in 2 samples: this campaign played as if alone" in captured.err
+
+
+
+def test_the_report_keeps_a_table_of_a_few_columns_whole_in_tables_txt():
+    """Issue 48: tables.txt split Table 1 of a single campaign (7 columns, long headers) into "continued" blocks."""
+    from d4sumo.results.analysis import table_success_statistics
+    from d4sumo.results.report import TEXT_WIDTH
+
+    text = table_success_statistics([_sample(i) for i in range(4)]).to_text(width=TEXT_WIDTH)
+    assert "continued" not in text
