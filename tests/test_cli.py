@@ -725,3 +725,16 @@ def test_falsify_with_a_formula_of_ones_own_says_how_many_samples_falsified_it(t
     assert f"formula falsified (robustness < 0) by {sum(r < 0 for r in rhos)} of 4 samples" in out
     assert main(["falsify", "--duration", "10", "--samples", "2", "--db", str(db), "--quiet"]) == 0
     assert "formula falsified" not in capsys.readouterr().out  # the paper's specification: its outcomes say it
+
+
+def test_a_campaigns_best_parameters_name_what_the_pedals_do_not_set():
+    """Issue 48: a lie's parameters (its value and start) were printed among the knots without names."""
+    from d4sumo.cli.campaigns import params_text
+    from d4sumo.inputs import campaign_of
+
+    lie = campaign_of({"controller": {"class": "cacc"}, "attack": {"message": "offset", "message_field": "speed"}})
+    family = lie.family()
+    text = params_text(family, [0.5] * 9 + [-14.15, 1.25])
+    assert text == "0.500, " * 8 + "0.500; msg_value -14.150, msg_start_s 1.250"
+    plain = campaign_of({}).family()
+    assert params_text(plain, [0.25] * 9) == ", ".join(["0.250"] * 9)

@@ -143,9 +143,17 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}")
         if top.collision:
             print(f"  first collision: {collision_text(top.collision)}")
-        print(f"  params: {', '.join(f'{v:.3f}' for v in top.params)}")
+        print(f"  params: {params_text(campaign.family(), top.params)}")
         print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
     return 0
+
+
+def params_text(family, params) -> str:
+    """A sample's parameters: the pedal family's values, then what a maneuver or a lie adds, each by its name
+    (a lie's offset and start are no knots)."""
+    own = len(getattr(family, "longitudinal", family).parameters)
+    added = [f"{name} {v:.3f}" for name, v in zip(family.names[own:], params[own:])]
+    return ", ".join(f"{v:.3f}" for v in params[:own]) + (f"; {', '.join(added)}" if added else "")
 
 
 def _nearest(summary, config) -> dict[str, float]:
