@@ -292,5 +292,5 @@ def traffic_nearness_text(min_gaps: Iterable[dict[str, float]], cars: Sequence[s
     nearest = nearest_traffic(min_gaps, cars)
     if not nearest:
         return "traffic: none ever ahead of or behind a car of the platoon, in its lane", False
-    parts = ", ".join(f"{car} {gap:.1f} m" for car, gap in nearest.items())
+    parts = ", ".join(f"{car} {gap:.1f} m" if gap >= 0 else f"{car} collided with it" for car, gap in nearest.items())
     return f"traffic: nearest to {parts}", min(nearest.values()) < TRAFFIC_MEETS_M

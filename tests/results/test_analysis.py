@@ -268,6 +268,7 @@ def test_how_near_the_traffic_came_to_each_car_of_the_platoon_and_whether_it_eve
     far = [{"traffic-v0": TRAFFIC_MEETS_M + 805.0}]  # a demand that departs far from the platoon (issue 48: 905 m)
     assert traffic_nearness_text(far, cars) == ("traffic: nearest to v0 905.0 m", False)
     assert traffic_nearness_text([{"v0-v1": 3.0}], cars)[1] is False
+    assert traffic_nearness_text([{"traffic-v0": -0.04}], cars) == ("traffic: nearest to v0 collided with it", True)
 
 
 @pytest.mark.sumo
