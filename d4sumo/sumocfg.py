@@ -104,7 +104,10 @@ def expand(doc: Mapping[str, Any]) -> dict:
                               f"none beside {network}, whose route files are the demand")
         traffic["demand"] = files["route-files"]
     if files["additional-files"]:
-        scenario["additional"] = [*scenario.get("additional", []), *files["additional-files"]]
+        given = scenario.get("additional", [])
+        if not isinstance(given, list) or not all(isinstance(p, str) for p in given):
+            raise ConfigError("scenario.additional", given, f"a list of SUMO additional files beside {network}'s")
+        scenario["additional"] = [*given, *files["additional-files"]]
     passed, overridden, left_out = {}, [], []
     for name, value in options.items():
         if name in OWN:
@@ -118,7 +121,10 @@ def expand(doc: Mapping[str, Any]) -> dict:
                                                            "it out: d4sumo sets the clock, the step, collisions, seeds and "
                                                            "insertion itself, and reads no sublane model)")
     if passed:
-        scenario["sumo_options"] = {**passed, **scenario.get("sumo_options", {})}
+        given = scenario.get("sumo_options", {})
+        if not isinstance(given, Mapping):
+            raise ConfigError("scenario.sumo_options", given, "a table of SUMO options, e.g. {time-to-teleport = \"-1\"}")
+        scenario["sumo_options"] = {**passed, **given}
     said = ([f"overridden by d4sumo's own: {', '.join(overridden)}"] if overridden else []) + (
         [f"left out: {', '.join(left_out)} (outputs, and what only the GUI or the log reads)"] if left_out else [])
     if said:

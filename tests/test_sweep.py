@@ -869,3 +869,20 @@ def test_ctrl_c_as_a_local_dask_cluster_starts_or_closes_is_taken_in_order(metho
         assert (done.returncode, done.stdout) == (0, "3\nclosed\n"), done.stderr
     # the 10 s more at exit it took before, against the run without Ctrl-C (a busy machine slows both alike)
     assert took < uninterrupted_s + 6.0, (took, uninterrupted_s)
+
+
+@pytest.mark.sumo
+def test_a_sweep_d4sumo_0_18_ran_on_a_road_of_ones_own_is_told_the_keys_that_go_on_with_it(tmp_path, capsys):
+    """Regression: the hint for a sweep 0.18 stored (its platoon through red lights) raised AttributeError."""
+    road = tmp_path / "road"
+    shutil.copytree(Path(__file__).resolve().parent.parent / "examples" / "roads" / "three_edges", road)
+    text = (f'name = "mine"\n[grid]\nsetpoint_m = [5.0, 7.0]\n[scenario]\nnetwork = "{road}/"\nstart = "steady"\n'
+            'duration_s = 10.0\n[search]\noptimizer = "random"\nsamples = 2\n')
+    db = tmp_path / "r.sqlite"
+    assert main(["sweep", str(write(tmp_path, text.replace('start = "steady"', 'start = "steady"\nsignals = "ignore"'),
+                                    "before.toml")), "--db", str(db), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["sweep", str(write(tmp_path, text)), "--db", str(db), "--quiet"]) == 2
+    said = capsys.readouterr().err
+    assert said.count("\n") == 1 and "It was run by d4sumo 0.18 or before (the platoon driving through red lights)" in said
+    assert '`signals = "ignore"` in [scenario]' in said

@@ -18,30 +18,13 @@ import math
 
 from ..model.bodies import Body, body_gap_m, struck_by
 from ..model.maneuvers import Pair
+from .calls import api_call, via_lanes
 
 #: how far before and after a junction's stretch of the route a car's body is looked at [m]
 NEAR_M = 5.0
 #: a vehicle on a lane out of a junction with its rear this near the lane's start may still reach into it [m]
 #: (one on a lane into it has its whole body behind the stop line)
 EDGE_M = 2.0
-
-
-def _call(api, domain: str, name: str):
-    """``api.<domain>.<name>``; for libsumo its C function itself, without the Python wrapper around it."""
-    return getattr(getattr(api, "_libsumo", None), f"{domain}_{name}", None) or getattr(getattr(api, domain), name)
-
-
-def _via_length(api, lane: str, to_lane: str) -> float:
-    """The length of the junction lanes from ``lane`` to ``to_lane`` [m] (0: no junction lane between them)."""
-    length, seen = 0.0, 0
-    while seen < 8:  # a junction lane may lead through an internal junction to a second one
-        seen += 1
-        link = next((ln for ln in api.lane.getLinks(lane) if ln[0] == to_lane), None)
-        if link is None or not link[4]:
-            return length
-        lane = link[4]
-        length += api.lane.getLength(lane)
-    return length
 
 
 class JunctionCrossings:
@@ -57,7 +40,7 @@ class JunctionCrossings:
         for k, (edge, to) in enumerate(zip(route, route[1:])):
             lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
             along += api.lane.getLength(lane)
-            length = _via_length(api, lane, to_lane)
+            length = sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
             junction = api.edge.getToJunction(edge)
             edges_in, edges_out = api.junction.getIncomingEdges(junction), api.junction.getOutgoingEdges(junction)
             internal = sorted({e for e in (*edges_in, *edges_out) if e.startswith(":")})
@@ -66,15 +49,21 @@ class JunctionCrossings:
                                lanes([e for e in edges_out if not e.startswith(":")])))
             along += length
         self.next = [0] * len(ids)  # each car's next junction: cars never drive backwards
-        vehicle = lambda name: _call(api, "vehicle", name)  # noqa: E731
+        self.started = False
+        vehicle = lambda name: api_call(api, "vehicle", name)  # noqa: E731
         self.get_position, self.get_angle, self.get_width = vehicle("getPosition"), vehicle("getAngle"), vehicle("getWidth")
         self.get_length, self.get_lane_position, self.get_speed = vehicle("getLength"), vehicle("getLanePosition"), vehicle("getSpeed")
-        self.on_lane = _call(api, "lane", "getLastStepVehicleIDs")
+        self.on_lane = api_call(api, "lane", "getLastStepVehicleIDs")
         self.sizes: dict[str, tuple[float, float]] = {}
 
     def __call__(self, x: list[float], pairs: list[Pair], names: list[str], xs: list[float], vs: list[float]) -> list[Pair]:
         """The step's 2D collisions of the platoon's cars at positions ``x`` along the route; a foe not yet
-        among ``names`` (the step's ids, positions and speeds that pairs index) is added to them."""
+        among ``names`` (the step's ids, positions and speeds that pairs index) is added to them. None at the
+        platoon's insertion (t = 0): its pairs reach the controllers before any collision check, and a car
+        placed onto another is seen a step later, before anyone acts on it."""
+        if not self.started:
+            self.started = True
+            return []
         spans, found = self.spans, []
         foes_of: dict[int, list[str]] = {}
         for b, front in enumerate(x):

@@ -11,6 +11,7 @@ is the model's (`model.signals`).
 from __future__ import annotations
 
 from ..model.signals import Stop
+from .calls import via_lanes
 
 #: how far ahead of a car a signal is seen [m]: more than stopping from 45 m/s comfortably takes
 LOOKAHEAD_M = 300.0
@@ -29,10 +30,7 @@ def route_signals(api, route: tuple[str, ...], path: tuple[int, ...]) -> list[tu
         along += api.lane.getLength(lane)
         if (lane, to_lane) in links:
             found.append((along, *links[lane, to_lane]))
-        via = next((link[4] for link in api.lane.getLinks(lane) if link[0] == to_lane), "")
-        while via:  # the junction's lanes, through an internal junction where there is one
-            along += api.lane.getLength(via)
-            via = next((link[4] for link in api.lane.getLinks(via) if link[0] == to_lane), "")
+        along += sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
     return found
 
 

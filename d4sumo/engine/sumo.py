@@ -32,6 +32,7 @@ from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_files_xml, type_elements
 from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary, sumo_home
+from .calls import api_call
 from .junctions import JunctionCrossings
 from .lights import RouteLights, route_signals
 from .scenarios import Road, default_cache_dir
@@ -427,9 +428,8 @@ def _define_type(api, type_id: str, v: VehicleParams) -> None:
 
 
 def vehicle_call(api, name: str):
-    """``api.vehicle.<name>``; for libsumo its C function itself, without the one-line Python wrapper
-    around it (a third of the cost of a call, and these run for every car at every step)."""
-    return getattr(getattr(api, "_libsumo", None), f"vehicle_{name}", None) or getattr(api.vehicle, name)
+    """``api.vehicle.<name>``, bound (`calls.api_call`)."""
+    return api_call(api, "vehicle", name)
 
 
 def simulation_step(api):
@@ -537,6 +537,8 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     sumo = sumo_binary("sumo")
     key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, ",".join(d.name for d in demands),
                      str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s),
+                     # what else its SUMO loads: a .sumocfg's additional files and options change the traffic
+                     *([config.additional_sha256] if config.additional else []), *(f"{k}={v}" for k, v in config.sumo_options),
                      *(["insertion-checks", "a process of its own"] if config.traffic.insertion_checks else [])])
     folder = Path(default_cache_dir()).parent / "traffic-states"
     path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
@@ -871,7 +873,7 @@ class SumoWorld:
                 self.lights = [RouteLights(api, found, len(ids)) for found, ids in zip(signals, platoons)]
         #: with traffic on a route of several edges, each platoon's collisions inside its junctions (`junctions`)
         self.crossings = None
-        if config.traffic is not None and not road.one_edge:
+        if config.traffic is not None and config.traffic.junction_collisions and not road.one_edge:
             self.crossings = [JunctionCrossings(api, road.route(e), road.platoon_path, ids, config.collision_gap_m)
                               for e, ids in enumerate(platoons)]
         if config.traffic is not None:

@@ -300,6 +300,8 @@ class EpisodeConfig:
                 raise ConfigError("scenario.start", self.start, "steady with [traffic] (the platoon joins the traffic at its speed)")
             if not _on_grid(self.traffic.warmup_s, self.step_s):
                 raise ConfigError("traffic.warmup_s", self.traffic.warmup_s, f"a whole number of steps of {self.step_s:g} s")
+            if not is_network_path(self.network) and not self.traffic.junction_collisions:  # one edge, no junction: one
+                fix("traffic", dataclasses.replace(self.traffic, junction_collisions=True))  # configuration, whatever it says
         fix("vehicles", self._checked_vehicles())
         declared = self.vehicle_of(0).max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
@@ -507,6 +509,8 @@ class EpisodeConfig:
             out["radar"] = self.radar.to_dict()
         if self.traffic is not None:
             out["traffic"] = self.traffic.to_dict()
+            if not is_network_path(self.network):  # d4sumo's own roads are one edge: no junction to look into
+                out["traffic"].pop("junction_collisions", None)
         if self.v2v is not None:
             out["v2v"] = self.v2v.to_dict()
         return out

@@ -49,7 +49,7 @@ TRAFFIC_ID = "traffic"
 #: a vehicle type's name: SUMO's ids allow more, a flow's id is built from it
 _TYPE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 #: what a stored definition's [traffic] table without a key held: the traffic as that version played it
-EARLIER_TRAFFIC = {"insertion_checks": False, "merge_by_departure": False}
+EARLIER_TRAFFIC = {"insertion_checks": False, "merge_by_departure": False, "junction_collisions": False}
 #: <vType> attributes d4sumo sets itself (the type's id)
 _OWN_ATTRIBUTES = ("id",)
 
@@ -81,6 +81,10 @@ class TrafficParams:
     #: departure, as ``sumo -r a,b`` does (false: one after the other in one file, as d4sumo 0.18 and before
     #: played them: the second file's vehicles entered once the first's had; their stored campaigns replay so)
     merge_by_departure: bool = True
+    #: a platoon car running into a vehicle inside a junction (crossing, merging, turning across its way) is a
+    #: collision, seen in 2D (`engine.junctions`); false: unseen, as d4sumo 0.18 and before played it (their
+    #: stored campaigns replay so)
+    junction_collisions: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -101,7 +105,7 @@ class TrafficParams:
         fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
         fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
         fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
-        for name in ("per_sample", "insertion_checks", "merge_by_departure"):
+        for name in ("per_sample", "insertion_checks", "merge_by_departure", "junction_collisions"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"traffic.{name}", getattr(self, name), "true or false")
         fix("types", _checked_types(self.types))
@@ -128,6 +132,8 @@ class TrafficParams:
             del out["insertion_checks"]
         if not self.merge_by_departure or not self.merges:  # likewise; and without effect where there is one file
             del out["merge_by_departure"]
+        if not self.junction_collisions:  # likewise (and left out on d4sumo's own roads: `EpisodeConfig.to_dict`)
+            del out["junction_collisions"]
         if self.types and self.vehicles_per_hour is not None:
             out["types"] = {name: dict(attributes) for name, attributes in self.types}
         return out

@@ -186,8 +186,9 @@ class Campaign:
 
     def with_inputs_of_0_18(self) -> "Campaign":
         """The campaign as d4sumo 0.18 and before ran it: its network file rebuilt from plain XML, its platoon driving
-        through red lights on a road of one's own, its demand files one after the other (`EpisodeConfig.rebuild`,
-        `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`); itself where that is what it does."""
+        through red lights on a road of one's own, its demand files one after the other, collisions inside junctions
+        unseen (`EpisodeConfig.rebuild`, `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`,
+        `TrafficParams.junction_collisions`); itself where that is what it does."""
         config = self.config
         if "signals" in config.to_dict()["scenario"]:
             config = dataclasses.replace(config, signals="ignore")
@@ -195,6 +196,8 @@ class Campaign:
             config = dataclasses.replace(config, rebuild=True)
         if config.traffic is not None and config.traffic.merges and config.traffic.merge_by_departure:
             config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, merge_by_departure=False))
+        if "junction_collisions" in (config.to_dict().get("traffic") or {}):
+            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, junction_collisions=False))
         return self if config == self.config else self.replace(config=config)
 
     def changes_of_0_18(self) -> list[tuple[str, str, str]]:
@@ -206,6 +209,8 @@ class Campaign:
             changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
         if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:
             changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
+        if "junction_collisions" in (self.config.to_dict().get("traffic") or {}):
+            changes.append(("traffic.junction_collisions", "false", "collisions inside junctions unseen"))
         return changes
 
     def with_options(self, options: dict) -> "Campaign":

@@ -46,9 +46,9 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
         return None
     inputs = sweep.with_inputs_of_before()
     lights = sweep.with_inputs_of_0_18()
-    changed = {key: (value, did) for c in sweep.campaigns for key, value, did in c.changes_of_0_18()}
+    then = {key: (value, did) for c in sweep.campaigns for key, value, did in c.changes_of_0_18()}
     lights_keys = [f"`{key.partition('.')[2]} = {json.dumps(value) if value == 'ignore' else value}` in [{key.partition('.')[0]}]"
-                   for key, (value, _) in changed.items()]
+                   for key, (value, _) in then.items()]
     input_keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
                   *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"]
                     if any(c.config.traffic for c in sweep.campaigns) else []), *lights_keys]
@@ -64,7 +64,7 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
             if (changed or keys) and theirs["fingerprint"] == before.fingerprint():
                 tables = [", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed]
                 version = ("an earlier d4sumo" if changed or not keys else
-                           f"d4sumo 0.18 or before ({', '.join(did for _, did in changed.values())})" if base is lights else
+                           f"d4sumo 0.18 or before ({', '.join(did for _, did in then.values())})" if base is lights else
                            "d4sumo 0.16 or before, which took a road of one's own as it found it, let traffic enter after "
                            "the warm-up unchecked, drove the platoon through red lights and played demand files one after "
                            "the other")

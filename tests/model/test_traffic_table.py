@@ -114,7 +114,8 @@ def test_a_user_demand_keeps_its_elements_its_vehicles_named_as_traffic_and_inse
     assert flow.get("id") == "traffic.main_1" and flow.get("insertionChecks") == "all"
     assert vehicle.get("id") == "traffic.v1" and vehicle.get("insertionChecks") == "none"  # the user's own choice
     assert params.to_dict() == {"warmup_s": 60.0, "clear_m": 50.0, "seed": 0, "demand": [str(demand)],
-                                "demand_sha256": params.demand_sha256, "insertion_checks": True}
+                                "demand_sha256": params.demand_sha256, "insertion_checks": True,
+                                "junction_collisions": True}  # (left out by EpisodeConfig on d4sumo's own roads)
     both = TrafficParams(demand=str(demand), vehicles_per_hour=300)
     assert len(ET.fromstring(demand_xml(both, ["a", "b"], [0, 1], 100.0)).findall("flow")) == 3
     demand.write_text(demand.read_text().replace("900", "1800"))  # another demand: other traffic

@@ -606,3 +606,23 @@ def test_a_campaign_on_a_network_file_an_earlier_version_stored_replays_on_the_n
     assert stored.config == new.with_inputs_of_0_18().config
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
     assert [key for key, _, _ in new.changes_of_0_18()] == ["scenario.rebuild", "scenario.signals"]
+
+
+def test_a_traffic_campaign_0_18_stored_on_a_road_of_ones_own_replays_with_collisions_inside_junctions_unseen():
+    """0.18 saw no collision inside a junction: its stored campaigns among traffic (no ``junction_collisions``) replay
+    and resume so, under their key; new ones see them; on d4sumo's own roads (one edge) nothing changed."""
+    from d4sumo.search.store import campaign_key
+    from d4sumo.sumohome import sumo_home
+
+    net = str(Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml")
+    new = Campaign(config=EpisodeConfig(network=net, route=("gneE27", "gneE25"), start="steady", traffic={}))
+    assert new.definition()["config"]["traffic"]["junction_collisions"] is True
+    old = copy.deepcopy(new.definition())
+    del old["config"]["traffic"]["junction_collisions"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert stored.config.traffic.junction_collisions is False
+    assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
+    assert "traffic.junction_collisions" in [key for key, _, _ in new.changes_of_0_18()]
+    shipped = Campaign(config=EpisodeConfig(start="steady", traffic={}))
+    assert "junction_collisions" not in shipped.definition()["config"]["traffic"]
+    assert Campaign.from_definition(shipped.definition(), samples=100).config == shipped.config

@@ -1,0 +1,22 @@
+"""Bound calls into SUMO's API for the step loop's hot paths."""
+
+from __future__ import annotations
+
+
+def api_call(api, domain: str, name: str):
+    """``api.<domain>.<name>``; for libsumo its C function itself, without the one-line Python wrapper around it
+    (a third of the cost of a call, and these run for every car at every step)."""
+    return getattr(getattr(api, "_libsumo", None), f"{domain}_{name}", None) or getattr(getattr(api, domain), name)
+
+
+def via_lanes(api, lane: str, to_lane: str) -> list[str]:
+    """The junction lanes from ``lane`` to ``to_lane`` of the next edge, in order (none: they touch): one, or two
+    through an internal junction."""
+    found: list[str] = []
+    while len(found) < 8:
+        via = next((link[4] for link in api.lane.getLinks(lane) if link[0] == to_lane), "")
+        if not via:
+            break
+        found.append(via)
+        lane = via
+    return found
