@@ -26,7 +26,7 @@ from typing import Any, Mapping
 from xml.etree import ElementTree as ET
 
 from .errors import ConfigError
-from .model.config import SUMO_OPTIONS_PASSED as PASSED, passed_option
+from .model.config import SUMO_OPTION_GROUPS_PASSED as GROUPS, SUMO_OPTIONS_PASSED as PASSED, passed_option
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +117,8 @@ def expand(doc: Mapping[str, Any]) -> dict:
         elif any(part in name for part in _LEFT_OUT_PARTS) or name == "route-steps":
             left_out.append(name)
         else:
-            raise ConfigError(f"{network}: {name}", value, f"an option d4sumo can honour, one of {', '.join(PASSED)} (or leave "
+            raise ConfigError(f"{network}: {name}", value, f"an option d4sumo can honour, one of {', '.join(PASSED)}, "
+                                                           f"{', '.join(p + '*' for p in GROUPS)} (or leave "
                                                            "it out: d4sumo sets the clock, the step, collisions, seeds and "
                                                            "insertion itself, and reads no sublane model)")
     if passed:

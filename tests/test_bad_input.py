@@ -52,6 +52,7 @@ SIMULATE = [
     ["--network", "/nonexistent/scenario.sumocfg"], ["--set", "scenario.signals=stop"], ["--set", "scenario.rebuild=1"],
     ["--set", "scenario.sumo_options={lateral-resolution=0.8}"], ["--set", 'scenario.additional=["/nonexistent.add.xml"]'],
     ["--set", "traffic.merge_by_departure=2"], ["--set", "scenario.join_m=4990"], ["--set", "scenario.join_m=-1"],
+    ["--set", 'scenario.sumo_options={scale="x"}'], ["--set", 'scenario.sumo_options={"device.rerouting.bogus"="1"}'],
 ]
 
 

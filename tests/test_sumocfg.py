@@ -96,3 +96,25 @@ def test_sumo_own_corridor_sumocfg_plays_its_network_demand_and_additional_file_
         assert scenario["network"].endswith("corridor/corridor.net.xml") and scenario["additional"][0].endswith("input_additional.add.xml")
         assert len(scenario["additional_sha256"]) == 64 and campaign.definition["config"]["traffic"]["demand"][0].endswith("corridor.rou.xml")
     assert main(["replay", str(db), "1"]) == 0
+
+
+@pytest.mark.sumo
+def test_an_additional_file_that_writes_outputs_is_loaded_with_the_files_it_reads_and_writes_nothing(tmp_path, monkeypatch):
+    """Found by review: the copy that sends an additional file's outputs nowhere lost the files it reads by a relative
+    path (a variable speed sign's steps): SUMO refused it."""
+    import numpy as np
+
+    from d4sumo.engine.simulation import simulate
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.sumohome import sumo_home
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "vss.def.xml").write_text('<additional>\n  <step time="0" speed="10"/>\n</additional>\n')
+    (tmp_path / "sign.add.xml").write_text('<additional>\n  <variableSpeedSign id="vss" lanes="gneE25_0" file="sub/vss.def.xml"/>\n'
+                                           '  <edgeData id="dump" file="dump.xml"/>\n</additional>\n')
+    monkeypatch.chdir(tmp_path)
+    net = Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml"
+    config = EpisodeConfig(network=str(net), route=("gneE27", "gneE25", "gneE18", "gneE29"), start="steady", speed_mps=13.0,
+                           duration_s=10.0, additional=(str(tmp_path / "sign.add.xml"),))
+    assert simulate(config, np.full(config.steps, np.nan)).outcome == "no_crash"
+    assert not list(tmp_path.rglob("dump.xml"))

@@ -28,7 +28,7 @@ from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, config_road
-from .sumo import check_additional, followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
+from .sumo import check_additional, check_options, followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +98,8 @@ def check_episode(config: EpisodeConfig, road: Road) -> Path | None:
         raise ValueError(f"a road {'run as given' if road.given else 'rebuilt'} for a configuration whose network is "
                          f"{'run as given' if config.network_given else 'rebuilt'} (`scenarios.config_road` builds its own)")
     check_road(config, road)
-    check_additional(config, road)  # and additional files it refuses
+    check_options(config, road)  # SUMO options it refuses
+    check_additional(config, road)  # and additional files
     traffic_files(config, road)  # a demand SUMO refuses is refused before any episode runs
     return followers_file(config, road)
 

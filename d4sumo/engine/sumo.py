@@ -158,12 +158,15 @@ _OUTPUTS = {"edgeData": "file", "laneData": "file", "timedEvent": "dest", "e1Det
             "e2Detector": "file", "laneAreaDetector": "file", "e3Detector": "file", "entryExitDetector": "file",
             "instantInductionLoop": "file", "routeProbe": "file", "calibrator": "output", "edgeRelations": "file",
             "tazRelations": "file", "vTypeProbe": "file"}
+#: the attributes by which an additional file's element reads another file (a VSS's or a rerouter's definitions)
+_INPUTS = ("file", "href", "files")
 _ADDITIONAL: dict[tuple[str, ...], list[str]] = {}
 
 
 def additional_files(config: EpisodeConfig) -> list[str]:
-    """The scenario's additional files as every episode loads them: copies, kept by their content in d4sumo's
-    cache, whose outputs (a detector's file, an edgeData dump, a saved switch state) go nowhere. Many episodes
+    """The scenario's additional files as every episode loads them: where a file writes outputs (a detector's
+    file, an edgeData dump, a saved switch state), a copy kept by its content in d4sumo's cache whose outputs go
+    nowhere, and whose other files are named from the original's folder; else the file itself. Many episodes
     run side by side, each of which would write them anew, into the folder the file is in; a replay's FCD is
     d4sumo's output."""
     if not config.additional:
@@ -179,9 +182,18 @@ def additional_files(config: EpisodeConfig) -> list[str]:
                 tree = ET.parse(path)
             except (ET.ParseError, OSError) as exc:
                 raise ConfigError("scenario.additional", path, f"a SUMO additional file that parses ({exc})") from None
-            for element in tree.getroot().iter():
-                if _OUTPUTS.get(element.tag) in element.attrib:
-                    element.set(_OUTPUTS[element.tag], os.devnull)
+            outputs = [e for e in tree.getroot().iter() if _OUTPUTS.get(e.tag) in e.attrib]
+            if not outputs:  # loaded where it is: the files it names are found as SUMO finds them
+                out.append(path)
+                continue
+            for element in outputs:
+                element.set(_OUTPUTS[element.tag], os.devnull)
+            here = os.path.dirname(os.path.abspath(path))
+            for element in tree.getroot().iter():  # the copy elsewhere: what it reads, named from its own folder
+                for name in _INPUTS:
+                    given = element.get(name)
+                    if given and element not in outputs and not os.path.isabs(given):
+                        element.set(name, ",".join(os.path.join(here, p) for p in given.split(",")))
             text = ET.tostring(tree.getroot(), encoding="unicode")
             copy = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}-{Path(path).name}"
             if not copy.is_file():
@@ -196,6 +208,26 @@ def additional_files(config: EpisodeConfig) -> list[str]:
             out.append(str(copy))
         _ADDITIONAL[key] = out
     return _ADDITIONAL[key]
+
+
+def check_options(config: EpisodeConfig, road: Road) -> None:
+    """The scenario's SUMO options (`EpisodeConfig.sumo_options`), loaded once by SUMO on the road (cached like the
+    followers' types): a value SUMO refuses, or an option it does not know, is a ConfigError naming them in one line."""
+    if not config.sumo_options:
+        return
+
+    def check(sumo: str, _: str) -> None:
+        cmd = [sumo, "--net-file", str(road.net_file), "--end", "0", "--no-step-log", "true",
+               *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        except subprocess.TimeoutExpired:
+            raise SumoError("SUMO did not load the scenario's options within 120 s") from None
+        said = " ".join(ln.strip().removeprefix("Error: ") for ln in done.stderr.splitlines()
+                        if ln.strip() and not ln.startswith(("Warning", "Quitting")))
+        if done.returncode != 0 or "Error" in done.stderr:
+            raise ConfigError("scenario.sumo_options", dict(config.sumo_options), f"options SUMO takes (SUMO: {said})")
+    _checked_file("\n".join(f"{k}={v}" for k, v in config.sumo_options), "options", "options", ".checked", check)
 
 
 def check_additional(config: EpisodeConfig, road: Road) -> None:

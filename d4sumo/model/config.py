@@ -664,8 +664,8 @@ def _sumo_options(options: Any) -> tuple[tuple[str, str], ...]:
         raise ConfigError("scenario.sumo_options", options, "a table of SUMO options, e.g. {time-to-teleport = \"-1\"}") from None
     for name, value in pairs:
         if not passed_option(name):
-            raise ConfigError(f"scenario.sumo_options.{name}", value,
-                              f"an option d4sumo can honour, one of {', '.join(SUMO_OPTIONS_PASSED)}")
+            raise ConfigError(f"scenario.sumo_options.{name}", value, f"an option d4sumo can honour, one of "
+                              f"{', '.join([*SUMO_OPTIONS_PASSED, *(g + '*' for g in SUMO_OPTION_GROUPS_PASSED)])}")
         if not isinstance(value, (str, int, float)) or isinstance(value, bool):
             raise ConfigError(f"scenario.sumo_options.{name}", value, "a value as SUMO takes it (a string or a number)")
     return tuple(sorted((k, str(v)) for k, v in pairs))
