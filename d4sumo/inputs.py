@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
 from typing import Any, Mapping
 
 import numpy as np
@@ -159,7 +160,11 @@ def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
-    return EpisodeConfig.from_dict(apply_preset(sumocfg.expand(doc)))
+    expanded, note = sumocfg.expanded(doc)
+    config = EpisodeConfig.from_dict(apply_preset(expanded))
+    if note:  # said once the configuration is sound: bad input stays one line
+        logging.getLogger("d4sumo.sumocfg").warning("%s", note)
+    return config
 
 
 def link_collision_distance(doc: Mapping[str, Any]) -> dict:

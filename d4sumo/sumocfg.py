@@ -81,10 +81,19 @@ def read(path: str) -> dict[str, str]:
 
 def expand(doc: Mapping[str, Any]) -> dict:
     """The document with its ``scenario.network``'s ``.sumocfg`` laid over it (see the module); as it is
-    where the network is no ``.sumocfg``."""
+    where the network is no ``.sumocfg``. What it overrides and leaves out is said (`expanded`)."""
+    out, note = expanded(doc)
+    if note:
+        log.warning("%s", note)
+    return out
+
+
+def expanded(doc: Mapping[str, Any]) -> tuple[dict, str]:
+    """`expand`'s document, and the note that says what of the ``.sumocfg`` d4sumo overrides and leaves out
+    ("": nothing), for the caller to say once the document is sound."""
     network = doc.get("scenario", {}).get("network") if isinstance(doc.get("scenario"), Mapping) else None
     if not is_sumocfg(network):
-        return dict(doc)
+        return dict(doc), ""
     options = read(network)
     folder = os.path.dirname(network)
     out = copy.deepcopy(dict(doc))
@@ -128,6 +137,4 @@ def expand(doc: Mapping[str, Any]) -> dict:
         scenario["sumo_options"] = {**passed, **given}
     said = ([f"overridden by d4sumo's own: {', '.join(overridden)}"] if overridden else []) + (
         [f"left out: {', '.join(left_out)} (outputs, and what only the GUI or the log reads)"] if left_out else [])
-    if said:
-        log.warning("%s: %s", network, "; ".join(said))
-    return out
+    return out, f"{network}: {'; '.join(said)}" if said else ""

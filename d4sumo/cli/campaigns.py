@@ -100,6 +100,11 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             exc.said = True  # main need not say it again
             raise
     top = summary.best
+    nearest = None
+    if campaign.config.traffic is not None:  # how near the traffic came to each car of the platoon
+        from ..results.analysis import nearest_traffic
+
+        nearest = nearest_traffic((s.min_gaps for s in summary.samples), campaign.config.vehicle_ids)
     result = {
         "db": str(args.db),
         "campaign_id": summary.campaign_id,
@@ -108,7 +113,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         "seed": campaign.seed,
         "samples": len(summary.samples),
         "outcomes": counts,
-        **({"nearest_traffic_m": _nearest(summary, campaign.config)} if campaign.config.traffic is not None else {}),
+        **({"nearest_traffic_m": nearest} if nearest is not None else {}),
         "best": None if top is None else {
             "sample_id": top.id, "index": top.index, "robustness": top.robustness, "outcome": top.outcome,
             "params": list(top.params), "collision": top.collision,
@@ -130,7 +135,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if config.traffic is not None:
         from ..results.analysis import TRAFFIC_MEETS_M, traffic_nearness_text
 
-        text, met = traffic_nearness_text((s.min_gaps for s in summary.samples), config.vehicle_ids)
+        text, met = traffic_nearness_text(nearest)
         print(f"  {text}")
         if not met:  # labelled traffic, played alone: said (its demand's vehicles drive elsewhere, or later)
             print(f"d4sumo: note: the traffic never came within {TRAFFIC_MEETS_M:g} m of a car of the platoon in "
@@ -154,12 +159,6 @@ def params_text(family, params) -> str:
     own = len(getattr(family, "longitudinal", family).parameters)
     added = [f"{name} {v:.3f}" for name, v in zip(family.names[own:], params[own:])]
     return ", ".join(f"{v:.3f}" for v in params[:own]) + (f"; {', '.join(added)}" if added else "")
-
-
-def _nearest(summary, config) -> dict[str, float]:
-    from ..results.analysis import nearest_traffic
-
-    return nearest_traffic((s.min_gaps for s in summary.samples), config.vehicle_ids)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

@@ -286,10 +286,9 @@ def nearest_traffic(min_gaps: Iterable[dict[str, float]], cars: Sequence[str]) -
     return {car: nearest[car] for car in cars if car in nearest}
 
 
-def traffic_nearness_text(min_gaps: Iterable[dict[str, float]], cars: Sequence[str]) -> tuple[str, bool]:
-    """How near the traffic came to each car of the platoon, in a line; and whether it ever came within
-    `TRAFFIC_MEETS_M` of one (else the campaign played as if alone)."""
-    nearest = nearest_traffic(min_gaps, cars)
+def traffic_nearness_text(nearest: dict[str, float]) -> tuple[str, bool]:
+    """How near the traffic came to each car of the platoon (`nearest_traffic`), in a line; and whether it ever
+    came within `TRAFFIC_MEETS_M` of one (else the campaign played as if alone)."""
     if not nearest:
         return "traffic: none ever ahead of or behind a car of the platoon, in its lane", False
     parts = ", ".join(f"{car} {gap:.1f} m" if gap >= 0 else f"{car} collided with it" for car, gap in nearest.items())

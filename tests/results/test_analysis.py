@@ -263,12 +263,12 @@ def test_how_near_the_traffic_came_to_each_car_of_the_platoon_and_whether_it_eve
     cars = ("v0", "v1", "v2", "v3")
     samples = [{"traffic-v0": 40.0, "v0-v1": 3.0, "v3-traffic": 250.0}, {"traffic-v0": 25.5, "v1-traffic": 80.0, "traffic-v2": 12.0}]
     assert nearest_traffic(samples, cars) == {"v0": 25.5, "v1": 80.0, "v2": 12.0, "v3": 250.0}
-    text, met = traffic_nearness_text(samples, cars)
+    text, met = traffic_nearness_text(nearest_traffic(samples, cars))
     assert text == "traffic: nearest to v0 25.5 m, v1 80.0 m, v2 12.0 m, v3 250.0 m" and met
     far = [{"traffic-v0": TRAFFIC_MEETS_M + 805.0}]  # a demand that departs far from the platoon (issue 48: 905 m)
-    assert traffic_nearness_text(far, cars) == ("traffic: nearest to v0 905.0 m", False)
-    assert traffic_nearness_text([{"v0-v1": 3.0}], cars)[1] is False
-    assert traffic_nearness_text([{"traffic-v0": -0.04}], cars) == ("traffic: nearest to v0 collided with it", True)
+    assert traffic_nearness_text(nearest_traffic(far, cars)) == ("traffic: nearest to v0 905.0 m", False)
+    assert traffic_nearness_text(nearest_traffic([{"v0-v1": 3.0}], cars))[1] is False
+    assert traffic_nearness_text(nearest_traffic([{"traffic-v0": -0.04}], cars)) == ("traffic: nearest to v0 collided with it", True)
 
 
 @pytest.mark.sumo
