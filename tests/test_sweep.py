@@ -526,7 +526,7 @@ def test_a_sweep_an_earlier_version_ran_on_a_road_of_ones_own_among_traffic_is_t
     text = (f'name = "mine"\n[grid]\nsetpoint_m = [5.0, 7.0]\n[scenario]\nnetwork = "{road}/"\nstart = "steady"\n'
             '[traffic]\nvehicles_per_hour = 600\n[search]\noptimizer = "random"\nsamples = 2\n')
     as_before = text.replace('start = "steady"', 'start = "steady"\nnetwork_sha256 = ""\nsignals = "ignore"').replace(
-        "vehicles_per_hour = 600", "vehicles_per_hour = 600\ninsertion_checks = false")
+        "vehicles_per_hour = 600", "vehicles_per_hour = 600\ninsertion_checks = false\njunction_collisions = false")
     db = tmp_path / "r.sqlite"
     assert main(["sweep", str(write(tmp_path, as_before, "before.toml")), "--db", str(db), "--quiet"]) == 0
     stored = outcomes(db)
@@ -535,7 +535,7 @@ def test_a_sweep_an_earlier_version_ran_on_a_road_of_ones_own_among_traffic_is_t
     said = capsys.readouterr().err
     assert said.count("\n") == 1 and "It was run by d4sumo 0.16 or before" in said
     assert ('`network_sha256 = ""` in [scenario] and `insertion_checks = false` in [traffic] (or in each table of '
-            'grid.traffic) and `signals = "ignore"` in [scenario]') in said
+            'grid.traffic) and `signals = "ignore"` in [scenario] and `junction_collisions = false` in [traffic]') in said
     assert outcomes(db) == stored
     # one whose optimiser an earlier d4sumo ran otherwise too (ce without its noise): both said at once
     ce = text.replace('optimizer = "random"', 'optimizer = "ce"')
