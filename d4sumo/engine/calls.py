@@ -20,3 +20,16 @@ def via_lanes(api, lane: str, to_lane: str) -> list[str]:
         found.append(via)
         lane = via
     return found
+
+
+def route_junctions(api, route: tuple[str, ...], path: tuple[int, ...]):
+    """Each junction between two edges of the route, along the platoon's lane path: (the edge before it, the
+    platoon's lane there, its lane on the next edge, where that lane ends along the route [m], how long the
+    junction lanes between them are [m])."""
+    along = 0.0
+    for k, (edge, to) in enumerate(zip(route, route[1:])):
+        lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
+        along += api.lane.getLength(lane)
+        length = sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
+        yield edge, lane, to_lane, along, length
+        along += length

@@ -18,7 +18,7 @@ import math
 
 from ..model.bodies import Body, body_gap_m, struck_by
 from ..model.maneuvers import Pair
-from .calls import api_call, via_lanes
+from .calls import api_call, route_junctions
 
 #: how far before and after a junction's stretch of the route a car's body is looked at [m]
 NEAR_M = 5.0
@@ -36,18 +36,13 @@ class JunctionCrossings:
         self.lengths = [api.vehicle.getLength(vid) for vid in ids]
         #: (start, end, internal lanes, lanes out of it) of each junction along the route
         self.spans: list[tuple[float, float, list[str], list[str]]] = []
-        along = 0.0
-        for k, (edge, to) in enumerate(zip(route, route[1:])):
-            lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
-            along += api.lane.getLength(lane)
-            length = sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
+        for edge, _, _, along, length in route_junctions(api, route, path):
             junction = api.edge.getToJunction(edge)
             edges_in, edges_out = api.junction.getIncomingEdges(junction), api.junction.getOutgoingEdges(junction)
             internal = sorted({e for e in (*edges_in, *edges_out) if e.startswith(":")})
             lanes = lambda edges: [f"{e}_{i}" for e in edges for i in range(api.edge.getLaneNumber(e))]  # noqa: E731
             self.spans.append((along - NEAR_M, along + length + NEAR_M, lanes(internal),
                                lanes([e for e in edges_out if not e.startswith(":")])))
-            along += length
         self.next = [0] * len(ids)  # each car's next junction: cars never drive backwards
         self.started = False
         vehicle = lambda name: api_call(api, "vehicle", name)  # noqa: E731

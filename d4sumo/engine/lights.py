@@ -11,7 +11,7 @@ is the model's (`model.signals`).
 from __future__ import annotations
 
 from ..model.signals import Stop
-from .calls import via_lanes
+from .calls import route_junctions
 
 #: how far ahead of a car a signal is seen [m]: more than stopping from 45 m/s comfortably takes
 LOOKAHEAD_M = 300.0
@@ -24,14 +24,8 @@ def route_signals(api, route: tuple[str, ...], path: tuple[int, ...]) -> list[tu
         for index, controlled in enumerate(api.trafficlight.getControlledLinks(tls)):
             for into, out, _ in controlled:
                 links.setdefault((into, out), (tls, index))
-    found, along = [], 0.0
-    for k, (edge, to) in enumerate(zip(route, route[1:])):
-        lane, to_lane = f"{edge}_{path[k]}", f"{to}_{path[k + 1]}"
-        along += api.lane.getLength(lane)
-        if (lane, to_lane) in links:
-            found.append((along, *links[lane, to_lane]))
-        along += sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
-    return found
+    return [(line, *links[lane, to_lane]) for _, lane, to_lane, line, _ in route_junctions(api, route, path)
+            if (lane, to_lane) in links]
 
 
 #: the link states a driver drives on at (green, off, blinking): where every light within reach shows one, nobody

@@ -177,7 +177,7 @@ def additional_files(config: EpisodeConfig) -> list[str]:
 
         folder = Path(default_cache_dir()).parent / "additional"
         out = []
-        for i, path in enumerate(config.additional):
+        for path in config.additional:
             try:
                 tree = ET.parse(path)
             except (ET.ParseError, OSError) as exc:
@@ -210,6 +210,11 @@ def additional_files(config: EpisodeConfig) -> list[str]:
     return _ADDITIONAL[key]
 
 
+def option_args(config: EpisodeConfig) -> list[str]:
+    """The scenario's SUMO options (`EpisodeConfig.sumo_options`) on SUMO's command line."""
+    return [arg for name, value in config.sumo_options for arg in (f"--{name}", value)]
+
+
 def check_options(config: EpisodeConfig, road: Road) -> None:
     """The scenario's SUMO options (`EpisodeConfig.sumo_options`), loaded once by SUMO on the road (cached like the
     followers' types): a value SUMO refuses, or an option it does not know, is a ConfigError naming them in one line."""
@@ -218,7 +223,7 @@ def check_options(config: EpisodeConfig, road: Road) -> None:
 
     def check(sumo: str, _: str) -> None:
         cmd = [sumo, "--net-file", str(road.net_file), "--end", "0", "--no-step-log", "true",
-               *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
+               *option_args(config)]
         try:
             done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
         except subprocess.TimeoutExpired:
@@ -248,7 +253,7 @@ def check_additional(config: EpisodeConfig, road: Road) -> None:
         horizon = (config.traffic.warmup_s if config.traffic is not None else 0.0) + config.total_s + 1.0  # meandata ends with it
         cmd = [sumo, "--net-file", str(road.net_file), "--additional-files", ",".join(additional_files(config)),
                "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true",
-               *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
+               *option_args(config)]
         message = _sumo_errors(cmd, "the additional files")
         if message is not None:
             raise ConfigError("scenario.additional", list(config.additional), f"additional files SUMO loads on {road.name} "
@@ -290,7 +295,7 @@ def _check_demand(config: EpisodeConfig, road: Road, sumo: str, demand: list) ->
     cmd = [sumo, "--net-file", str(road.net_file), "--step-length", repr(config.step_s),
            "--end", repr(horizon), "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true",
            *(["--additional-files", ",".join(additional_files(config))] if config.additional else []),
-           *(arg for name, value in config.sumo_options for arg in (f"--{name}", value))]
+           *option_args(config)]
     message = None
     xsd = Path(sumo_home(), "data", "xsd") if _sumo_home_known() else None
     if config.traffic.types and config.traffic.vehicles_per_hour is not None and xsd is not None and xsd.is_dir():
@@ -365,8 +370,7 @@ def sumo_command(config: EpisodeConfig, road: Road, fcd_path: str | Path | None 
     additional = [*([str(types_file)] if types_file is not None else []), *additional_files(config)]
     if additional:  # the followers' vehicle types, and the scenario's own files (a .sumocfg's)
         cmd += ["--additional-files", ",".join(additional)]
-    for name, value in config.sumo_options:  # a .sumocfg's options that change nothing d4sumo decides
-        cmd += [f"--{name}", value]
+    cmd += option_args(config)  # a .sumocfg's options that change nothing d4sumo decides
     if demand_files:  # SUMO merges them by departure
         cmd += ["--route-files", ",".join(str(p) for p in demand_files)]
     if state_file is not None:  # the traffic's vehicles, flows and random streams at the end of its warm-up
