@@ -608,6 +608,20 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
 
 
 @pytest.mark.sumo
+def test_falsify_names_a_cooperative_campaign_0_19_ran_with_beacons_read_whatever_the_radar_saw(tmp_path):
+    """d4sumo 0.19's cooperative followers read the platoon's beacons with another car cut in between: its campaign
+    is another one now, and falsify with the same flags says so, with the flag that goes on with it."""
+    flags = ["--start", "steady", "--controller", "cacc", "--set", "scenario.maneuver=\"cutin\"", "--duration", "10",
+             "--optimizer", "random", "--samples", "2", "--db", str(tmp_path / "r.sqlite"), "--quiet"]
+    assert main(["falsify", *flags, "--set", "v2v.match_radar=false"]) == 0  # as 0.19 stored it
+    now = run("falsify", *flags)
+    assert now.returncode == 0, now.stderr
+    assert ("holds this campaign as d4sumo 0.19 or before ran it (cooperative followers reading the beacons whatever "
+            "their radar saw)") in now.stderr
+    assert now.stderr.rstrip().endswith("To go on with that one: --set v2v.match_radar=false")
+
+
+@pytest.mark.sumo
 def test_falsify_names_a_campaign_on_a_road_of_ones_own_an_earlier_version_ran_through_red_lights(tmp_path):
     """d4sumo 0.18 drove the platoon through red lights: its campaign on a road of one's own is another one now, and
     falsify with the same flags says so, with the flag that goes on with it (which then resumes it)."""

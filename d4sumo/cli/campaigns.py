@@ -16,13 +16,18 @@ from .episodes import collision_text
 def _as_earlier_versions_ran(campaign):
     """The campaign as earlier versions of d4sumo ran it (its optimiser, that optimiser's options, its inputs,
     in every combination), each with what differed and the flags that go on with it."""
+    from ..search.campaign import INPUTS_CHANGED
+
     inputs = campaign.with_inputs_of_before()
-    lights = campaign.with_inputs_of_0_18()
-    lights_flags = [f"--set {key}={value}" for key, value, _ in campaign.changes_of_0_18()]
+    changed = {}  # version -> (the campaign as it ran it, the flags), where it ran it otherwise
+    for version in INPUTS_CHANGED:
+        flags = [f"--set {key}={value}" for key, value, _ in campaign.changes_of(version)]
+        if (before := campaign.with_inputs_of(version)) is not campaign and before not in [b for b, _ in changed.values()]:
+            changed[version] = (before, flags)
     input_flags = [*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
-                   *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else []), *lights_flags]
-    for base, flags in [(campaign, []), *([(lights, lights_flags)] if lights is not campaign else []),
-                        *([(inputs, input_flags)] if inputs is not campaign else [])]:
+                   *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else []),
+                   *(changed[INPUTS_CHANGED[-1]][1] if INPUTS_CHANGED[-1] in changed else [])]
+    for base, flags in [(campaign, []), *changed.values(), *([(inputs, input_flags)] if inputs is not campaign else [])]:
         if campaign.optimizer == DEFAULT_OPTIMIZER:
             default_before = base.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
             for earlier in ({}, *EARLIER_OPTIONS.get(EARLIER_DEFAULT_OPTIMIZER, ())):  # as each earlier version ran it
@@ -33,9 +38,10 @@ def _as_earlier_versions_ran(campaign):
         for earlier in EARLIER_OPTIONS.get(campaign.optimizer, ()):
             if (before := base.with_options(earlier)) != campaign:
                 yield before, "as an earlier d4sumo ran it; this starts a new one", [as_set_flags(campaign.optimizer, earlier), *flags]
-        if base is lights:
-            what = ", ".join(did for _, _, did in campaign.changes_of_0_18())
-            yield base, f"as d4sumo 0.18 or before ran it ({what}); this starts a new one", flags
+        version = next((v for v, (b, _) in changed.items() if b is base), None)
+        if version is not None:
+            what = ", ".join(did for _, _, did in campaign.changes_of(version))
+            yield base, f"as d4sumo {version} or before ran it ({what}); this starts a new one", flags
         elif base is not campaign:
             yield (base, "as d4sumo 0.16 or before ran it (a road of one's own taken as found, traffic entering after the "
                          "warm-up unchecked, the platoon driving through red lights, demand files one after the other); "

@@ -302,6 +302,8 @@ class EpisodeConfig:
                 raise ConfigError("traffic.warmup_s", self.traffic.warmup_s, f"a whole number of steps of {self.step_s:g} s")
             if not is_network_path(self.network) and not self.traffic.junction_collisions:  # one edge, no junction: one
                 fix("traffic", dataclasses.replace(self.traffic, junction_collisions=True))  # configuration, whatever it says
+        if self.v2v is not None and not self.v2v.match_radar and not self.others_cut_in:  # the radar sees the platoon's
+            fix("v2v", dataclasses.replace(self.v2v, match_radar=True))  # car ahead all along: one configuration
         fix("vehicles", self._checked_vehicles())
         declared = self.vehicle_of(0).max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
@@ -513,7 +515,15 @@ class EpisodeConfig:
                 out["traffic"].pop("junction_collisions", None)
         if self.v2v is not None:
             out["v2v"] = self.v2v.to_dict()
+            if not self.others_cut_in:  # what campaigns stored before it was a key (`EARLIER_V2V`) hold, and the same
+                out["v2v"].pop("match_radar", None)
         return out
+
+    @property
+    def others_cut_in(self) -> bool:
+        """Whether a car other than the one ahead of it in the platoon may come between a follower and it: a
+        traffic car, or a lane-changing maneuver's (`v2v.ChannelParams.match_radar`)."""
+        return self.traffic is not None or self.maneuver_class.lateral
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":

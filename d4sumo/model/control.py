@@ -425,11 +425,17 @@ def below_target(acceleration_mps2: float, speed_mps: float, target_speed_mps: f
     return min(acceleration_mps2, (target_speed_mps - speed_mps) / step_s)
 
 
+def acc_acceleration(obs, headway_s: float) -> float:
+    """Plexe's ACC (Rajamani's Eq. 6.18: a = -(v - v_ahead + lambda (h v + 2 - gap)) / h, lambda 0.1) on what the
+    radar measures: what a cooperative controller falls back to."""
+    return -(obs.speed_mps - obs.lead_speed_mps + 0.1 * (headway_s * obs.speed_mps + 2.0 - obs.gap_m)) / headway_s
+
+
 class Fallback:
     """The mitigation the platoon-security literature proposes: where the car ahead's newest beacon and the
     radar disagree on its speed by more than ``fallback_mps``, the car distrusts the channel and falls back
-    to an ACC (Plexe's, Rajamani's Eq. 6.18: a = -(v - v_ahead + lambda (h v + 2 - gap)) / h, lambda 0.1),
-    on what its radar measures; it trusts the channel again once they agree. Its mode is recorded."""
+    to an ACC (`acc_acceleration`) on what its radar measures; it trusts the channel again once they agree.
+    Its mode is recorded (falling back where its radar sees another car than the beacons', too: `unmatched`)."""
 
     def __init__(self, threshold_mps: float, headway_s: float):
         self.threshold, self.headway = threshold_mps, headway_s
@@ -442,8 +448,17 @@ class Fallback:
             self.mode = MODE_CACC
             return None
         self.mode = MODE_FALLBACK
-        h = self.headway
-        return -(obs.speed_mps - obs.lead_speed_mps + 0.1 * (h * obs.speed_mps + 2.0 - obs.gap_m)) / h
+        return acc_acceleration(obs, self.headway)
+
+
+def unmatched(controller, obs) -> float:
+    """The acceleration of a cooperative ``controller`` whose radar sees another car than the one whose beacons
+    it reads (`sensing.Observation.matched`): its ACC at its fallback headway, as CACC systems do where a car
+    cut in, no faster than the target speed; its mitigation's mode, where it has one, says it fell back."""
+    if controller.fallback is not None:
+        controller.fallback.mode = MODE_FALLBACK
+    return below_target(acc_acceleration(obs, controller.params.fallback_headway_s), obs.speed_mps,
+                        controller.target_speed_mps, controller.step_s)
 
 
 class PathCACC:
@@ -468,7 +483,8 @@ class PathCACC:
         self.a3 = -(2.0 * params.xi - params.c1 * (params.xi + root)) * w
         self.a4 = -params.c1 * (params.xi + root) * w
         self.a5 = -w * w
-        self.setpoint_m, self.vehicle, self.target_speed_mps, self.step_s = setpoint_m, vehicle, target_speed_mps, step_s
+        self.params, self.setpoint_m, self.vehicle, self.target_speed_mps, self.step_s = (params, setpoint_m, vehicle,
+                                                                                           target_speed_mps, step_s)
         self.fallback = Fallback(params.fallback_mps, params.fallback_headway_s) if params.fallback_mps else None
 
     @property
@@ -484,6 +500,8 @@ class PathCACC:
         ahead, leader = obs.front_message, obs.leader_message
         if not obs.leader:  # nobody ahead within its radar's range: it cruises
             return acceleration_to_command(cruise_acceleration(obs.speed_mps, self.target_speed_mps), self.vehicle)
+        if not obs.matched:  # another car is ahead than the one whose beacons it reads
+            return acceleration_to_command(unmatched(self, obs), self.vehicle)
         if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
             return acceleration_to_command(below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
         if ahead is None or leader is None:
@@ -539,6 +557,9 @@ class PloegCACC:
         ahead = obs.front_message
         if not obs.leader:  # nobody ahead within its radar's range: it cruises
             self.u = cruise_acceleration(obs.speed_mps, self.target_speed_mps)
+            return acceleration_to_command(self.u, self.vehicle)
+        if not obs.matched:  # another car is ahead than the one whose beacons it reads: it goes on from its ACC
+            self.u = unmatched(self, obs)
             return acceleration_to_command(self.u, self.vehicle)
         if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
             self.u = below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s)  # it goes on from there
@@ -627,6 +648,8 @@ class ConsensusCACC:
         return -p.b * (speed_mps - leader.speed_mps) + spacing_error / len(gains)
 
     def observe(self, obs) -> float:
+        if not obs.matched and obs.leader:  # another car is ahead than the one whose beacons it reads
+            return acceleration_to_command(unmatched(self, obs), self.vehicle)
         if self.fallback is not None and (acc := self.fallback.check(obs)) is not None:
             return acceleration_to_command(below_target(acc, obs.speed_mps, self.target_speed_mps, self.step_s), self.vehicle)
         messages = obs.messages

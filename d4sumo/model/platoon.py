@@ -270,6 +270,8 @@ class Platoon:
                         for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         #: whether the cars are the paper's column, pair i - 1 car i and the car ahead (no lane change, no traffic)
         self._one_ahead = not self.maneuver.lateral and config.traffic is None
+        #: whether a follower reads the beacons of the car ahead of it in the platoon only while its radar sees it
+        self._match = config.v2v is not None and config.v2v.match_radar and not self._one_ahead
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
         #: whether it reads every car ahead's, the newest beacon of each car it reads), where one is new
         self._sumo_listening = [(i, f.hears_all) for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]
@@ -367,9 +369,12 @@ class Platoon:
             channel.send(k, positions, speeds, accels)
             if self._sumo_listening:
                 self._feed_sumo()
+            match = self._match
             for i, command, apply, inbox in self._python:
                 leader, gap = (i - 1, pairs[i - 1][2]) if ahead is None else ahead.get(i, (i, FREE_ROAD_GAP_M))
-                c = command(gap, speeds[i], speeds[leader], accels[i], inbox, positions[i], now)
+                # whether its radar sees the car whose beacons it reads as the one ahead (or nobody)
+                matched = not match or leader == i - 1 or leader == i
+                c = command(gap, speeds[i], speeds[leader], accels[i], inbox, positions[i], now, matched)
                 if type(c) is not float or not -1.0 <= c <= 1.0:
                     c = checked_command(c, i, k)
                 commands.append(c)

@@ -80,7 +80,10 @@ class Observation:
     it in the platoon (None until one has arrived; for v1 both are the leader's), every newest beacon it
     received by sender (``messages``), and where and when it is (its GPS: ``position_m`` along the road,
     its front bumper's, and ``time_s``, the step's start), which a controller that places itself among
-    the beacons' positions reads."""
+    the beacons' positions reads. ``matched``: whether the car its radar sees is the one whose beacons
+    ``front_message`` holds. It is not where another car is between them (a traffic car that cut in, a
+    maneuver's car): a cooperative controller then follows what its radar sees with its ACC, as CACC
+    systems do (`v2v.ChannelParams.match_radar`)."""
 
     speed_mps: float
     gap_m: float
@@ -92,6 +95,7 @@ class Observation:
     messages: Any = None
     position_m: float = 0.0
     time_s: float = 0.0
+    matched: bool = True
 
     @property
     def relative_speed_mps(self) -> float:
@@ -131,19 +135,22 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
     the perfect one, to the controller's ``observe`` (given an `Observation`) where it has one, else to its
     ``command`` (gap, own speed, speed ahead, as measured). The perfect radar and a controller without
     ``observe``: the command itself, untouched. With ``beacons`` (a platoon that exchanges V2V beacons) the
-    command also takes the car's own acceleration, its inbox (`v2v.Channel.inbox`), its position and the
-    time, which ``observe`` is given."""
+    command also takes the car's own acceleration, its inbox (`v2v.Channel.inbox`), its position, the
+    time and whether its radar sees the car ahead of it in the platoon (`Observation.matched`), which
+    ``observe`` is given."""
     radar = Radar(params, step_s, car) if params is not None and not params.perfect else None
     if beacons:
         front = car - 1
         if radar is None and observe is not None:  # the common case, at every step: nothing to decide
-            def heard(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float) -> float:
+            def heard(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float,
+                      matched: bool = True) -> float:
                 return observe(Observation(own, gap, lead, gap < FREE_ROAD_GAP_M, accel, inbox.get(0), inbox.get(front), inbox,
-                                           position, time))
+                                           position, time, matched))
 
             return heard
 
-        def listening(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float) -> float:
+        def listening(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float,
+                      matched: bool = True) -> float:
             if radar is not None:
                 o = radar.observe(gap, own, lead)
                 gap, lead, seen = o.gap_m, o.lead_speed_mps, o.leader
@@ -151,7 +158,8 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
                 seen = gap < FREE_ROAD_GAP_M
             if observe is None:
                 return command(gap, own, lead)
-            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front), inbox, position, time))
+            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front), inbox, position, time,
+                                       matched))
 
         return listening
     if radar is None and observe is None:

@@ -33,6 +33,11 @@ class ChannelParams:
     latency_s: float = 0.0  # from a beacon's sending to its delivery
     loss: float = 0.0  # the probability that a beacon is lost
     seed: int = 0  # the losses': every episode of the configuration loses the same beacons
+    #: a follower reads the beacons of the car ahead of it in the platoon only while its radar sees that car; where
+    #: another is between them (a traffic car that cut in, a maneuver's car) it falls back to its ACC, as CACC
+    #: systems do (`sensing.Observation.matched`). False: it reads them whatever its radar sees, as d4sumo 0.19
+    #: and before had it (`EARLIER_V2V`), for study
+    match_radar: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -40,14 +45,20 @@ class ChannelParams:
         fix("latency_s", check_number("v2v.latency_s", self.latency_s, 0.0, 5.0, "seconds"))
         fix("loss", check_number("v2v.loss", self.loss, 0.0, 1.0, "(a probability)"))
         fix("seed", check_int("v2v.seed", self.seed, 0, 2**32 - 1))
+        if not isinstance(self.match_radar, bool):
+            raise ConfigError("v2v.match_radar", self.match_radar, "true or false")
 
     @classmethod
     def from_table(cls, table: Any) -> "ChannelParams":
         return table_of(cls, table, "v2v")
 
     def to_dict(self) -> dict:
-        """As a definition stores it: every key (the channel is part of the system under test)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        """As a definition stores it: every key (the channel is part of the system under test); ``match_radar``
+        where it is not what campaigns stored before it was a key hold (`EARLIER_V2V`)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if not self.match_radar:
+            del out["match_radar"]
+        return out
 
     @property
     def label(self) -> str:
@@ -57,7 +68,13 @@ class ChannelParams:
             text += f", latency {self.latency_s:g} s"
         if self.loss:
             text += f", loss {self.loss:g}"
+        if not self.match_radar:
+            text += ", beacons read whatever the radar sees"
         return text
+
+
+#: what a stored definition's [v2v] table without a key held: the channel as that version played it
+EARLIER_V2V = {"match_radar": False}
 
 
 @dataclass(slots=True)  # made for every car at every beacon: not frozen, whose construction costs thrice

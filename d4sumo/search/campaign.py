@@ -21,9 +21,13 @@ from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
 from ..model.traffic import EARLIER_TRAFFIC
+from ..model.v2v import EARLIER_V2V
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
+
+#: the versions whose inputs `Campaign.with_inputs_of` plays, newest first: each changed what a campaign's keys do
+INPUTS_CHANGED = ("0.19", "0.18")
 
 log = logging.getLogger(__name__)
 
@@ -142,6 +146,8 @@ class Campaign:
             config = {**config, "scenario": {**EARLIER_SCENARIO, **config.get("scenario", {})}}
             if isinstance(config.get("traffic"), dict):
                 config = {**config, "traffic": {**EARLIER_TRAFFIC, **config["traffic"]}}
+            if isinstance(config.get("v2v"), dict):
+                config = {**config, "v2v": {**EARLIER_V2V, **config["v2v"]}}
             return cls(
                 config=EpisodeConfig.from_dict(config),
                 attack=attack["family"],
@@ -182,35 +188,44 @@ class Campaign:
         config = dataclasses.replace(self.config, **EARLIER_SCENARIO)
         if config.traffic is not None:
             config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
+        if config.v2v is not None:
+            config = dataclasses.replace(config, v2v=dataclasses.replace(config.v2v, **EARLIER_V2V))
         return self if config == self.config else self.replace(config=config)
 
-    def with_inputs_of_0_18(self) -> "Campaign":
-        """The campaign as d4sumo 0.18 and before ran it: its network file rebuilt from plain XML, its platoon driving
-        through red lights on a road of one's own, its demand files one after the other, collisions inside junctions
-        unseen (`EpisodeConfig.rebuild`, `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`,
-        `TrafficParams.junction_collisions`); itself where that is what it does."""
+    def with_inputs_of(self, version: str) -> "Campaign":
+        """The campaign as d4sumo ``version`` (one of `INPUTS_CHANGED`) and before ran it (`changes_of`); itself where
+        that is what it does."""
         config = self.config
-        if "signals" in config.to_dict()["scenario"]:
-            config = dataclasses.replace(config, signals="ignore")
-        if not config.rebuild:
-            config = dataclasses.replace(config, rebuild=True)
-        if config.traffic is not None and config.traffic.merges and config.traffic.merge_by_departure:
-            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, merge_by_departure=False))
-        if "junction_collisions" in (config.to_dict().get("traffic") or {}):
-            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, junction_collisions=False))
+        for key, _, _ in self.changes_of(version):
+            table, _, name = key.partition(".")
+            if table == "scenario":
+                config = dataclasses.replace(config, **{name: EARLIER_SCENARIO[name]})
+            elif table == "traffic":
+                config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **{name: EARLIER_TRAFFIC[name]}))
+            else:
+                config = dataclasses.replace(config, v2v=dataclasses.replace(config.v2v, **{name: EARLIER_V2V[name]}))
         return self if config == self.config else self.replace(config=config)
 
-    def changes_of_0_18(self) -> list[tuple[str, str, str]]:
-        """What `with_inputs_of_0_18` changes: (the key, its value then, what it did), each."""
+    def changes_of(self, version: str) -> list[tuple[str, str, str]]:
+        """What d4sumo ``version`` and before did otherwise with this campaign's inputs: (the key, its value then, what
+        it did), each. 0.19: cooperative followers read the platoon's beacons whatever their radar saw
+        (`ChannelParams.match_radar`). 0.18, besides: a network file rebuilt from plain XML, the platoon driving
+        through red lights on a road of one's own, demand files one after the other, collisions inside junctions
+        unseen (`EpisodeConfig.rebuild`, `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`,
+        `TrafficParams.junction_collisions`)."""
         changes = []
-        if not self.config.rebuild:
-            changes.append(("scenario.rebuild", "true", "its network file rebuilt from plain XML"))
-        if "signals" in self.config.to_dict()["scenario"]:
-            changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
-        if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:
-            changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
-        if "junction_collisions" in (self.config.to_dict().get("traffic") or {}):
-            changes.append(("traffic.junction_collisions", "false", "collisions inside junctions unseen"))
+        stored = self.config.to_dict()
+        if version == "0.18":
+            if not self.config.rebuild:
+                changes.append(("scenario.rebuild", "true", "its network file rebuilt from plain XML"))
+            if "signals" in stored["scenario"]:
+                changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
+            if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:
+                changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
+            if "junction_collisions" in (stored.get("traffic") or {}):
+                changes.append(("traffic.junction_collisions", "false", "collisions inside junctions unseen"))
+        if "match_radar" in (stored.get("v2v") or {}):
+            changes.append(("v2v.match_radar", "false", "cooperative followers reading the beacons whatever their radar saw"))
         return changes
 
     def with_options(self, options: dict) -> "Campaign":

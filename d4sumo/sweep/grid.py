@@ -68,10 +68,9 @@ class Sweep:
         campaigns = tuple(c.with_inputs_of_before() for c in self.campaigns)
         return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 
-    def with_inputs_of_0_18(self) -> "Sweep":
-        """The sweep as d4sumo 0.18 and before ran it: the platoon driving through red lights on roads of one's own,
-        demand files one after the other (`Campaign.with_inputs_of_0_18`)."""
-        campaigns = tuple(c.with_inputs_of_0_18() for c in self.campaigns)
+    def with_inputs_of(self, version: str) -> "Sweep":
+        """The sweep as d4sumo ``version`` and before ran it (`Campaign.with_inputs_of`)."""
+        campaigns = tuple(c.with_inputs_of(version) for c in self.campaigns)
         return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 
     def with_default_of_before(self) -> "Sweep":

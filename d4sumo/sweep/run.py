@@ -44,15 +44,21 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
     earlier versions ran them, its inputs as 0.16 and before did, in every combination; None: none of them."""
     if theirs["name"] != sweep.name:
         return None
+    from ..search.campaign import INPUTS_CHANGED
+
     inputs = sweep.with_inputs_of_before()
-    lights = sweep.with_inputs_of_0_18()
-    then = {key: (value, did) for c in sweep.campaigns for key, value, did in c.changes_of_0_18()}
-    lights_keys = [f"`{key.partition('.')[2]} = {json.dumps(value) if value == 'ignore' else value}` in [{key.partition('.')[0]}]"
-                   for key, (value, _) in then.items()]
+    versions = {}  # version -> (the sweep as it ran it, the keys to set, what it did), where it ran it otherwise
+    for version in INPUTS_CHANGED:
+        then = {key: (value, did) for c in sweep.campaigns for key, value, did in c.changes_of(version)}
+        keys = [f"`{key.partition('.')[2]} = {json.dumps(value) if value == 'ignore' else value}` in [{key.partition('.')[0]}]"
+                for key, (value, _) in then.items()]
+        if (before := sweep.with_inputs_of(version)) is not sweep and before not in [b for b, _, _ in versions.values()]:
+            versions[version] = (before, keys, ", ".join(did for _, did in then.values()))
+    oldest = versions.get(INPUTS_CHANGED[-1], (None, [], ""))[1]
     input_keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
                   *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"]
-                    if any(c.config.traffic for c in sweep.campaigns) else []), *lights_keys]
-    for base, keys in [(sweep, []), *([(lights, lights_keys)] if lights is not sweep else []),
+                    if any(c.config.traffic for c in sweep.campaigns) else []), *oldest]
+    for base, keys in [(sweep, []), *((b, k) for b, k, _ in versions.values()),
                        *([(inputs, input_keys)] if inputs is not sweep else [])]:
         names = list(EARLIER_OPTIONS)
         # each optimiser as now or as an earlier version ran it, in every combination (bo's and ce's both changed)
@@ -63,8 +69,8 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
                 before = before.as_run_before(optimizer, earlier)
             if (changed or keys) and theirs["fingerprint"] == before.fingerprint():
                 tables = [", ".join(f"`{k} = {v}`" for k, v in e.items()) + f" in [search.{o}]" for o, e in changed]
-                version = ("an earlier d4sumo" if changed or not keys else
-                           f"d4sumo 0.18 or before ({', '.join(did for _, did in then.values())})" if base is lights else
+                ran = next((f"d4sumo {v} or before ({did})" for v, (b, _, did) in versions.items() if b is base), None)
+                version = ("an earlier d4sumo" if changed or not keys else ran if ran is not None else
                            "d4sumo 0.16 or before, which took a road of one's own as it found it, let traffic enter after "
                            "the warm-up unchecked, drove the platoon through red lights and played demand files one after "
                            "the other")

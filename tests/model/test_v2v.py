@@ -11,6 +11,7 @@ from d4sumo.errors import ConfigError
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import ConsensusCACC, ConsensusParams, PathCACC, PathParams, PloegCACC, PloegParams
 from d4sumo.model.sensing import Observation
+from d4sumo.model.platoon import Platoon
 from d4sumo.model.v2v import Channel, ChannelParams, Message
 from d4sumo.model.vehicle import VehicleParams
 
@@ -139,3 +140,50 @@ def test_a_sumo_consensus_platoon_of_more_cars_than_plexe_holds_gets_one_line():
     with pytest.raises(ConfigError) as info:
         EpisodeConfig(controller=consensus, followers=8)
     assert info.value.field == "scenario.followers" and "at most 7" in info.value.allowed
+
+
+@pytest.mark.parametrize("cls, params", [(PathCACC, PathParams), (PloegCACC, PloegParams), (ConsensusCACC, ConsensusParams)])
+def test_a_cooperative_follower_whose_radar_sees_another_car_than_the_beacons_falls_back_to_its_acc(cls, params):
+    """A traffic car (or a maneuver's) cut in between it and the car whose beacons it reads: it follows what its
+    radar sees with its ACC at its fallback headway, as CACC systems do, and its mitigation's mode says so."""
+    vehicle = VehicleParams()
+    ahead, leader = Message(0, 0.0, 52.0, 20.0, 2.0, 4.0), Message(0, 0.0, 52.0, 20.0, 2.0, 4.0)
+    inbox = {0: leader}
+    acc = -(24.0 - 20.0 + 0.1 * (1.5 * 24.0 + 2.0 - 8.0)) / 1.5  # Rajamani's Eq. 6.18 on the car 8 m ahead at 20 m/s
+    law = cls(params(fallback_mps=5.0, fallback_headway_s=1.5), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)
+    cut_in = Observation(24.0, 8.0, 20.0, True, 0.0, leader, ahead, inbox, 40.0, 1.0, matched=False)
+    assert law.observe(cut_in) == pytest.approx(acc / vehicle.max_decel_mps2) and law.mode == 1.0
+    matched = Observation(24.0, 8.0, 20.0, True, 0.0, leader, ahead, inbox, 40.0, 1.0)  # the beacons' car 8 m ahead: its law
+    assert law.observe(matched) != pytest.approx(acc / vehicle.max_decel_mps2)
+    plain = cls(params(), setpoint_m=5.0, target_speed_mps=25.0, vehicle=vehicle, step_s=STEP)  # no mitigation: the same ACC
+    assert plain.observe(Observation(24.0, 8.0, 20.0, True, 0.0, leader, ahead, inbox, 40.0, 1.0, matched=False)) == \
+        pytest.approx(-(4.0 + 0.1 * (1.2 * 24.0 - 6.0)) / 1.2 / vehicle.max_decel_mps2)
+
+
+def test_a_cooperative_follower_behind_a_car_that_cut_in_reads_the_beacons_only_with_match_radar():
+    """The attacker cuts in ahead of v2 (a cacc): with ``match_radar`` (the default) v2 follows it with its ACC; without,
+    it keeps reading v1's beacons, as d4sumo 0.19 had it."""
+    positions, speeds = [92.0, 100.0, 84.0, 111.5], [25.0] * 4  # v0 cut in 3.5 m ahead of v2
+    commands = {}
+    for match in (True, False):
+        config = EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"),
+                               v2v=ChannelParams(match_radar=match))
+        platoon = Platoon(config, np.full(config.steps, np.nan), attacker_max_speed_mps=40.0)
+        for k in range(2):  # the first beacons arrive
+            platoon.advance(k, positions, speeds, platoon.maneuver.pairs(positions, [(0,), (0,), (0,), (0,)]))
+        commands[match] = platoon.commands[-1][2]
+    acc = -(0.1 * (1.2 * 25.0 + 2.0 - 3.5)) / 1.2  # its ACC on the attacker 3.5 m ahead at its own speed
+    assert commands[True] == pytest.approx(acc / VehicleParams().max_decel_mps2)
+    assert commands[False] != pytest.approx(commands[True])
+
+
+def test_match_radar_is_stored_where_another_car_may_come_between_and_read_back_as_0_19_had_it():
+    cut_in = EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"))
+    assert cut_in.to_dict()["v2v"]["match_radar"] is True
+    assert "match_radar" not in EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"),
+                                              v2v=ChannelParams(match_radar=False)).to_dict()["v2v"]  # as 0.19 stored it
+    column = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"), v2v=ChannelParams(match_radar=False))
+    assert column.v2v.match_radar and "match_radar" not in column.to_dict()["v2v"]  # the same column either way: one identity
+    with pytest.raises(ConfigError) as info:
+        ChannelParams(match_radar="yes")
+    assert info.value.field == "v2v.match_radar"

@@ -456,12 +456,12 @@ def test_a_campaign_on_a_road_of_ones_own_an_earlier_version_stored_keeps_its_id
     old = copy.deepcopy(new.definition())
     del old["config"]["scenario"]["signals"]
     stored = Campaign.from_definition(old, samples=12)
-    assert stored.config.signals == "ignore" and stored.config == new.with_inputs_of_0_18().config
+    assert stored.config.signals == "ignore" and stored.config == new.with_inputs_of("0.18").config
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
     shipped = Campaign(config=EpisodeConfig(start="steady"))
     assert "signals" not in shipped.definition()["config"]["scenario"]
     assert Campaign.from_definition(shipped.definition(), samples=100) == shipped  # the same campaign, as it ran
-    assert shipped.with_inputs_of_0_18() is shipped
+    assert shipped.with_inputs_of("0.18") is shipped
 
 
 @pytest.mark.parametrize("version, removed, kept", [
@@ -603,9 +603,9 @@ def test_a_campaign_on_a_network_file_an_earlier_version_stored_replays_on_the_n
     del old["config"]["scenario"]["rebuild"], old["config"]["scenario"]["signals"]
     stored = Campaign.from_definition(old, samples=12)
     assert stored.config.rebuild is True and not stored.config.network_given and stored.config.signals == "ignore"
-    assert stored.config == new.with_inputs_of_0_18().config
+    assert stored.config == new.with_inputs_of("0.18").config
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
-    assert [key for key, _, _ in new.changes_of_0_18()] == ["scenario.rebuild", "scenario.signals"]
+    assert [key for key, _, _ in new.changes_of("0.18")] == ["scenario.rebuild", "scenario.signals"]
 
 
 def test_a_traffic_campaign_0_18_stored_on_a_road_of_ones_own_replays_with_collisions_inside_junctions_unseen():
@@ -622,7 +622,27 @@ def test_a_traffic_campaign_0_18_stored_on_a_road_of_ones_own_replays_with_colli
     stored = Campaign.from_definition(old, samples=12)
     assert stored.config.traffic.junction_collisions is False
     assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
-    assert "traffic.junction_collisions" in [key for key, _, _ in new.changes_of_0_18()]
+    assert "traffic.junction_collisions" in [key for key, _, _ in new.changes_of("0.18")]
     shipped = Campaign(config=EpisodeConfig(start="steady", traffic={}))
     assert "junction_collisions" not in shipped.definition()["config"]["traffic"]
     assert Campaign.from_definition(shipped.definition(), samples=100).config == shipped.config
+
+
+def test_a_cooperative_campaign_0_19_stored_among_traffic_replays_with_beacons_read_whatever_the_radar_saw():
+    """0.19's cooperative followers read the platoon's beacons whatever their radar saw: its stored campaigns among
+    traffic (no ``match_radar``) replay and resume so, under their key; in the paper's column nothing changed."""
+    from d4sumo.model.config import ControllerConfig
+    from d4sumo.search.store import campaign_key
+
+    new = Campaign(config=EpisodeConfig(start="steady", traffic={}, controller=ControllerConfig("cacc")))
+    assert new.definition()["config"]["v2v"]["match_radar"] is True
+    old = copy.deepcopy(new.definition())
+    del old["config"]["v2v"]["match_radar"]
+    stored = Campaign.from_definition(old, samples=12)
+    assert stored.config.v2v.match_radar is False and stored.config == new.with_inputs_of("0.19").config
+    assert campaign_key(stored.definition()) == campaign_key(old) != campaign_key(new.definition())
+    assert [key for key, _, _ in new.changes_of("0.19")] == ["v2v.match_radar"]
+    assert "v2v.match_radar" in [key for key, _, _ in new.changes_of("0.18")]
+    column = Campaign(config=EpisodeConfig(start="steady", controller=ControllerConfig("cacc")))
+    assert "match_radar" not in column.definition()["config"]["v2v"] and column.with_inputs_of("0.19") is column
+    assert Campaign.from_definition(column.definition(), samples=100).config == column.config
