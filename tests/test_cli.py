@@ -598,6 +598,8 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
     now = run("falsify", *flags)
     assert now.returncode == 0, now.stderr
     assert "holds this campaign as d4sumo 0.16 or before ran it" in now.stderr
+    # its one traffic played once without the attack: whose doing its crashes are
+    assert "  without the attack (the attacker only cruising, in the same traffic): no crash in 1 episode\n" in now.stdout
     assert now.stderr.rstrip().endswith("To go on with that one: --set traffic.insertion_checks=false")
     # one an earlier auto ran too (d4sumo 0.10: held inputs cut across signals): both keys said at once
     older = [*flags[:6], "--samples", "2", "--db", str(tmp_path / "older.sqlite"), "--quiet"]  # the default: auto

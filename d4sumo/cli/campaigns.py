@@ -111,6 +111,11 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         from ..results.analysis import nearest_traffic
 
         nearest = nearest_traffic((s.min_gaps for s in summary.samples), campaign.config.vehicle_ids)
+    without = None
+    if campaign.config.traffic is not None and not campaign.config.traffic.per_sample:  # one traffic: one episode tells
+        from ..results.baseline import campaign_baseline
+
+        without = campaign_baseline(evaluator.without_attack, False, ((s.index, s.outcome) for s in summary.samples))
     result = {
         "db": str(args.db),
         "campaign_id": summary.campaign_id,
@@ -120,6 +125,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         "samples": len(summary.samples),
         "outcomes": counts,
         **({"nearest_traffic_m": nearest} if nearest is not None else {}),
+        **({"without_attack": {"episodes": without.played, "crashed": without.crashed, "kinds": dict(without.kinds),
+                               "traffics_doing": dict(without.traffics)}} if without is not None else {}),
         "best": None if top is None else {
             "sample_id": top.id, "index": top.index, "robustness": top.robustness, "outcome": top.outcome,
             "params": list(top.params), "collision": top.collision,
@@ -141,8 +148,12 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if config.traffic is not None:
         from ..results.analysis import TRAFFIC_MEETS_M, traffic_nearness_text
 
+        from ..results.baseline import baseline_text
+
         text, met = traffic_nearness_text(nearest)
         print(f"  {text}")
+        print("  " + (baseline_text(without) if without is not None else "without the attack: each sample met traffic of "
+                      "its own (traffic.per_sample); `d4sumo report` plays each crash's without it"))
         if not met:  # labelled traffic, played alone: said (its demand's vehicles drive elsewhere, or later)
             print(f"d4sumo: note: the traffic never came within {TRAFFIC_MEETS_M:g} m of a car of the platoon in "
                   f"{len(summary.samples)} samples: this campaign played as if alone (place the platoon where the "

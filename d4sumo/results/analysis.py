@@ -37,7 +37,17 @@ def scenario_labels(records: Iterable[Record]) -> dict[tuple, str]:
     for s in scenarios:
         for k, v in s:
             values[k].add(_hashable(v))
-    return {s: ", ".join(f"{k}={_value_text(v)}" for k, v in s if len(values[k]) > 1) for s in scenarios}
+    # a path by its file's name where that tells the values apart (a network, a demand file): labels stay readable
+    short = {k: len({_short(v) for v in vs}) == len(vs) for k, vs in values.items()}
+    return {s: ", ".join(f"{k}={_value_text(_short(v) if short[k] else v)}" for k, v in s if len(values[k]) > 1)
+            for s in scenarios}
+
+
+def _short(value):
+    if isinstance(value, (list, tuple)):
+        return tuple(_short(v) for v in value)
+    name = value.rsplit("/", 1)[-1] if isinstance(value, str) else ""
+    return name if "." in name else value  # a file's (corridor.net.xml), not a rate's (1800 veh/h/lane)
 
 
 def _hashable(value):

@@ -7,6 +7,7 @@ work and writes nothing but the figure (and the FCD, only where one is asked for
 
 from __future__ import annotations
 
+import hashlib
 import html
 import logging
 import os
@@ -198,7 +199,11 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
     if compare_systems:
         tables.insert(0, table_systems(records))
     if has_traffic(records):
+        from .baseline import table_without_attack
+
         tables.append(table_crash_kinds(records))
+        step("tables: the traffic without the attack")
+        tables.append(table_without_attack(records, evaluator_of))
     for t in tables:
         parts.append(_table_html(t))
     # a table of a few columns whole (its headers say much), a sweep of many systems in blocks of columns
@@ -280,7 +285,7 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         if c is None:
             continue
         found = True
-        name = "clusters_" + "".join(ch if ch.isalnum() else "_" for ch in condition) + ".png"
+        name = figure_name("clusters", condition)
         figures.clusters(c, out / name)
         parts.append(f"<h3>{html.escape(condition)}</h3><p>{html.escape(clusters_caption(c))}</p>{_img(name, condition)}")
     if not found:
@@ -337,6 +342,20 @@ def severe_rule(records: Sequence[Record], top: Sequence[Record], severe: int) -
             "configuration gives at most one attack, its most severe, so that one campaign's near-copies of its best "
             f"attack do not fill the list: of the {count_noun(len(found), 'configuration')} that found a successful "
             f"attack (of {len(configurations)}), the {len(top)} with the most severe are shown (--severe {severe}).")
+
+
+#: the longest figure name a report writes: a condition names its road's and its demand's paths, and file systems
+#: take at most 255 bytes a name
+FIGURE_NAME_CHARS = 120
+
+
+def figure_name(kind: str, condition: str) -> str:
+    """A figure's file name from what it shows: its words, shortened past `FIGURE_NAME_CHARS` and told apart by a
+    digest of the whole."""
+    words = "".join(ch if ch.isalnum() else "_" for ch in condition)
+    if len(words) > FIGURE_NAME_CHARS:
+        words = words[:FIGURE_NAME_CHARS] + "_" + hashlib.sha256(condition.encode()).hexdigest()[:12]
+    return f"{kind}_{words}.png"
 
 
 def clusters_caption(c) -> str:

@@ -71,6 +71,12 @@ class Evaluator:
         that sample meets (`EpisodeConfig.for_sample`)."""
         return simulate(self.campaign.config.for_sample(index), self.plan(params), road=self.road, fcd_path=fcd_path, gui=gui)
 
+    def without_attack(self, index: int, *, fcd_path: str | Path | None = None) -> Episode:
+        """Sample ``index``'s episode with the attacker only cruising: no pedal attack, no lane change, no lie, in
+        the traffic that sample meets (`results.baseline`)."""
+        config = self.campaign.config
+        return simulate(config.for_sample(index), AttackPlan(np.full(config.steps, np.nan)), road=self.road, fcd_path=fcd_path)
+
     def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
         t0 = time.perf_counter()
         x = tuple(float(v) for v in params)

@@ -250,3 +250,31 @@ def test_campaigns_with_and_without_a_lie_are_never_pooled_and_every_output_name
         write_csv(store, f)
     with open(out, newline="") as f:
         assert [row["lie"] for row in csv.DictReader(f)] == ["", "", "a lie (offset on its speed)", "a lie (offset on its speed)"]
+
+
+@pytest.mark.sumo
+def test_a_report_among_traffic_plays_each_crash_traffic_without_the_attack(tmp_path):
+    """The report's table of the traffic's doing: each crashed sample's traffic (each its own) played with the attacker
+    only cruising; none of these crashes without the attack."""
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.results.baseline import table_without_attack
+    from d4sumo.results.report import build_report, evaluator_of
+    from d4sumo.search.campaign import Campaign, open_store
+    from d4sumo.search.runner import run_campaign
+
+    config = EpisodeConfig(network="highway_3lane_120kmh", start="steady", speed_mps=25.0, duration_s=15.0,
+                           traffic={"vehicles_per_hour": 600, "warmup_s": 40.0, "per_sample": True})
+    db = tmp_path / "traffic.sqlite"
+    with open_store(db) as store:
+        run_campaign(Campaign(config=config, optimizer="random", samples=4, seed=3), store)
+    records = load_records([db])
+    crashed = sum(r.outcome in ("success", "attacker_crash") for r in records)
+    assert crashed  # the random attacks crash something: each crash's traffic is played
+    ticks = []
+    table = table_without_attack(records, evaluator_of, lambda: ticks.append(1))
+    (row,) = table.rows
+    assert row[1:4] == ("4", str(crashed), "0") and len(ticks) == crashed
+    successes = sum(r.outcome == "success" for r in records)
+    assert row[5] == f"0 of {successes}"
+    page = build_report([db], tmp_path / "report")
+    assert "Without the attack" in (tmp_path / "report" / "tables.txt").read_text() and page.exists()
