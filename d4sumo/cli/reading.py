@@ -95,9 +95,13 @@ def cmd_report(args: argparse.Namespace) -> int:
         raise ConfigError("--out", str(args.out), "a folder you may write (permission denied)")
     steps = ["tables", "heatmaps", "time-space diagrams", "clusters"]
     with tqdm(total=len(steps), desc="report", disable=args.quiet, file=sys.stderr) as bar:
-        def progress(what: str) -> None:
-            if bar.n or what != steps[0]:
+        current: list[str] = []
+
+        def progress(what: str) -> None:  # "tables: ..." goes on with the step "tables"
+            step = what.partition(":")[0]
+            if current and step != current[-1]:
                 bar.update(1)
+            current.append(step)
             bar.set_postfix_str(what)
 
         index = build_report(args.db, args.out, severe=args.severe, progress=progress)

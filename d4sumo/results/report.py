@@ -202,8 +202,14 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         from .baseline import table_without_attack
 
         tables.append(table_crash_kinds(records))
+        played = [0]
+
+        def one_more() -> None:
+            played[0] += 1
+            step(f"tables: the traffic without the attack, episode {played[0]}")
+
         step("tables: the traffic without the attack")
-        tables.append(table_without_attack(records, evaluator_of))
+        tables.append(table_without_attack(records, evaluator_of, one_more))
     for t in tables:
         parts.append(_table_html(t))
     # a table of a few columns whole (its headers say much), a sweep of many systems in blocks of columns
