@@ -33,19 +33,33 @@ def route_signals(api, route: tuple[str, ...], path: tuple[int, ...]) -> list[tu
 _GO = frozenset("GgsoO")
 
 
+def signal_tracks(lights: "RouteLights") -> tuple[tuple[float, str, str], ...]:
+    """What a platoon's route lights recorded: each signal's stop line along the route [m], its light's id, and its
+    state at each step (SUMO's link state letters, one a step)."""
+    if not lights.recorded:
+        return ()
+    return tuple((line, tls, "".join(step[i] for step in lights.recorded)) for i, (line, tls, _) in enumerate(lights.signals))
+
+
 class RouteLights:
     """What each car of one platoon sees of the route's signals, step by step (see the module)."""
 
-    def __init__(self, api, signals: list[tuple[float, str, int]], cars: int):
+    def __init__(self, api, signals: list[tuple[float, str, int]], cars: int, record: bool = False):
         self.signals = signals
         self.first = 0  # the first signal ahead of the rearmost car
         self.next = [0] * cars  # each car's next signal: cars never drive backwards
         self.get_state = api.trafficlight.getRedYellowGreenState
+        #: with ``record`` (a replay that writes its FCD, for its time-space diagram): every signal's state at each
+        #: step, a letter a signal (`Episode.signals`)
+        self.recorded: list[str] | None = [] if record else None
 
     def __call__(self, x: list[float]) -> list[Stop | None] | None:
         """The signal each car at positions ``x`` along the route sees, or None (none within reach); None for
         all of them where every light within their reach lets them on."""
         signals, get_state = self.signals, self.get_state
+        if self.recorded is not None:
+            states_now = {tls: get_state(tls) for _, tls, _ in signals}
+            self.recorded.append("".join(states_now[tls][index] for _, tls, index in signals))
         j, rear, front = self.first, min(x), max(x)
         while j < len(signals) and rear > signals[j][0]:
             j += 1

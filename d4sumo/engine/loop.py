@@ -138,7 +138,8 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             try:
                 trace, min_gaps, warmup_min_gaps = alone.platoon.trace(np.arange(steps_done + 1) * dt, x, v, lateral_m)
                 among = world.traffic_collisions(e) if traffic else ()
-                results[e] = Episode(trace, collisions, min_gaps, warmup_min_gaps, among)
+                results[e] = Episode(trace, collisions, min_gaps, warmup_min_gaps, among,
+                                     world.signal_tracks(e) if lights else ())
             except Exception as exc:  # a user's controller's mode that is not a number
                 results[e] = exc
         else:

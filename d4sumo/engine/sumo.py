@@ -34,7 +34,7 @@ from ..model.vehicle import VehicleParams
 from ..sumohome import sumo_binary, sumo_home
 from .calls import api_call
 from .junctions import JunctionCrossings
-from .lights import RouteLights, route_signals
+from .lights import RouteLights, route_signals, signal_tracks
 from .scenarios import Road, default_cache_dir
 
 ROUTE_ID = "platoon"
@@ -886,7 +886,8 @@ class SumoWorld:
     fast bound calls to sense and command them, a step, and the removal of an ended episode's cars.
     Open it with `open_world`, which starts SUMO, inserts the platoons and closes SUMO afterwards."""
 
-    def __init__(self, api, config: EpisodeConfig, road: Road, platoons: list[tuple[str, ...]]):
+    def __init__(self, api, config: EpisodeConfig, road: Road, platoons: list[tuple[str, ...]], record: bool = False):
+        """``record``: the episode writes its FCD (a replay): what its figures draw is recorded too (`signal_tracks`)."""
         self.api = api
         self.platoons = platoons
         self.attacker_max_speed_mps = road.speed_limit_mps
@@ -906,7 +907,7 @@ class SumoWorld:
         if config.signals != "ignore" and not road.one_edge:
             signals = [route_signals(api, road.route(e), road.platoon_path) for e in range(len(platoons))]
             if any(signals):
-                self.lights = [RouteLights(api, found, len(ids)) for found, ids in zip(signals, platoons)]
+                self.lights = [RouteLights(api, found, len(ids), record) for found, ids in zip(signals, platoons)]
         #: with traffic on a route of several edges, each platoon's collisions inside its junctions (`junctions`)
         self.crossings = None
         if config.traffic is not None and config.traffic.junction_collisions and not road.one_edge:
@@ -946,6 +947,10 @@ class SumoWorld:
         if self.crossings is not None:
             pairs += self.crossings[e](x, pairs, names, xs, vs)
         return pairs, names, xs, vs
+
+    def signal_tracks(self, e: int) -> tuple[tuple[float, str, str], ...]:
+        """Episode ``e``'s signals and their states at each step, where they were recorded (`lights.signal_tracks`)."""
+        return signal_tracks(self.lights[e]) if self.lights is not None else ()
 
     def stops(self, e: int, x: list[float]):
         """What each car of episode ``e``, at positions ``x`` along its route, sees of the next traffic light
@@ -1006,6 +1011,7 @@ class open_world:
             binary = "sumo"
         cmd = sumo_command(config, road, fcd_path, binary=binary, types_file=types_file, state_file=traffic_state(config, road))
         self.api, self.cmd, self.config, self.road, self.configs = api, cmd, config, road, list(configs)
+        self.record = fcd_path is not None
 
     def __enter__(self) -> SumoWorld:
         for later in range(MAX_JOINS if self.config.traffic is not None else 1):
@@ -1016,10 +1022,10 @@ class open_world:
             try:
                 if self.config.traffic is None:
                     return SumoWorld(self.api, self.config, self.road, load_platoon(self.api, self.config, self.road,
-                                                                                   len(self.configs), self.configs))
+                                                                                   len(self.configs), self.configs), self.record)
                 platoons = join_traffic(self.api, self.config, self.road, later)
                 if platoons is not None:
-                    return SumoWorld(self.api, self.config, self.road, platoons)
+                    return SumoWorld(self.api, self.config, self.road, platoons, self.record)
                 self.api.close()  # a traffic car entered its places with it: again, a step later
             except BaseException as exc:
                 self.__exit__(type(exc), exc, None)

@@ -106,6 +106,9 @@ class Episode:
     #: among traffic, the collisions of two traffic cars SUMO reported during the episode, as (time [s],
     #: the car that ran into the other, that car): none of the platoon's, and in no verdict
     traffic_collisions: tuple[tuple[float, str, str], ...] = ()
+    #: in a replay that wrote its FCD on a route through traffic lights: each signal's stop line along the route [m],
+    #: its light's id and its state at each step's start (SUMO's link state letters, one a step), for the figures
+    signals: tuple[tuple[float, str, str], ...] = ()
 
     @property
     def first_collision(self) -> Collision | None:

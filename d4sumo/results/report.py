@@ -57,6 +57,7 @@ def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None 
     if name is not None:
         name_fcd(Path(fcd_path), fcd_path, name)
     fcd = timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
+    fcd.signals = episode.signals  # the lights along the route, as the replay recorded them
     said = timespace.said_track(episode.trace, fcd)
     if said is not None:  # a message attack: what the liar's beacons said, beside where it was
         fcd[said[0]] = said[1]

@@ -19,6 +19,36 @@ TRAFFIC_COLOR = "0.75"
 SAID = " said"
 
 
+class Tracks(dict):
+    """An FCD read as {vehicle id: track} (`read_fcd`), with what else its figures draw: ``signals``, each traffic light's
+    stop line along the route [m], its id, and its state at each step (`Episode.signals`)."""
+
+    signals: tuple[tuple[float, str, str], ...] = ()
+
+
+#: a signal's state letters (SUMO's) as the colour a time-space diagram draws its stop line in
+SIGNAL_COLORS = {**dict.fromkeys("rRu", "#d62728"), **dict.fromkeys("yY", "#ffbf00"), **dict.fromkeys("GgsoO", "#2ca02c")}
+
+
+def _draw_signals(ax, signals, start_s: float, step_s: float) -> None:
+    """Each signal's stop line at its place along the route, in the colour of its state over time: a red light
+    the platoon stopped before shows as the cars' lines flat below a red band."""
+    from matplotlib.collections import LineCollection
+
+    first = True
+    for line_m, tls, states in signals:
+        segments, colors = [], []
+        start = 0
+        for k in range(1, len(states) + 1):
+            if k == len(states) or states[k] != states[start]:
+                segments.append([(start_s + start * step_s, line_m), (start_s + k * step_s, line_m)])
+                colors.append(SIGNAL_COLORS.get(states[start], "0.5"))
+                start = k
+        ax.add_collection(LineCollection(segments, colors=colors, linewidths=3.5, zorder=1.2, capstyle="butt",
+                                         label="traffic light at its stop line" if first else None))
+        first = False
+
+
 def said_track(trace, fcd: Mapping[str, Mapping[str, np.ndarray]]) -> tuple[str, dict[str, np.ndarray]] | None:
     """What the liar's beacons said at each sample (the trace's ``sent_*_vK``, from its first beacon on), as
     an FCD track beside the liar's own (its lanes), with its id (``vK said``); None without a message attack."""
@@ -66,7 +96,7 @@ def read_fcd(path: str | Path, platoon_lanes: Mapping[str, int] | None = None) -
     # With traffic SUMO's clock ran through the traffic's warm-up first: the episode's starts with the platoon
     t0 = min((rows[vid][0][0] for vid in platoon), default=0.0) if len(platoon) < len(rows) else 0.0
     offsets: dict[str, float] = {}  # each edge's start along the route, as the platoon drove it
-    out = {}
+    out = Tracks()
     for vid in sorted(rows, key=_vehicle_order):
         time, pos, speed, accel, lane, odometer = zip(*rows[vid])
         pos = np.array(pos)
@@ -216,6 +246,11 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
     from matplotlib.colors import Normalize
 
     lane_ids = lanes(fcd)
+    signals = getattr(fcd, "signals", ())
+    if signals:  # the platoon's own steps: the FCD's, as read (its clock starts with the platoon)
+        platoon_times = next(d["time"] for vid, d in fcd.items() if not is_traffic(vid))
+        step_s = float(platoon_times[1] - platoon_times[0]) if len(platoon_times) > 1 else 1.0
+        start_s = float(platoon_times[0])
     vmax = speed_max_mps or max((float(d["speed"].max()) for d in fcd.values() if len(d["speed"])), default=0.0) or 1.0
     # the scale starts at 0, or lower where a liar said it drove backwards (else its lie would be clipped)
     vmin = min((float(d["speed"].min()) for vid, d in fcd.items() if vid.endswith(SAID) and len(d["speed"])), default=0.0)
@@ -247,6 +282,8 @@ def time_space_figure(fcd: dict, title: str, collision: dict | None = None, *, s
             last = np.flatnonzero(inside)
             if last.size:
                 ends[i].append((_vehicle_label(vid), float(d["time"][last[-1]]), float(d["pos"][last[-1]])))
+        if signals:
+            _draw_signals(ax, signals, start_s, step_s)
         _mark_moments(ax, attack_start_s, lane_change_s)
         if collision and lane == crash_lane:
             ax.plot([collision["time_s"]], [collision["position_m"]], marker="X", color="red", markeredgecolor="white",

@@ -114,3 +114,30 @@ def ignoring_names(corridor) -> tuple[str, ...]:
     """The signals of an episode through the same lights, driven through: no light_X (nobody looked)."""
     config = _config(corridor, signals="ignore", duration_s=2.0)
     return simulate(config, np.full(config.steps, np.nan), road=config_road(config)).trace.names
+
+
+def test_a_replay_records_each_signal_state_every_step_and_its_time_space_diagram_draws_the_red_it_stopped_at(
+        corridor, tmp_path):
+    from matplotlib.collections import LineCollection
+
+    from d4sumo.results import timespace
+
+    config = _config(corridor)
+    road = config_road(config)
+    cruise = np.full(config.steps, np.nan)
+    assert simulate(config, cruise, road=road).signals == ()  # a campaign's episodes record nothing
+    episode = simulate(config, cruise, road=road, fcd_path=tmp_path / "fcd.xml")
+    assert [tls for _, tls, _ in episode.signals] == ["gneJ12", "gneJ11", "gneJ10"]
+    assert all(len(states) == len(episode.trace) - 1 for _, _, states in episode.signals)  # one letter a step
+    stopped = int(np.argmax(episode.trace["speed_v0"] < 0.1))
+    line, _, states = next(s for s in episode.signals if s[0] > episode.trace["pos_v0"][stopped])
+    assert states[stopped] in "rRu" and 0.0 < line - episode.trace["pos_v0"][stopped] < 10.0  # waiting at its stop line
+    fcd = timespace.read_fcd(tmp_path / "fcd.xml", road.platoon_lanes)
+    fcd.signals = episode.signals
+    fig = timespace.time_space_figure(fcd, "red")
+    bands = [c for c in fig.axes[0].collections if isinstance(c, LineCollection) and c.get_label().startswith("traffic light")
+             or isinstance(c, LineCollection) and np.allclose([seg[0][1] for seg in c.get_segments()], line)]
+    red = [seg for c in bands for seg, color in zip(c.get_segments(), c.get_colors()) if seg[0][1] == line
+           and tuple(np.round(color[:3], 3)) == (0.839, 0.153, 0.157)]
+    waited_s = fcd["v0"]["time"][stopped]  # on the FCD's clock
+    assert any(seg[0][0] <= waited_s <= seg[1][0] for seg in red)  # a red band over the time it waited
