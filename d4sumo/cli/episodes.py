@@ -132,6 +132,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
 
     import numpy as np
 
+    from ..engine.layout import route_lanes
     from ..engine.networks import opendrive_network
     from ..model.maneuvers import lane_changes, maneuver_of
     from ..results.openscenario import read_motion
@@ -150,8 +151,11 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
         campaign = campaign.replace(config=config)
     evaluator = Evaluator(campaign)
     plan = evaluator.plan(row.params)
+    road = evaluator.road  # the positions measured along its lanes, as SUMO counts them
+    lanes = route_lanes(road.net_file, road.route_edges, road.platoon_path)
     plan = dataclasses.replace(plan, motion=read_motion(args.openscenario, "v0", config.step_s, config.steps, row.id, key,
-                                                        changes_lanes=bool(lane_changes(plan, maneuver_of(config)))))
+                                                        changes_lanes=bool(lane_changes(plan, maneuver_of(config))),
+                                                        lanes=lanes))
     from ..engine.simulation import simulate
 
     episode = simulate(config, plan, road=evaluator.road, fcd_path=fcd, gui=args.gui)

@@ -189,3 +189,26 @@ def _longest_piece(chain, reach: list[list[int]]) -> str:
     return (f"the longest piece along which a lane leads on is {len(piece)} edge{'s' if len(piece) > 1 else ''} "
             f"({sum(e.getLength() for e in piece):.0f} m, speed limit {min(e.getSpeed() for e in piece):g} m/s): "
             f"scenario.route = [{route}]")
+
+
+def route_lanes(net_file: Path, route: tuple[str, ...], path: tuple[int, ...]) -> list[tuple[tuple[tuple[float, float], ...], float]]:
+    """The lanes the platoon drives along the route, in order, its junctions' internal lanes included: each one's
+    shape (x, y) and its length as SUMO counts positions on it. SUMO lays a car at lane position p at the point p *
+    (shape's length / length) along the shape: on a curve the lanes of an edge share its length, not their shapes'."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_file), withInternal=True)
+    lanes = []
+    for k, edge in enumerate(route):
+        lane = net.getLane(f"{edge}_{path[k]}")
+        lanes.append(lane)
+        if k + 1 == len(route):
+            break
+        to = net.getLane(f"{route[k + 1]}_{path[k + 1]}")
+        for _ in range(8):  # through the junction: one internal lane, or two through an internal junction
+            via = next((c.getViaLaneID() for c in lane.getOutgoing() if c.getToLane() is to), "")
+            if not via:
+                break
+            lane = net.getLane(via)
+            lanes.append(lane)
+    return [(tuple(map(tuple, lane.getShape())), lane.getLength()) for lane in lanes]

@@ -63,7 +63,7 @@ def heading_rad(sumo_angle_deg: float) -> float:
 
 
 def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sample: int | None = None,
-                campaign: str | None = None, changes_lanes: bool = False) -> np.ndarray:
+                campaign: str | None = None, changes_lanes: bool = False, lanes=None) -> np.ndarray:
     """The speed at each step's end of ``vehicle`` as an exported scenario has it, what `AttackPlan.motion`
     replays: from its initial speed, and the distance along its lane between two of its trajectory's timed
     positions, which SUMO's ballistic update covers at the mean of the speeds at the step's ends (a car that
@@ -72,7 +72,9 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
     says. ``changes_lanes``: its heading turns away from its lane's while it changes lanes (the more, the
     slower it drives: at a standstill it moves only across), so the distance along its lane is read along
     the heading it starts with, in its lane: the roads lane changes are played on are straight
-    (`engine.simulation.check_road`: lanes as long as each other, no curve, no junction)."""
+    (`engine.simulation.check_road`: lanes as long as each other, no curve, no junction). ``lanes``: the route's
+    lanes the car keeps to (`layout.route_lanes`), along which its positions are measured as SUMO counts them (on a
+    curve a lane's shape is longer or shorter than SUMO's length of it, by a few centimetres in a hundred metres)."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
@@ -111,15 +113,38 @@ def read_motion(path: str | Path, vehicle: str, step_s: float, steps: int, sampl
                                                            f"of another campaign, exported from {where})")
     if np.any(np.abs(np.diff(t) - step_s) > 1e-6):
         raise ConfigError("--openscenario", str(path), f"a trajectory with a position every step of the episode ({step_s:g} s)")
-    lane = np.full_like(heading, heading[0]) if changes_lanes else heading  # the direction of its lane at each position
-    step = np.diff(xy, axis=0)
-    along = np.abs(step[:, 0] * np.cos(lane[:-1]) + step[:, 1] * np.sin(lane[:-1]))
+    if lanes is not None and not changes_lanes:
+        along = np.maximum(np.diff(along_route(xy, lanes)), 0.0)  # cars never drive backwards
+    else:
+        lane = np.full_like(heading, heading[0]) if changes_lanes else heading  # the direction of its lane at each position
+        step = np.diff(xy, axis=0)
+        along = np.abs(step[:, 0] * np.cos(lane[:-1]) + step[:, 1] * np.sin(lane[:-1]))
     speeds = []
     for d, dt in zip(along, np.diff(t)):
         v = max(0.0, 2.0 * d / dt - v)
         speeds.append(v)
     speeds = np.array(speeds)
     return np.concatenate([speeds, np.full(max(0, steps - speeds.size), speeds[-1])])[:steps]
+
+
+def along_route(xy: np.ndarray, lanes) -> np.ndarray:
+    """Each point's position along the route as SUMO counts it (a car's: where it started plus its odometer), from the
+    route's lanes (`layout.route_lanes`): the point projected onto the nearest of the lane it was on and the next few,
+    its distance along that lane's shape scaled to SUMO's length of the lane."""
+    from sumolib.geomhelper import polyLength, polygonOffsetWithMinimumDistanceToPoint, distancePointToPolygon
+
+    starts, at = [], 0.0
+    for _, length in lanes:
+        starts.append(at)
+        at += length
+    factors = [length / polyLength(shape) if polyLength(shape) > 0 else 1.0 for shape, length in lanes]
+    out, current = [], 0
+    for point in map(tuple, xy):
+        candidates = range(current, min(len(lanes), current + 4))
+        current = min(candidates, key=lambda i: distancePointToPolygon(point, lanes[i][0], perpendicular=False))
+        offset = polygonOffsetWithMinimumDistanceToPoint(point, lanes[current][0], perpendicular=False)
+        out.append(starts[current] + offset * factors[current])
+    return np.array(out)
 
 
 class NotExported(ConfigError):
