@@ -140,9 +140,6 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     from ..search.store import campaign_key
 
     config = campaign.config
-    if config.traffic is not None:
-        raise ConfigError("--openscenario", str(args.openscenario), "a sample of a campaign without [traffic] "
-                                                                    "(its traffic is not exported)")
     stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
     key = campaign_key(campaign.definition())  # the campaign an export of this sample names
     if args.network is not None:

@@ -3,16 +3,24 @@
 ``d4sumo export DB SAMPLE --openscenario DIR`` replays the sample through SUMO (its FCD: where each car
 was, every step) and writes
 
-- ``DIR/road.xodr``: the network the episode ran on, as netconvert's own ``--opendrive-output`` writes it;
-- ``DIR/scenario.xosc``: OpenSCENARIO 1.2, written with scenariogeneration. Each car is an entity whose
-  reference point is its front bumper (SUMO's position; its bounding box lies behind it). The attacker
-  (and a maneuver's other car) follows the trajectory it drove, a polyline of timed world positions, one a
-  step. The followers start where they were, at their speed, and carry their controller as the system
-  under test: a controller named by its class, its parameters (and the scenario's setpoint and target
-  speed) as properties, so that another simulator can put its own ACC in their place. The storyboard
-  stops at the collision that ended the episode (the pair that collided), or at its end.
+- ``DIR/road.xodr``: the network the episode ran on, as netconvert's own ``--opendrive-output`` writes it: a
+  network file run as given keeps its coordinates and its geo-reference (its ``<geoReference>`` and offset);
+- ``DIR/scenario.xosc``: OpenSCENARIO 1.2, written with scenariogeneration, in the network's coordinates, its
+  clock starting with the platoon. Each car is an entity whose reference point is its front bumper (SUMO's
+  position; its bounding box lies behind it), and follows the trajectory it drove, a polyline of timed world
+  positions, one a step:
+  - the attacker (and a maneuver's other car) always;
+  - the followers, the systems under test, while the parameter ``followers_as_played`` is true (the
+    default). Each carries its controller: named by its class, its parameters (and the scenario's setpoint
+    and target speed, its radar and channel) as properties. Set to false, they start where they were at
+    their speed, for another simulator to put its own ACC in their place;
+  - among traffic, every traffic car that came within `TRAFFIC_MEETS_M` of a car of the platoon, out of the
+    scene until it entered the road and after it left (AddEntityAction, DeleteEntityAction).
 
-The file header's properties say what d4sumo found: the outcome, the pair, the time of the collision.
+  The storyboard stops at the collision that ended the episode (the pair that collided), or at its end.
+
+The file header's properties say what d4sumo found: the outcome, the pair, the time of the collision, the
+systems under test.
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Sequence
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -31,7 +40,9 @@ from ..errors import ConfigError
 from ..model.fmu import SIGNALS, is_fmu
 from ..model.maneuvers import CAR_WIDTH_M
 from ..model.trace import Collision
+from ..model.traffic import is_traffic
 from ..search.store import campaign_key
+from .analysis import TRAFFIC_MEETS_M
 from .records import Record
 
 CAR_HEIGHT_M = 1.5
@@ -48,7 +59,7 @@ def read_fcd_xy(path: str | Path) -> dict[str, dict[str, list[float]]]:
             continue
         t = float(element.get("time"))
         for v in element.iter("vehicle"):
-            d = out.setdefault(v.get("id"), {"time": [], "x": [], "y": [], "angle": [], "speed": []})
+            d = out.setdefault(v.get("id"), {"time": [], "x": [], "y": [], "angle": [], "speed": [], "type": v.get("type", "")})
             d["time"].append(t)
             for key in ("x", "y", "angle", "speed"):
                 d[key].append(float(v.get(key)))
@@ -166,9 +177,6 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
     evaluator = evaluator_of(record)
     campaign = evaluator.campaign
     config = campaign.config
-    if config.traffic is not None:  # the sample is what cannot be exported, not the folder
-        raise NotExported(record.sample_id, "its campaign plays among traffic", "a sample of a campaign without [traffic] "
-                          "(this version writes the platoon, not the traffic around it)")
     if campaign.message:  # another simulator would see the attacker's motion, and none of its lies
         raise NotExported(record.sample_id, f"its campaign has a message attack, {campaign.message}", "a sample of a "
                           "campaign without a message attack (OpenSCENARIO carries the cars' motion, not what their V2V "
@@ -227,53 +235,133 @@ def _position(xosc, track: dict, i: int):
     return xosc.WorldPosition(track["x"][i], track["y"][i], 0.0, heading_rad(track["angle"][i]), 0.0, 0.0)
 
 
+#: the parameter that plays the followers as they drove (true, the default) or leaves them to the simulator's own
+#: controllers in their place (false), as the simulator that plays the file sets it
+FOLLOWERS_AS_PLAYED = "followers_as_played"
+#: SUMO's default passenger car, for a traffic car whose size the FCD does not say
+TRAFFIC_LENGTH_M, TRAFFIC_WIDTH_M = 5.0, 1.8
+
+
+def near_traffic(tracks: dict, platoon: Sequence[str], within_m: float) -> list[str]:
+    """The traffic cars that came within ``within_m`` of a car of the platoon, front bumper to front bumper, at a
+    step both were on the road (`read_fcd_xy` tracks), in the order they first appeared."""
+    at: dict[float, list[tuple[float, float]]] = {}
+    for vid in platoon:
+        for t, x, y in zip(*(tracks[vid][k] for k in ("time", "x", "y"))) if vid in tracks else ():
+            at.setdefault(round(t, 6), []).append((x, y))
+    near = []
+    for vid, d in tracks.items():
+        if vid in platoon or not is_traffic(vid):
+            continue
+        if any(math.hypot(x - px, y - py) <= within_m for t, x, y in zip(d["time"], d["x"], d["y"])
+               for px, py in at.get(round(t, 6), ())):
+            near.append(vid)
+    return sorted(near, key=lambda vid: tracks[vid]["time"][0])
+
+
+def _trajectory_event(xosc, vid: str, track: dict, t0: float, first: int = 0):
+    """An event that drives ``vid`` along its track from sample ``first`` on, its times relative to the event's start."""
+    times = track["time"][first:]
+    polyline = xosc.Polyline([t - times[0] for t in times], [_position(xosc, track, k) for k in range(first, len(track["time"]))])
+    trajectory = xosc.Trajectory(f"{vid}_as_played", False)
+    trajectory.add_shape(polyline)
+    event = xosc.Event(f"{vid}_drives", xosc.Priority.override)
+    event.add_action(f"{vid}_follows_its_trajectory", xosc.FollowTrajectoryAction(
+        trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.relative, 1.0, 0.0))
+    event.add_trigger(xosc.ValueTrigger(f"{vid}_at_start", 0.0, xosc.ConditionEdge.none,
+                                        xosc.SimulationTimeCondition(times[0] - t0, xosc.Rule.greaterOrEqual)))
+    return event
+
+
+def _group(xosc, vid: str, *events):
+    maneuver = xosc.Maneuver(f"{vid}_maneuver")
+    for event in events:
+        maneuver.add_event(event)
+    group = xosc.ManeuverGroup(f"{vid}_group")
+    group.add_actor(vid)
+    group.add_maneuver(maneuver)
+    return group
+
+
+def _at_start(xosc, name: str):
+    return xosc.ValueTrigger(name, 0.0, xosc.ConditionEdge.none, xosc.SimulationTimeCondition(0.0, xosc.Rule.greaterOrEqual))
+
+
 def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
     from scenariogeneration import xosc
 
     config = campaign.config
-    ids = config.vehicle_ids
+    ids = [vid for vid in config.vehicle_ids if vid in tracks]
     n = config.followers + 1
+    # the scenario's clock starts with the platoon (among traffic SUMO's ran through the traffic's warm-up first)
+    t0 = min(tracks[v]["time"][0] for v in ids)
+    traffic = near_traffic(tracks, ids, TRAFFIC_MEETS_M)
     entities = xosc.Entities()
     init = xosc.Init()
-    t0 = min(tracks[v]["time"][0] for v in ids if v in tracks)
-    for i, vid in enumerate(ids):
-        if vid not in tracks:
-            continue
-        vehicle = _vehicle(xosc, vid, config.vehicle_of(i), max(config.speed_mps, 70.0))
-        if 1 <= i < n:
-            entities.add_scenario_object(vid, vehicle, controller=_controller(xosc, i, config.controllers[i - 1], config))
-        else:
-            entities.add_scenario_object(vid, vehicle)
+
+    def start_at(vid: str, k: int = 0):
         track = tracks[vid]
-        init.add_init_action(vid, xosc.TeleportAction(_position(xosc, track, 0)))
-        init.add_init_action(vid, xosc.AbsoluteSpeedAction(track["speed"][0], xosc.TransitionDynamics(
+        init.add_init_action(vid, xosc.TeleportAction(_position(xosc, track, k)))
+        init.add_init_action(vid, xosc.AbsoluteSpeedAction(track["speed"][k], xosc.TransitionDynamics(
             xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)))
-    story = xosc.Story("attack")
-    act = xosc.Act("as_played", xosc.ValueTrigger("at_start", 0.0, xosc.ConditionEdge.none,
-                                                  xosc.SimulationTimeCondition(t0, xosc.Rule.greaterOrEqual)))
-    for i, vid in enumerate(ids):  # the cars d4sumo commands, not the systems under test: as they drove
-        if (1 <= i < n) or vid not in tracks:
-            continue
+
+    for i, vid in enumerate(ids):
+        vehicle = _vehicle(xosc, vid, config.vehicle_of(config.vehicle_ids.index(vid)), max(config.speed_mps, 70.0))
+        follower = 1 <= i < n
+        controller = _controller(xosc, i, config.controllers[i - 1], config) if follower else None
+        entities.add_scenario_object(vid, vehicle, controller=controller)
+        start_at(vid)
+    end = max(tracks[v]["time"][-1] for v in ids)
+    traffic_story = xosc.Story("traffic")
+    traffic_act = xosc.Act("traffic_as_played", _at_start(xosc, "traffic_at_start"))
+    for vid in traffic:
         track = tracks[vid]
-        polyline = xosc.Polyline([t - t0 for t in track["time"]], [_position(xosc, track, k) for k in range(len(track["time"]))])
-        trajectory = xosc.Trajectory(f"{vid}_as_played", False)
-        trajectory.add_shape(polyline)
-        action = xosc.FollowTrajectoryAction(trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.relative, 1.0, 0.0)
-        event = xosc.Event(f"{vid}_drives", xosc.Priority.override)
-        event.add_action(f"{vid}_follows_its_trajectory", action)
-        event.add_trigger(xosc.ValueTrigger(f"{vid}_at_start", 0.0, xosc.ConditionEdge.none,
-                                            xosc.SimulationTimeCondition(t0, xosc.Rule.greaterOrEqual)))
-        maneuver = xosc.Maneuver(f"{vid}_maneuver")
-        maneuver.add_event(event)
-        group = xosc.ManeuverGroup(f"{vid}_group")
-        group.add_actor(vid)
-        group.add_maneuver(maneuver)
-        act.add_maneuver_group(group)
+        box = xosc.BoundingBox(TRAFFIC_WIDTH_M, TRAFFIC_LENGTH_M, CAR_HEIGHT_M, -TRAFFIC_LENGTH_M / 2.0, 0.0, CAR_HEIGHT_M / 2.0)
+        vehicle = xosc.Vehicle(vid, xosc.VehicleCategory.car, box, xosc.Axle(0.5, 0.6, 1.6, -1.0, 0.3),
+                               xosc.Axle(0.0, 0.6, 1.6, -4.0, 0.3), 70.0, 3.0, 9.0)
+        vehicle.add_property("sumo.type", track["type"])  # its size: SUMO's default passenger car's
+        entities.add_scenario_object(vid, vehicle)
+        late = track["time"][0] > t0 + 1e-9
+        events = []
+        if late:  # it enters the road after the platoon: out of the scene until then, where it entered
+            init.add_global_action(xosc.DeleteEntityAction(vid))
+            enter = xosc.Event(f"{vid}_enters", xosc.Priority.parallel)
+            enter.add_action(f"{vid}_added", xosc.AddEntityAction(vid, _position(xosc, track, 0)))
+            enter.add_trigger(xosc.ValueTrigger(f"{vid}_entering", 0.0, xosc.ConditionEdge.none,
+                                                xosc.SimulationTimeCondition(track["time"][0] - t0, xosc.Rule.greaterOrEqual)))
+            events.append(enter)
+        else:
+            start_at(vid, int(np.searchsorted(np.round(track["time"], 6), round(t0, 6))))
+        first_k = 0 if late else int(np.searchsorted(np.round(track["time"], 6), round(t0, 6)))
+        events.append(_trajectory_event(xosc, vid, track, t0, first_k))
+        if track["time"][-1] < end - 1e-9:  # it left the road (or SUMO's network) before the episode's end
+            leave = xosc.Event(f"{vid}_leaves", xosc.Priority.parallel)
+            leave.add_action(f"{vid}_deleted", xosc.DeleteEntityAction(vid))
+            leave.add_trigger(xosc.ValueTrigger(f"{vid}_leaving", 0.0, xosc.ConditionEdge.none, xosc.SimulationTimeCondition(
+                track["time"][-1] - t0 + config.step_s, xosc.Rule.greaterOrEqual)))
+            events.append(leave)
+        traffic_act.add_maneuver_group(_group(xosc, vid, *events))
+    story = xosc.Story("attack")
+    act = xosc.Act("as_played", _at_start(xosc, "at_start"))
+    for i, vid in enumerate(ids):  # the cars d4sumo commands, not the systems under test: as they drove
+        if not 1 <= i < n:
+            act.add_maneuver_group(_group(xosc, vid, _trajectory_event(xosc, vid, tracks[vid], t0)))
     story.add_act(act)
-    end = max(tracks[v]["time"][-1] for v in ids if v in tracks)
+    # the systems under test as they drove, unless the parameter hands them to the simulator's own controllers
+    as_played = xosc.ConditionGroup()
+    as_played.add_condition(_at_start(xosc, "followers_at_start"))
+    as_played.add_condition(xosc.ValueTrigger("followers_as_played_set", 0.0, xosc.ConditionEdge.none,
+                                              xosc.ParameterCondition(FOLLOWERS_AS_PLAYED, "true", xosc.Rule.equalTo)))
+    played = xosc.Trigger()
+    played.add_conditiongroup(as_played)
+    followers = xosc.Act("systems_under_test_as_played", played)
+    for i, vid in enumerate(ids):
+        if 1 <= i < n:
+            followers.add_maneuver_group(_group(xosc, vid, _trajectory_event(xosc, vid, tracks[vid], t0)))
+    story.add_act(followers)
     stop = xosc.ConditionGroup("stop")
     stop.add_condition(xosc.ValueTrigger("episode_end", 0.0, xosc.ConditionEdge.rising,
-                                         xosc.SimulationTimeCondition(end + config.step_s, xosc.Rule.greaterThan), "stop"))
+                                         xosc.SimulationTimeCondition(end - t0 + config.step_s, xosc.Rule.greaterThan), "stop"))
     stops = xosc.Trigger("stop")
     stops.add_conditiongroup(stop)
     if first is not None:  # the expected end: the collision d4sumo found
@@ -283,14 +371,22 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
         stops.add_conditiongroup(collided)
     storyboard = xosc.StoryBoard(init, stops)
     storyboard.add_story(story)
+    if traffic:
+        traffic_story.add_act(traffic_act)
+        storyboard.add_story(traffic_story)
+    parameters = xosc.ParameterDeclarations()
+    parameters.add_parameter(xosc.Parameter(FOLLOWERS_AS_PLAYED, xosc.ParameterType.boolean, "true"))
     header = xosc.Properties()
     header.add_property("d4sumo.database", str(Path(record.db).resolve()))
     header.add_property("d4sumo.sample", str(record.sample_id))
     header.add_property("d4sumo.campaign", campaign_key(campaign.definition()))  # which campaign's sample: a replay checks it
     header.add_property("d4sumo.outcome", outcome)
+    header.add_property("d4sumo.systems_under_test", " ".join(ids[1:n]))
+    if traffic:
+        header.add_property("d4sumo.traffic", f"{len(traffic)} cars that came within {TRAFFIC_MEETS_M:g} m of the platoon")
     if first is not None:
         header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")
         header.add_property("d4sumo.collision_time_s", repr(round(first.time_s, 9)))  # a whole step: 3.4, not 3.4000000000000004
-    return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", xosc.ParameterDeclarations(), entities, storyboard,
+    return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", parameters, entities, storyboard,
                          xosc.RoadNetwork(ROAD_FILE), xosc.Catalog(), osc_minor_version=OSC_MINOR,
                          header_properties=header)

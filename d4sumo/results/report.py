@@ -326,7 +326,7 @@ TEXT_WIDTH = 200
 
 def _openscenario_links(record: Record, out: Path, name: str, fcd: Path) -> str:
     """The sample as OpenSCENARIO on its road as OpenDRIVE (`openscenario`), written beside the report, as links;
-    a sample this version does not export (among traffic) says so."""
+    a sample this version does not export (a message attack's) says so."""
     from .openscenario import NotExported, export_openscenario
 
     folder = f"openscenario/{name}"
