@@ -18,6 +18,7 @@ import os
 import re
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 from xml.sax.saxutils import escape as xml_escape, unescape as xml_unescape
@@ -579,6 +580,10 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     folder = Path(default_cache_dir()).parent / "traffic-states"
     path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
     if path.is_file():
+        try:  # used now: the last a full cache lets go (`_prune`)
+            os.utime(path)
+        except OSError:  # a cache one may read, not write
+            pass
         return path
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -595,7 +600,32 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+    _prune(folder, TRAFFIC_STATES_KEPT)
     return path
+
+
+#: the traffic warm-ups the cache keeps, the most recently used (a few kB each): a campaign whose samples each meet
+#: traffic of their own warms up one a sample
+TRAFFIC_STATES_KEPT = 4096
+#: a cached file used this recently is never let go [s]: another process may be about to load it
+IN_USE_S = 3600.0
+
+
+def _prune(folder: Path, kept: int) -> None:
+    """The cache ``folder`` down to its ``kept`` most recently used files, none used within `IN_USE_S`."""
+    try:
+        files = [(f.stat().st_mtime, f) for f in folder.iterdir() if f.is_file()]
+    except OSError:
+        return
+    if len(files) <= kept:
+        return
+    now = time.time()
+    for used, f in sorted(files)[:len(files) - kept]:
+        if now - used > IN_USE_S:
+            try:
+                f.unlink()
+            except OSError:  # another process let it go first
+                pass
 
 
 def _warm_up_alone(cmd: list[str], config: EpisodeConfig, road: Road, state: str) -> None:

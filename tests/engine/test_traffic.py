@@ -362,3 +362,23 @@ def test_a_demand_whose_flows_have_no_end_plays_as_sumo_plays_it():
                            start="steady", speed_mps=13.0, duration_s=20.0, traffic={"demand": str(game / "corridor.rou.xml")})
     episode = simulate(config, np.full(config.steps, np.nan))
     assert "traffic-v0" in episode.min_gaps  # traffic ahead of the attacker: the demand drives
+
+
+def test_the_warm_up_cache_keeps_its_most_recently_used_and_never_one_in_use(tmp_path):
+    """Issue 48: the cache grew by a warm-up for every sample that met traffic of its own; it keeps the most recently
+    used (a hit marks it used), and never lets go one used within the hour, which another process may be loading."""
+    import os
+    import time
+
+    from d4sumo.engine.sumo import IN_USE_S, _prune
+
+    now = time.time()
+    for k in range(10):
+        f = tmp_path / f"{k}.xml.gz"
+        f.write_text("state")
+        used = now - IN_USE_S - 100 * (10 - k) if k < 8 else now - 60  # 8 old ones, then 2 in use
+        os.utime(f, (used, used))
+    _prune(tmp_path, 4)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["6.xml.gz", "7.xml.gz", "8.xml.gz", "9.xml.gz"]
+    _prune(tmp_path, 1)  # the two in use stay, whatever the cap
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["8.xml.gz", "9.xml.gz"]
