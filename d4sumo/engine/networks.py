@@ -181,7 +181,8 @@ def network_source(name: str, root: Path | None = None, route: tuple[str, ...] =
         return _given_source(name, root)
     source = _network_source(name, root)
     source = _restrict(source, tuple(route)) if route else source
-    if scenario_folder(name, root).is_file():
+    folder = scenario_folder(name, root)
+    if folder.is_file() or isinstance(_inputs(folder, strict=False), Path):  # a network file's, alone or in its folder
         _note_signals(source, tuple(route))
     return source
 
@@ -226,8 +227,11 @@ def _given_source(name: str, root: Path | None = None) -> NetworkSource:
     import gzip
 
     net_file = scenario_folder(name, root)
+    if net_file.is_dir() and isinstance(found := _inputs(net_file, strict=False), Path):  # a folder holding one network file
+        net_file = found
     if not net_file.is_file():
-        raise ConfigError("scenario.network", name, "a network file (*.net.xml or *.net.xml.gz) to run as given")
+        raise ConfigError("scenario.network", name, "a network file (*.net.xml or *.net.xml.gz), or a folder holding one, "
+                                                    "to run as given")
     stat = net_file.stat()
     key = (str(net_file), stat.st_size, stat.st_mtime_ns, "given")
     if key not in _PLAIN:

@@ -230,7 +230,7 @@ class EpisodeConfig:
         fix("join_m", check_number("scenario.join_m", self.join_m, 0.0, 100_000.0, "metres along the route's first edge"))
         if not isinstance(self.rebuild, bool):
             raise ConfigError("scenario.rebuild", self.rebuild, "true or false")
-        if not self.network.endswith(NETWORK_FILE_SUFFIXES):  # node and edge files are built by netconvert: nothing else to do
+        if builds_network(self.network):  # node and edge files are built by netconvert: nothing else to do
             fix("rebuild", True)
         fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
         fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
@@ -630,6 +630,18 @@ def is_network_path(network: str) -> bool:
     """Whether a network is named by a path, not by a shipped variant's name (which is taken first, as
     `engine.networks.scenario_folder` does)."""
     return "/" in network or os.sep in network or not (SCENARIOS_DIR / network).is_dir()
+
+
+def builds_network(network: str) -> bool:
+    """Whether the road of ``network`` is built by netconvert from node and edge files: a shipped variant, or a folder
+    of them. A network file, or a folder holding one and nothing else, may run as given (`EpisodeConfig.rebuild`)."""
+    if not is_network_path(network):
+        return True
+    path = Path(network).expanduser()
+    if path.name.endswith(NETWORK_FILE_SUFFIXES) or not path.is_dir():  # (a folder no longer there: as stored)
+        return False
+    nodes, edges, nets = folder_files(path)
+    return not (not nodes and not edges and len(nets) == 1)
 
 
 def network_files(network: str) -> list[Path]:

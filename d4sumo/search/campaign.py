@@ -209,7 +209,7 @@ class Campaign:
     def changes_of(self, version: str) -> list[tuple[str, str, str]]:
         """What d4sumo ``version`` and before did otherwise with this campaign's inputs: (the key, its value then, what
         it did), each. 0.19: cooperative followers read the platoon's beacons whatever their radar saw
-        (`ChannelParams.match_radar`). 0.18, besides: a network file rebuilt from plain XML, the platoon driving
+        (`ChannelParams.match_radar`), and a folder holding a network file was rebuilt (`EpisodeConfig.rebuild`). 0.18, besides: a network file rebuilt from plain XML, the platoon driving
         through red lights on a road of one's own, demand files one after the other, collisions inside junctions
         unseen (`EpisodeConfig.rebuild`, `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`,
         `TrafficParams.junction_collisions`)."""
@@ -224,6 +224,8 @@ class Campaign:
                 changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
             if "junction_collisions" in (stored.get("traffic") or {}):
                 changes.append(("traffic.junction_collisions", "false", "collisions inside junctions unseen"))
+        if version == "0.19" and not self.config.rebuild and Path(self.config.network).is_dir():
+            changes.append(("scenario.rebuild", "true", "its folder's network file rebuilt from plain XML"))
         if "match_radar" in (stored.get("v2v") or {}):
             changes.append(("v2v.match_radar", "false", "cooperative followers reading the beacons whatever their radar saw"))
         return changes

@@ -125,6 +125,32 @@ def test_a_network_file_runs_as_given_its_signal_programmes_and_coordinates_kept
 
 
 @pytest.mark.sumo
+def test_a_folder_holding_one_network_file_runs_it_as_given(tmp_path):
+    """A folder holding a network file and nothing else was rebuilt (0.19): it runs as the file does; a folder of node
+    and edge files is built, whatever it says; a campaign 0.19 stored on the folder replays rebuilt, and says so."""
+    import shutil
+
+    from d4sumo.engine.scenarios import config_road
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.sumohome import sumo_home
+
+    net = Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml"
+    folder = tmp_path / "corridor"
+    folder.mkdir()
+    shutil.copy(net, folder / net.name)
+    route = ("gneE27", "gneE25", "gneE18", "gneE29")
+    config = EpisodeConfig(network=str(folder), route=route, start="steady", speed_mps=13.0, duration_s=20.0)
+    assert config.network_given and config.to_dict()["scenario"]["rebuild"] is False
+    road = config_road(config)
+    assert road.given and road.net_file.read_bytes() == net.read_bytes()
+    assert [key for key, _, _ in Campaign(config=config).changes_of("0.19")] == ["scenario.rebuild"]
+    plain = tmp_path / "plain"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "examples" / "roads" / "three_edges", plain)
+    assert EpisodeConfig(network=str(plain), rebuild=False).rebuild  # node and edge files: built
+
+
+@pytest.mark.sumo
 def test_a_batch_on_a_network_as_given_plays_its_episodes_one_at_a_time_each_as_alone():
     import numpy as np
 
