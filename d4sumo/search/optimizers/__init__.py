@@ -47,6 +47,7 @@ from .base import INDEPENDENT_BATCH, Optimizer, check_options
 from .bayes import BayesianOptimization, TrustRegionBO
 from .cmaes import CMAES
 from .crossentropy import BucketCrossEntropy, CrossEntropy
+from .gp import LEARN_POINTS
 from .portfolio import Portfolio
 from .sampling import Halton, RandomSearch
 
@@ -71,7 +72,9 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: stalls, then explored from the design on without suffix moves, then cut held inputs across signals)
 OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1, "inducing": 0},
                                               "ce": {"noise_fraction": 0.0},
-                                              "auto": {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0}}
+                                              "auto": {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0,
+                                                       # an option of 0.6's, gone in 0.7, back for its campaigns
+                                                       "learn_points": LEARN_POINTS}}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals

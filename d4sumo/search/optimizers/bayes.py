@@ -23,7 +23,7 @@ from scipy.stats import qmc
 
 from ...errors import ConfigError
 from .base import Optimizer
-from .gp import GaussianProcess, one_blas_thread
+from .gp import LEARN_POINTS, GaussianProcess, one_blas_thread
 
 
 class GaussianProcessSearch(Optimizer):
@@ -48,7 +48,7 @@ class GaussianProcessSearch(Optimizer):
         self._gp = None
         self._fitted = 0  # the scores told when the GP was last fitted
         self._learned = 0  # the scores modelled when the hyperparameters were last learned
-        self._process = GaussianProcess(self.dimension, inducing=o.get("inducing", 0))
+        self._process = GaussianProcess(self.dimension, inducing=o.get("inducing", 0), learn_points=o.get("learn_points", LEARN_POINTS))
         self._run = 0  # the first sample of the current run (turbo starts new runs)
 
     def ready(self) -> int:
