@@ -21,6 +21,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser, published as tomli
     import tomli as tomllib
 
+from .. import ledger
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
 from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
@@ -480,24 +481,11 @@ class EpisodeConfig:
             del scenario["attacker_declared_decel_mps2"]
         for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
             del scenario[key]  # a maneuver's settings have no effect on another
-        for key in ("attacker_cruise_offset_mps", "end_distance_m", "collision_gap_m", "route", "network_sha256"):  # stored where set: earlier campaigns keep their identity
-            if not scenario[key]:
-                del scenario[key]
+        scenario = ledger.stored("scenario", scenario)  # keys added later, where they hold what earlier campaigns ran
         if "route" in scenario:
             scenario["route"] = list(scenario["route"])
-        if scenario["lane"] is None:  # the road's own choice: earlier campaigns keep their identity
-            del scenario["lane"]
-        # d4sumo's own roads have no traffic lights; a platoon driving through red is what campaigns stored
-        # before it was a key (`EARLIER_SCENARIO`) hold
-        if not is_network_path(self.network) or self.signals == "ignore":
-            del scenario["signals"]
-        if self.rebuild:  # what campaigns stored before it was a key hold, and all a road of node and edge files does
-            del scenario["rebuild"]
-        if self.join_m == REAR_START_M:  # where every earlier campaign started
-            del scenario["join_m"]
-        for key in ("additional", "additional_sha256", "sumo_options"):  # stored where set: earlier campaigns keep their identity
-            if not scenario[key]:
-                del scenario[key]
+        if not is_network_path(self.network):  # d4sumo's own roads have no traffic lights: one configuration
+            scenario.pop("signals", None)
         if "additional" in scenario:
             scenario["additional"] = list(scenario["additional"])
         if "sumo_options" in scenario:
@@ -515,7 +503,7 @@ class EpisodeConfig:
                 out["traffic"].pop("junction_collisions", None)
         if self.v2v is not None:
             out["v2v"] = self.v2v.to_dict()
-            if not self.others_cut_in:  # what campaigns stored before it was a key (`EARLIER_V2V`) hold, and the same
+            if not self.others_cut_in:  # what campaigns stored before it was a key hold (`ledger`), and the same
                 out["v2v"].pop("match_radar", None)
         return out
 
@@ -532,7 +520,7 @@ class EpisodeConfig:
         tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
         scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in TABLES]
         _check_keys("scenario", tables["scenario"], scenario_keys)
-        if tables["scenario"].get("route", None) in ([], ()):  # left out, the network's one chain; given, edges
+        if tables["scenario"].get("route", None) == []:  # left out (or restored: ()), the network's one chain; given, edges
             raise ConfigError("scenario.route", [], "a list of one edge id or more, e.g. [\"e1\", \"e2\"] (leave it out "
                                                     "for a network of one chain of edges)")
         # [vehicle.vI]: a car's own table (the config checks the car); any other key is one of [vehicle]
@@ -586,8 +574,6 @@ def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
-#: what a stored definition's [scenario] table without a key held: the scenario as that version played it
-EARLIER_SCENARIO = {"network_sha256": "", "signals": "ignore", "rebuild": True}
 #: SUMO options given as they are (`EpisodeConfig.sumo_options`): they change what SUMO's traffic does, nothing
 #: d4sumo decides
 SUMO_OPTIONS_PASSED = ("time-to-teleport", "time-to-teleport.highways", "max-depart-delay", "ignore-route-errors",

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
+from .. import ledger
 from ..errors import ConfigError, check_int, check_number, is_number, table_of
 
 #: the flow per lane without a demand of the user's [vehicles per hour per lane]
@@ -48,8 +49,6 @@ DEFAULT_VPH = 1200.0
 TRAFFIC_ID = "traffic"
 #: a vehicle type's name: SUMO's ids allow more, a flow's id is built from it
 _TYPE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
-#: what a stored definition's [traffic] table without a key held: the traffic as that version played it
-EARLIER_TRAFFIC = {"insertion_checks": False, "merge_by_departure": False, "junction_collisions": False}
 #: <vType> attributes d4sumo sets itself (the type's id)
 _OWN_ATTRIBUTES = ("id",)
 
@@ -126,14 +125,9 @@ class TrafficParams:
             out["demand"] = list(self.demand)
         else:
             del out["demand_sha256"]
-        if not self.per_sample:  # stored where set
-            del out["per_sample"]
-        if not self.insertion_checks:  # as campaigns stored before it was a key (`EARLIER_TRAFFIC`) hold it
-            del out["insertion_checks"]
-        if not self.merge_by_departure or not self.merges:  # likewise; and without effect where there is one file
-            del out["merge_by_departure"]
-        if not self.junction_collisions:  # likewise (and left out on d4sumo's own roads: `EpisodeConfig.to_dict`)
-            del out["junction_collisions"]
+        out = ledger.stored("traffic", out)  # keys added later, where they hold what earlier campaigns ran
+        if not self.merges:  # without effect where there is one file
+            out.pop("merge_by_departure", None)
         if self.types and self.vehicles_per_hour is not None:
             out["types"] = {name: dict(attributes) for name, attributes in self.types}
         return out

@@ -22,6 +22,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .. import ledger
 from ..errors import ConfigError, check_int, check_number, table_of
 
 
@@ -36,7 +37,7 @@ class ChannelParams:
     #: a follower reads the beacons of the car ahead of it in the platoon only while its radar sees that car; where
     #: another is between them (a traffic car that cut in, a maneuver's car) it falls back to its ACC, as CACC
     #: systems do (`sensing.Observation.matched`). False: it reads them whatever its radar sees, as d4sumo 0.19
-    #: and before had it (`EARLIER_V2V`), for study
+    #: and before had it (`ledger`), for study
     match_radar: bool = True
 
     def __post_init__(self) -> None:
@@ -54,11 +55,8 @@ class ChannelParams:
 
     def to_dict(self) -> dict:
         """As a definition stores it: every key (the channel is part of the system under test); ``match_radar``
-        where it is not what campaigns stored before it was a key hold (`EARLIER_V2V`)."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        if not self.match_radar:
-            del out["match_radar"]
-        return out
+        where it is not what campaigns stored before it was a key hold (`ledger`)."""
+        return ledger.stored("v2v", {f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
 
     @property
     def label(self) -> str:
@@ -72,9 +70,6 @@ class ChannelParams:
             text += ", beacons read whatever the radar sees"
         return text
 
-
-#: what a stored definition's [v2v] table without a key held: the channel as that version played it
-EARLIER_V2V = {"match_radar": False}
 
 
 @dataclass(slots=True)  # made for every car at every beacon: not frozen, whose construction costs thrice

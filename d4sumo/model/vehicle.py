@@ -11,6 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from .. import ledger
 from ..errors import ConfigError, check_number
 
 #: SUMO's classes of road vehicle (its vClass): a lane's permissions say which may drive on it
@@ -53,15 +54,8 @@ class VehicleParams:
     def to_dict(self) -> dict:
         """As a definition stores it: the keys added after the first (coasting, class, shape) only where
         they differ from their defaults (campaigns stored before them keep their identity)."""
-        d = dataclasses.asdict(self)
-        for key in LATER_KEYS:
-            if d[key] == LATER_KEYS[key]:
-                del d[key]
-        return d
+        return ledger.stored("vehicle", dataclasses.asdict(self))
 
-
-#: [vehicle] keys a definition holds only where set (`VehicleParams.to_dict`), with their defaults
-LATER_KEYS = {"coast_decel_mps2": 0.0, "vclass": "passenger", "shape": ""}
 
 
 def command_to_acceleration(u: float, vehicle: VehicleParams) -> float:

@@ -14,20 +14,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .. import ledger
 from ..errors import ConfigError, NotSimulable, check_int, check_number
 from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from ..model.config import EARLIER_SCENARIO, EpisodeConfig, network_digest
+from ..model.config import EpisodeConfig, network_digest
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
-from ..model.traffic import EARLIER_TRAFFIC
-from ..model.v2v import EARLIER_V2V
-from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, OPTIONS_SINCE, resolve_options, stored_options
+from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store
 
 #: the versions whose inputs `Campaign.with_inputs_of` plays, newest first: each changed what a campaign's keys do
 INPUTS_CHANGED = ("0.19", "0.18")
+
+
+def _flag_value(value) -> str:
+    """A value as ``--set`` takes it: true, false, a bare word."""
+    return ("true" if value else "false") if isinstance(value, bool) else str(value)
 
 log = logging.getLogger(__name__)
 
@@ -111,9 +115,9 @@ class Campaign:
             "optimizer": self.optimizer,
             "optimizer_options": stored_options(self.optimizer, dict(self.optimizer_options)),
             "seed": self.seed,
-            "spec": {"formula": self.formula, "d_safe_m": self.d_safe_m,
-                     # only where it matters, so that campaigns stored before it keep their identity
-                     **({"from_attack_start": True} if self.config.attack_start_step and self.score_from_attack_start else {})},
+            # (from the attack's start only where it starts later)
+            "spec": ledger.stored("spec", {"formula": self.formula, "d_safe_m": self.d_safe_m, "from_attack_start":
+                                           bool(self.config.attack_start_step and self.score_from_attack_start)}),
         }
 
     @classmethod
@@ -143,11 +147,10 @@ class Campaign:
         try:
             attack = definition["attack"]
             config = definition["config"]  # keys later versions added, as the earlier ones played it:
-            config = {**config, "scenario": {**EARLIER_SCENARIO, **config.get("scenario", {})}}
-            if isinstance(config.get("traffic"), dict):
-                config = {**config, "traffic": {**EARLIER_TRAFFIC, **config["traffic"]}}
-            if isinstance(config.get("v2v"), dict):
-                config = {**config, "v2v": {**EARLIER_V2V, **config["v2v"]}}
+            config = {**config, "scenario": ledger.restored("scenario", config.get("scenario", {}))}
+            for table in ("traffic", "v2v"):
+                if isinstance(config.get(table), dict):
+                    config = {**config, table: ledger.restored(table, config[table])}
             return cls(
                 config=EpisodeConfig.from_dict(config),
                 attack=attack["family"],
@@ -160,9 +163,9 @@ class Campaign:
                 message=attack.get("message", ""),
                 message_field=attack.get("message_field", "accel"),
                 message_sender=attack.get("message_sender", 0),
-                optimizer_options=tuple({**OPTIONS_SINCE.get(definition["optimizer"], {}),
-                                         **definition.get("optimizer_options", {})}.items()),
-                score_from_attack_start=definition["spec"].get("from_attack_start", False),
+                optimizer_options=tuple(ledger.restored(f"search.{definition['optimizer']}",
+                                                        definition.get("optimizer_options", {})).items()),
+                score_from_attack_start=ledger.restored("spec", definition["spec"])["from_attack_start"],
             )
         except ControllerImportError as exc:  # not damage: the database is fine, this machine lacks the module
             raise NotSimulable(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None
@@ -182,14 +185,18 @@ class Campaign:
         return dataclasses.replace(self, **changes)
 
     def with_inputs_of_before(self) -> "Campaign":
-        """The campaign as d4sumo 0.16 and before ran it: its road's files without a digest, its traffic entering
-        after the warm-up without insertion checks, its platoon driving through red lights (`EARLIER_SCENARIO`,
-        `EARLIER_TRAFFIC`)."""
-        config = dataclasses.replace(self.config, **EARLIER_SCENARIO)
-        if config.traffic is not None:
-            config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **EARLIER_TRAFFIC))
-        if config.v2v is not None:
-            config = dataclasses.replace(config, v2v=dataclasses.replace(config.v2v, **EARLIER_V2V))
+        """The campaign as d4sumo 0.16 and before ran it: every input a later version changed what it does with
+        (`ledger`: its road's files without a digest, its traffic entering after the warm-up without insertion
+        checks, its platoon driving through red lights, ...) as it was then."""
+        config = self.config
+        for entry in ledger.added_after("0.16"):
+            if not entry.did or entry.table not in ("scenario", "traffic", "v2v"):
+                continue
+            if entry.table == "scenario":
+                config = dataclasses.replace(config, **{entry.name: entry.earlier})
+            elif getattr(config, entry.table) is not None:
+                config = dataclasses.replace(config, **{entry.table: dataclasses.replace(getattr(config, entry.table),
+                                                                                          **{entry.name: entry.earlier})})
         return self if config == self.config else self.replace(config=config)
 
     def with_inputs_of(self, version: str) -> "Campaign":
@@ -198,36 +205,22 @@ class Campaign:
         config = self.config
         for key, _, _ in self.changes_of(version):
             table, _, name = key.partition(".")
+            value = ledger.earlier(table)[name]
             if table == "scenario":
-                config = dataclasses.replace(config, **{name: EARLIER_SCENARIO[name]})
-            elif table == "traffic":
-                config = dataclasses.replace(config, traffic=dataclasses.replace(config.traffic, **{name: EARLIER_TRAFFIC[name]}))
+                config = dataclasses.replace(config, **{name: value})
             else:
-                config = dataclasses.replace(config, v2v=dataclasses.replace(config.v2v, **{name: EARLIER_V2V[name]}))
+                config = dataclasses.replace(config, **{table: dataclasses.replace(getattr(config, table), **{name: value})})
         return self if config == self.config else self.replace(config=config)
 
     def changes_of(self, version: str) -> list[tuple[str, str, str]]:
         """What d4sumo ``version`` and before did otherwise with this campaign's inputs: (the key, its value then, what
-        it did), each. 0.19: cooperative followers read the platoon's beacons whatever their radar saw
-        (`ChannelParams.match_radar`), and a folder holding a network file was rebuilt (`EpisodeConfig.rebuild`). 0.18, besides: a network file rebuilt from plain XML, the platoon driving
-        through red lights on a road of one's own, demand files one after the other, collisions inside junctions
-        unseen (`EpisodeConfig.rebuild`, `EpisodeConfig.signals`, `TrafficParams.merge_by_departure`,
-        `TrafficParams.junction_collisions`)."""
-        changes = []
+        it did), each: every key added since (`ledger`) that its definition holds, and, 0.19 and before, a folder
+        holding a network file rebuilt (`EpisodeConfig.rebuild`)."""
         stored = self.config.to_dict()
-        if version == "0.18":
-            if not self.config.rebuild:
-                changes.append(("scenario.rebuild", "true", "its network file rebuilt from plain XML"))
-            if "signals" in stored["scenario"]:
-                changes.append(("scenario.signals", "ignore", "the platoon driving through red lights"))
-            if self.config.traffic is not None and self.config.traffic.merges and self.config.traffic.merge_by_departure:
-                changes.append(("traffic.merge_by_departure", "false", "its demand files one after the other"))
-            if "junction_collisions" in (stored.get("traffic") or {}):
-                changes.append(("traffic.junction_collisions", "false", "collisions inside junctions unseen"))
+        changes = [(entry.key, _flag_value(entry.earlier), entry.did) for entry in ledger.added_after(version)
+                   if entry.did and entry.table in stored and entry.name in (stored[entry.table] or {})]
         if version == "0.19" and not self.config.rebuild and Path(self.config.network).is_dir():
-            changes.append(("scenario.rebuild", "true", "its folder's network file rebuilt from plain XML"))
-        if "match_radar" in (stored.get("v2v") or {}):
-            changes.append(("v2v.match_radar", "false", "cooperative followers reading the beacons whatever their radar saw"))
+            changes.insert(0, ("scenario.rebuild", "true", "its folder's network file rebuilt from plain XML"))
         return changes
 
     def with_options(self, options: dict) -> "Campaign":

@@ -63,8 +63,7 @@ class Sweep:
 
     def with_inputs_of_before(self) -> "Sweep":
         """The sweep as d4sumo 0.16 and before ran it: its roads' files without a digest, its traffic entering
-        after the warm-up without insertion checks, its platoons driving through red lights (`EARLIER_SCENARIO`,
-        `EARLIER_TRAFFIC`)."""
+        after the warm-up without insertion checks, its platoons driving through red lights (`ledger`)."""
         campaigns = tuple(c.with_inputs_of_before() for c in self.campaigns)
         return self if campaigns == self.campaigns else dataclasses.replace(self, campaigns=campaigns)
 

@@ -15,7 +15,8 @@ from d4sumo.search.store import campaign_key
 
 ROOT = Path(__file__).resolve().parents[2]
 RELEASES = ROOT / "tests" / "data" / "releases"
-DATABASES = sorted(RELEASES.glob("*.sqlite"), key=lambda p: tuple(int(n) for n in p.name[:-len(".sqlite")].split(".")))
+DATABASES = sorted(RELEASES.glob("*.sqlite"), key=lambda p: (tuple(int(n) for n in p.name.split("-")[0].removesuffix(".sqlite")
+                                                                          .split(".")), p.name))
 
 
 def _campaigns(db: Path, tmp_path: Path):
@@ -25,8 +26,13 @@ def _campaigns(db: Path, tmp_path: Path):
         return store.campaigns(), {c.id: store.samples(c.id) for c in store.campaigns()}
 
 
-def test_every_release_since_0_2_wrote_a_database_here():
-    assert [p.name for p in DATABASES][:1] == ["0.2.0.sqlite"] and len(DATABASES) >= 19
+def test_every_release_since_0_2_wrote_a_database_here_at_both_ends():
+    """Each version's release (its first commit) and the last commit that carried it: what a database that says it
+    was created by it may hold."""
+    names = {p.name for p in DATABASES}
+    for version in ("0.2.0", "0.10.1", "0.19.0"):
+        assert {f"{version}.sqlite", f"{version}-last.sqlite"} <= names
+    assert len(DATABASES) == 38
 
 
 @pytest.mark.parametrize("db", DATABASES, ids=lambda p: p.name[:-len(".sqlite")])

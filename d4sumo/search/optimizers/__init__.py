@@ -42,12 +42,12 @@ from typing import Callable
 
 import numpy as np
 
+from ... import ledger
 from ...errors import ConfigError
 from .base import INDEPENDENT_BATCH, Optimizer, check_options
 from .bayes import BayesianOptimization, TrustRegionBO
 from .cmaes import CMAES
 from .crossentropy import BucketCrossEntropy, CrossEntropy
-from .gp import LEARN_POINTS
 from .portfolio import Portfolio
 from .sampling import Halton, RandomSearch
 
@@ -70,11 +70,7 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 #: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
 #: ran scikit-optimize's GP; ce added no noise; auto explored uniformly, then made piece moves through
 #: stalls, then explored from the design on without suffix moves, then cut held inputs across signals)
-OPTIONS_SINCE: dict[str, dict[str, float]] = {"bo": {"batch_size": 1, "gp_version": 1, "inducing": 0},
-                                              "ce": {"noise_fraction": 0.0},
-                                              "auto": {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0,
-                                                       # an option of 0.6's, gone in 0.7, back for its campaigns
-                                                       "learn_points": LEARN_POINTS}}
+OPTIONS_SINCE: dict[str, dict[str, float]] = {name: ledger.earlier(f"search.{name}") for name in ("bo", "ce", "auto")}
 
 
 #: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
@@ -102,8 +98,7 @@ def as_set_flags(name: str, options: dict) -> str:
 
 def stored_options(name: str, options: dict) -> dict:
     """The options as a campaign's definition holds them (see OPTIONS_SINCE)."""
-    since = OPTIONS_SINCE.get(name, {})
-    return {k: v for k, v in options.items() if not (k in since and since[k] == v)}
+    return ledger.stored(f"search.{name}", options)
 
 
 def resolve_options(name: str, options: dict | None) -> dict:

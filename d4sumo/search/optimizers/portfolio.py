@@ -88,7 +88,7 @@ class Portfolio(BayesianOptimization):
     OPTIONS = {**BayesianOptimization.OPTIONS, "random_share": (0.5, 0.0, 1.0), "share_min": (0.2, 0.0, 1.0),
                "share_max": (0.8, 0.0, 1.0), "version": (2, 1, 2), "stall": (25, 0, 100_000),
                "suffix": (0.25, 0.0, 1.0), "patience": (5, 0, 100_000), "per_signal": (1, 0, 1),
-               # the scores its GP's kernel is learned from: bo's since 0.7; 0.6's auto learned from 256
+               # the scores its GP's kernel is learned from: bo's since 0.8; 0.7's auto learned from 256
                "learn_points": (LEARN_POINTS, 16, 100_000)}
 
     @staticmethod
