@@ -21,6 +21,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..cache import default_cache_dir
 from ..errors import ConfigError
 from ..model.config import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files
 from .netconvert import plain_xml
@@ -43,8 +44,6 @@ _KEPT: dict[str, Path] = {}
 
 def kept_road(sha256: str) -> Path:
     """Where this machine keeps the files of the road of content ``sha256`` (`keep_road`)."""
-    from .scenarios import default_cache_dir
-
     return default_cache_dir().parent / "roads" / sha256
 
 
@@ -296,7 +295,6 @@ def opendrive_network(xodr: Path) -> Path:
     """An OpenDRIVE road (an exported scenario's road.xodr) as SUMO's network, imported by netconvert once
     (kept in the network cache by its content)."""
     from .netconvert import opendrive_input
-    from .scenarios import default_cache_dir
 
     xodr = Path(xodr)
     if not xodr.is_file():

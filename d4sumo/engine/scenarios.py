@@ -16,6 +16,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..cache import default_cache_dir  # noqa: F401 (where it was: callers import it from here)
 from ..errors import ConfigError
 from .copies import copies_alike, copy_prefix, side_by_side
 from .layout import LAYOUT, OR_ROUTE, describe
@@ -95,11 +96,6 @@ class Road:
     def route(self, copy: int = 0) -> tuple[str, ...]:
         """The edges of one copy of the road."""
         return self.route_edges if self.copies == 1 else tuple(f"{copy_prefix(copy)}{e}" for e in self.route_edges)
-
-
-def default_cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "d4sumo" / "nets"
 
 
 def build_road(name: str | NetworkSource, *, root: Path | None = None, cache_dir: Path | None = None,

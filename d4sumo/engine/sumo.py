@@ -36,7 +36,8 @@ from ..sumohome import sumo_binary, sumo_home
 from .calls import api_call
 from .junctions import JunctionCrossings
 from .lights import RouteLights, route_signals, signal_tracks
-from .scenarios import Road, default_cache_dir
+from ..cache import default_cache_dir
+from .scenarios import Road
 
 ROUTE_ID = "platoon"
 VTYPE_ID = "d4car"

@@ -23,7 +23,8 @@ from .config import EpisodeConfig
 from .arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per_row
 from .control import CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
-from .platoon import Platoon, PythonFollower, assemble_trace, checked_command, cruise_params, followers_of
+from .commands import checked_command
+from .platoon import Platoon, PythonFollower, assemble_trace, cruise_params, followers_of
 from .trace import Collision, Episode
 
 #: episodes of a campaign played side by side at most, by default (the results never depend on it, only the speed)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 from typing import Callable
 
+from .commands import checked_command  # the Python's error for a command that is not one
 from .control import ConsensusCACC, PathCACC, PloegCACC
 from .messages import BeaconFalsifier
 from .sensing import Radar
@@ -76,7 +77,5 @@ def compiled_followers(platoon) -> Callable | None:
     sources = [channel.sources[i] for i in range(1, config.followers + 1)]
     randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
     lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None
-    from .platoon import checked_command  # the Python's error for a command that is not one
-
     return Followers((channel.step_s, channel.every, channel.delay, float(channel.params.loss)), list(channel.lengths), sources,
                      randoms, lie, laws, checked_command).advance

@@ -33,6 +33,7 @@ import weakref
 import zipfile
 from pathlib import Path
 
+from ..cache import cache_folder
 from ..errors import ConfigError
 from .plugins import ControllerImportError, NotImported, may_import
 from .vehicle import VehicleParams, acceleration_to_command
@@ -56,8 +57,7 @@ def is_fmu(name: object) -> bool:
 
 
 def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "d4sumo" / "fmus"
+    return cache_folder("fmus")
 
 
 def file_sha256(path: Path) -> str:

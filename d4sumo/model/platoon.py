@@ -13,12 +13,12 @@ followers (with their radars and channel) may be stepped in C instead (`cooperat
 from __future__ import annotations
 
 import math
-import numbers
 
 import numpy as np
 
 from ..errors import D4sumoError
 from . import carfollowing
+from .commands import ControllerError, checked_command  # noqa: F401 (re-exported: where they were)
 from .config import ControllerConfig, EpisodeConfig
 from .cooperative import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
@@ -29,20 +29,6 @@ from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial
 from .trace import Collision, Trace, rows_array
 from .traffic import TRAFFIC_ID
 from .v2v import Channel
-
-
-class ControllerError(D4sumoError, ValueError):
-    """A follower controller returned something that is not a command."""
-
-
-def checked_command(c, car: int, k: int) -> float:
-    """A follower controller's command as a float in [-1, 1] (a float32 or a numpy scalar becomes the
-    float it stands for), or a ControllerError: a user's controller must not corrupt the trace."""
-    # a float as it is (the common case, without numbers.Real's slow ABC check); not a string that reads as a number
-    u = c if type(c) is float else float(c) if isinstance(c, numbers.Real) else math.nan
-    if not -1.0 <= u <= 1.0:  # NaN fails too
-        raise ControllerError(f"the controller of v{car} returned {c!r} at step {k}; allowed: a command in [-1, 1]")
-    return u
 
 
 def _named_errors(command, car: int, name: str):

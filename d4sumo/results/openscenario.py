@@ -44,6 +44,7 @@ from ..model.traffic import is_traffic
 from ..search.store import campaign_key
 from .analysis import TRAFFIC_MEETS_M
 from .records import Record
+from .replays import evaluator_of
 
 CAR_HEIGHT_M = 1.5
 #: OpenSCENARIO's minor version the export writes (1.2)
@@ -171,8 +172,6 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
     """Write the sample's ``road.xodr`` and ``scenario.xosc`` into ``out_dir`` (created; files already there
     are replaced whole, never half-written). ``fcd``: its replay's FCD where one was written already (its
     verdict is then the stored one, which a replay reproduces); else it is replayed here."""
-    from .report import evaluator_of
-
     out_dir = Path(out_dir)
     evaluator = evaluator_of(record)
     campaign = evaluator.campaign

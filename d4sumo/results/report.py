@@ -17,51 +17,20 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .. import __version__
-from ..engine.simulation import name_fcd
 from ..errors import ConfigError, NotSimulable
 from ..files import part_of, remove_stale_parts
-from ..search.campaign import Campaign, open_store
-from ..search.runner import Evaluator
 from ..search.store import collision_dict
 from . import figures, paper, timespace
 from .analysis import (Table, attack_label, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes,
                        table_by_speed, table_crash_kinds, table_success_statistics, table_systems)
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records
+from .replays import evaluator_of, replay_to_fcd  # noqa: F401 (importable from here, where they were)
 
 log = logging.getLogger(__name__)
 
 PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
 SEVERITY = "largest speed difference between the colliding cars at the first collision"
-
-
-def evaluator_of(record: Record) -> Evaluator:
-    """The evaluator of a stored sample's campaign, ready to replay it (its controllers loaded, its
-    parameters checked: a damaged row says which sample of which database)."""
-    with open_store(record.db, create=False) as store:
-        definition = store.campaign(record.campaign_id).definition
-    campaign = Campaign.from_definition(definition, where=f"{record.db}: campaign {record.campaign_id}", imports=True)
-    evaluator = Evaluator(campaign)
-    try:
-        evaluator.plan(record.params)
-    except ConfigError as exc:  # a damaged database: say which sample of which
-        raise ConfigError(f"{record.db}: sample {record.sample_id}: {exc.field}", exc.given, exc.allowed) from None
-    return evaluator
-
-
-def replay_to_fcd(record: Record, fcd_path: str | Path, name: str | Path | None = None) -> dict:
-    """Re-simulate a stored sample into an FCD file; returns the parsed FCD. ``name``: where the file will
-    be once moved (a report's, built in a folder beside its own), for its header to name."""
-    evaluator = evaluator_of(record)
-    episode = evaluator.simulate(record.index, record.params, fcd_path=fcd_path)
-    if name is not None:
-        name_fcd(Path(fcd_path), fcd_path, name)
-    fcd = timespace.read_fcd(fcd_path, evaluator.road.platoon_lanes)
-    fcd.signals = episode.signals  # the lights along the route, as the replay recorded them
-    said = timespace.said_track(episode.trace, fcd)
-    if said is not None:  # a message attack: what the liar's beacons said, beside where it was
-        fcd[said[0]] = said[1]
-    return fcd
 
 
 def collision_of(record: Record) -> dict | None:
