@@ -20,6 +20,9 @@ or position; a beacon's time is always the true one):
 The parameters follow the attacker's pedal family's in the campaign's box (`MessageAttack`): the
 optimiser searches the lie and the driving together, one cyber-physical attack. The followers' verdicts
 read the truth; only what they are told is false.
+
+Each kind is a class (`Lie`: its parameters, the beacon it sends), registered by name in `LIES`, as the
+pedal families are in `attacks`: a new kind is a subclass and `register_lie`.
 """
 
 from __future__ import annotations
@@ -33,7 +36,6 @@ from .attacks import AttackFamily, Parameter, attack_signal, make_attack
 from .maneuvers import EpisodeSettings, ManeuverAttack, maneuver_of
 from .v2v import Message
 
-MESSAGE_ATTACKS = ("offset", "scaling", "sinusoid", "delay", "replay", "jam", "knots")
 MESSAGE_FIELDS = ("accel", "speed", "position")
 #: the [attack] keys of a message attack
 MESSAGE_KEYS = ("message", "message_field", "message_sender")
@@ -42,29 +44,170 @@ FIELD_BOUNDS = {"accel": (8.0, "m/s^2"), "speed": (15.0, "m/s"), "position": (30
 _ATTRIBUTE = {"accel": "accel_mps2", "speed": "speed_mps", "position": "position_m"}
 
 
+class Lie:
+    """One kind of message attack (see the module): its parameters, and the beacon it sends at each step from
+    its start on. A new kind is a subclass, registered in `LIES` under its ``name``."""
+
+    name = ""
+
+    def __init__(self, options: dict):
+        self.options = options
+
+    def parameters(self, field: str, window_s: float) -> tuple[Parameter, ...]:
+        """Its own parameters, then its start, after the attack's start (within the attack's ``window_s``)."""
+        return (*self.own(field, window_s), Parameter("msg_start_s", 0.0, float(window_s), "s"))
+
+    def own(self, field: str, window_s: float) -> tuple[Parameter, ...]:
+        return ()
+
+    def told(self, f: "BeaconFalsifier", k: int, message: Message) -> Message | None:
+        """The beacon sent at step ``k`` for the sender's true one (None: none)."""
+        return message if k < f.start else self.lie(f, k, message)
+
+    def lie(self, f: "BeaconFalsifier", k: int, message: Message) -> Message | None:
+        raise NotImplementedError
+
+
+class _FieldLie(Lie):
+    """A lie that rewrites the one field of each beacon from its true value."""
+
+    def lie(self, f, k, message):
+        name = f.attribute
+        return dataclasses.replace(message, **{name: self.value(getattr(message, name), f.values, (k - f.start) * f.step_s)})
+
+    def value(self, true: float, v: dict, t_s: float) -> float:
+        raise NotImplementedError
+
+
+class Offset(_FieldLie):
+    name = "offset"
+
+    def own(self, field, window_s):
+        bound, unit = FIELD_BOUNDS[field]
+        return (Parameter("msg_value", -bound, bound, unit),)
+
+    def value(self, true, v, t_s):
+        return true + v["msg_value"]
+
+
+class Scaling(_FieldLie):
+    name = "scaling"
+
+    def own(self, field, window_s):
+        return (Parameter("msg_factor", 0.0, 3.0),)
+
+    def value(self, true, v, t_s):
+        return true * v["msg_factor"]
+
+
+class Sinusoid(_FieldLie):
+    name = "sinusoid"
+
+    def own(self, field, window_s):
+        bound, unit = FIELD_BOUNDS[field]
+        return Parameter("msg_amplitude", 0.0, bound, unit), Parameter("msg_frequency_hz", 0.05, 1.0, "Hz")
+
+    def lie(self, f, k, message):  # the time since its start, in whole steps as the episode counts them
+        name, v = f.attribute, f.values
+        lie = getattr(message, name) + v["msg_amplitude"] * math.sin(2.0 * math.pi * v["msg_frequency_hz"] * (k - f.start) * f.step_s)
+        return dataclasses.replace(message, **{name: lie})
+
+
+class _OldBeacon(Lie):
+    """A lie that sends an earlier true beacon's position, speed and acceleration."""
+
+    def lie(self, f, k, message):
+        old = f.at(self.step_of(f, k))
+        return dataclasses.replace(message, position_m=old.position_m, speed_mps=old.speed_mps, accel_mps2=old.accel_mps2)
+
+    def step_of(self, f, k: int) -> int:
+        raise NotImplementedError
+
+
+class Delay(_OldBeacon):
+    name = "delay"
+
+    def own(self, field, window_s):
+        return (Parameter("msg_delay_s", 0.0, 3.0, "s"),)
+
+    def step_of(self, f, k):
+        return k - int(round(f.values["msg_delay_s"] / f.step_s))
+
+
+class Replay(_OldBeacon):
+    name = "replay"
+
+    def own(self, field, window_s):
+        return (Parameter("msg_window_s", 0.5, 10.0, "s"),)
+
+    def step_of(self, f, k):
+        window = max(1, int(round(f.values["msg_window_s"] / f.step_s)))
+        return f.start - window + (k - f.start) % window
+
+
+class Jam(Lie):
+    name = "jam"
+
+    def own(self, field, window_s):
+        return (Parameter("msg_duration_s", 0.0, float(window_s), "s"),)
+
+    def lie(self, f, k, message):
+        return None if k < f.start + int(round(f.values["msg_duration_s"] / f.step_s)) else message
+
+
+class Knots(Lie):
+    """The acceleration it reports, as knots over the attack (the knots family's, read as a pedal of the sender's
+    vehicle); the truth outside the attack. It has no start of its own: its knots span the attack."""
+
+    name = "knots"
+
+    def __init__(self, options: dict):
+        super().__init__(options)
+        self.family = make_attack("knots", options)
+
+    def parameters(self, field, window_s):
+        return tuple(dataclasses.replace(p, name=f"msg_{p.name}") for p in self.family.parameters)
+
+    def accelerations(self, x, config: EpisodeSettings, sender: int) -> np.ndarray:
+        """What it reports at each step: NaN outside the attack (the truth)."""
+        u = attack_signal(self.family, x, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
+        v = config.vehicle_of(sender)
+        return np.where(u >= 0.0, u * v.max_accel_mps2, u * v.max_decel_mps2)
+
+    def told(self, f, k, message):
+        a = f.accel[k] if k < len(f.accel) else math.nan
+        return message if a != a else dataclasses.replace(message, accel_mps2=float(a))
+
+
+#: the message attacks by name (`Lie`): `attack.message` names one, `register_lie` adds one
+LIES: dict[str, type[Lie]] = {cls.name: cls for cls in (Offset, Scaling, Sinusoid, Delay, Replay, Jam, Knots)}
+
+
+def register_lie(cls: type[Lie]) -> type[Lie]:
+    """Make a message attack available under its ``name`` (a class decorator); names are never silently replaced."""
+    if not cls.name or LIES.get(cls.name, cls) is not cls:
+        raise ValueError(f"message attack {cls.name!r}: a name of its own (taken: {', '.join(LIES)})")
+    LIES[cls.name] = cls
+    return cls
+
+
+def make_lie(kind: str, options: dict | None = None) -> Lie:
+    if not isinstance(kind, str) or kind not in LIES:
+        raise ConfigError("attack.message", kind, f"one of {', '.join(LIES)}")
+    return LIES[kind](dict(options or {}))
+
+
 class MessageAttack(ManeuverAttack):
     """The attacker's pedal family (and its maneuver's parameters) plus the parameters of its falsified
     beacons (see the module); its signal is the pedals'."""
 
     def __init__(self, box: AttackFamily, kind: str, field: str, window_s: float, options: dict, sender: int = 0):
-        if kind not in MESSAGE_ATTACKS:
-            raise ConfigError("attack.message", kind, f"one of {', '.join(MESSAGE_ATTACKS)}")
+        lie = make_lie(kind, options)
         if field not in MESSAGE_FIELDS:
             raise ConfigError("attack.message_field", field, f"one of {', '.join(MESSAGE_FIELDS)}")
-        bound, unit = FIELD_BOUNDS[field]
-        start = Parameter("msg_start_s", 0.0, float(window_s), "s")
-        self.knots = make_attack("knots", options) if kind == "knots" else None
-        added = {
-            "offset": (Parameter("msg_value", -bound, bound, unit), start),
-            "scaling": (Parameter("msg_factor", 0.0, 3.0), start),
-            "sinusoid": (Parameter("msg_amplitude", 0.0, bound, unit), Parameter("msg_frequency_hz", 0.05, 1.0, "Hz"), start),
-            "delay": (Parameter("msg_delay_s", 0.0, 3.0, "s"), start),
-            "replay": (Parameter("msg_window_s", 0.5, 10.0, "s"), start),
-            "jam": (Parameter("msg_duration_s", 0.0, float(window_s), "s"), start),
-            "knots": tuple(dataclasses.replace(p, name=f"msg_{p.name}") for p in (self.knots.parameters if self.knots else ())),
-        }[kind]
+        added = lie.parameters(field, window_s)
         super().__init__(box, added, (len(added),))
-        self.box, self.kind, self.field, self.sender = box, kind, field, sender
+        self.box, self.kind, self.field, self.sender, self.lie = box, kind, field, sender, lie
         self.message_first = self._first_added  # the parameters of the lie start here
 
     def describe(self) -> dict:
@@ -80,12 +223,9 @@ class MessageAttack(ManeuverAttack):
     def falsifier(self, params, config: EpisodeSettings) -> "BeaconFalsifier":
         x = self.check(params)[self._first_added:]
         values = dict(zip((p.name for p in self.parameters[self._first_added:]), x))
-        accel = None
-        if self.kind == "knots":
-            u = attack_signal(self.knots, x, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
-            v = config.vehicle_of(self.sender)
-            accel = np.where(u >= 0.0, u * v.max_accel_mps2, u * v.max_decel_mps2)  # NaN outside the attack: the truth
-        return BeaconFalsifier(self.kind, self.field, values, config.step_s, config.attack_start_step, accel, self.sender)
+        accel = self.lie.accelerations(x, config, self.sender) if isinstance(self.lie, Knots) else None
+        return BeaconFalsifier(self.kind, self.field, values, config.step_s, config.attack_start_step, accel, self.sender,
+                               lie=self.lie)
 
 
 class BeaconFalsifier:
@@ -93,43 +233,22 @@ class BeaconFalsifier:
     none). It keeps the true beacons it was given, for the attacks that send old ones."""
 
     def __init__(self, kind: str, field: str, values: dict, step_s: float, attack_start_step: int,
-                 accel: np.ndarray | None = None, sender: int = 0):
+                 accel: np.ndarray | None = None, sender: int = 0, lie: Lie | None = None):
         self.kind, self.attribute, self.values, self.step_s = kind, _ATTRIBUTE[field], values, step_s
+        self.lie = lie if lie is not None else make_lie(kind)
         self.sender = sender  # the car whose beacons it rewrites: 0 the attacker, K an insider follower vK
         self.start = attack_start_step + int(round(values.get("msg_start_s", 0.0) / step_s))
         self.accel = accel
         self.true: dict[int, Message] = {}
 
-    def _at(self, k: int) -> Message:
+    def at(self, k: int) -> Message:
         """The newest true beacon at or before step k (the first, before any)."""
         earlier = [j for j in self.true if j <= k]
         return self.true[max(earlier)] if earlier else self.true[min(self.true)]
 
     def __call__(self, k: int, message: Message) -> Message | None:
         self.true[k] = message
-        if self.kind == "knots":
-            a = self.accel[k] if k < len(self.accel) else math.nan
-            return message if a != a else dataclasses.replace(message, accel_mps2=float(a))
-        if k < self.start:
-            return message
-        v, name = self.values, self.attribute
-        if self.kind == "jam":
-            return None if k < self.start + int(round(v["msg_duration_s"] / self.step_s)) else message
-        if self.kind in ("delay", "replay"):
-            if self.kind == "delay":
-                old = self._at(k - int(round(v["msg_delay_s"] / self.step_s)))
-            else:
-                window = max(1, int(round(v["msg_window_s"] / self.step_s)))
-                old = self._at(self.start - window + (k - self.start) % window)
-            return dataclasses.replace(message, position_m=old.position_m, speed_mps=old.speed_mps, accel_mps2=old.accel_mps2)
-        true = getattr(message, name)
-        if self.kind == "offset":
-            lie = true + v["msg_value"]
-        elif self.kind == "scaling":
-            lie = true * v["msg_factor"]
-        else:  # sinusoid
-            lie = true + v["msg_amplitude"] * math.sin(2.0 * math.pi * v["msg_frequency_hz"] * (k - self.start) * self.step_s)
-        return dataclasses.replace(message, **{name: lie})
+        return self.lie.told(self, k, message)
 
 
 def lie_label(message: str, field: str, sender: int = 0) -> str:
@@ -153,8 +272,7 @@ def attack_box(config, longitudinal: AttackFamily, message: str = "", field: str
                                                                   "attacker only cruises, which is no attack")
         return box
     kind = message
-    if not isinstance(kind, str) or kind not in MESSAGE_ATTACKS:
-        raise ConfigError("attack.message", kind, f"one of {', '.join(MESSAGE_ATTACKS)}")
+    make_lie(kind)  # one of the message attacks, or one line
     if config.v2v is None:
         raise ConfigError("attack.message", kind, "a platoon that exchanges V2V beacons (a follower whose controller "
                                                   "reads them: cacc, ploeg, consensus, or sumo:CC with a cooperative active_controller)")

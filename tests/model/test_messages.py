@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -110,3 +111,38 @@ def test_a_message_attack_that_cannot_be_gets_one_line(config, message, field, w
     with pytest.raises(ConfigError) as info:
         attack_box(config, make_attack("knots"), message, field)
     assert info.value.field == where
+
+
+def test_a_message_attack_of_ones_own_is_a_class_registered_by_its_name():
+    """Message attacks are classes with a registry, as pedal families are: a new one is a subclass of `Lie` and one
+    registration; it then plays through the campaign's box like d4sumo's own."""
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+    from d4sumo.model.messages import LIES, Lie, attack_box, register_lie
+    from d4sumo.model.attacks import make_attack
+
+    class Freeze(Lie):
+        """From its start on, the first true beacon of the attack, again and again."""
+
+        name = "freeze"
+
+        def lie(self, f, k, message):
+            return f.at(f.start)
+
+    register_lie(Freeze)
+    try:
+        with pytest.raises(ValueError):
+            register_lie(type("Other", (Lie,), {"name": "offset"}))  # a name is never silently replaced
+        config = EpisodeConfig(controller=ControllerConfig("cacc"), start="steady")
+        box = attack_box(config, make_attack("knots"), "freeze", "speed")
+        assert box.names[-1] == "msg_start_s" and len(box.names) == 10
+        falsify = box.falsifier([0.0] * 9 + [1.0], config)
+        first = Message(0, 1.0, 10.0, 25.0, 0.0, 4.5)
+        told = [falsify(k, dataclasses.replace(first, time_s=k * 0.05, speed_mps=25.0 + k)) for k in range(40)]
+        start = config.attack_start_step + 20
+        assert [m.speed_mps for m in told[:start]] == [25.0 + k for k in range(start)]
+        assert all(m.speed_mps == 25.0 + start for m in told[start:])
+    finally:
+        del LIES["freeze"]
+    with pytest.raises(ConfigError) as info:
+        attack_box(config, make_attack("knots"), "freeze", "speed")
+    assert info.value.field == "attack.message" and "offset" in info.value.allowed
