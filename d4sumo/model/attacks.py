@@ -43,6 +43,10 @@ class AttackFamily:
     name: str = ""
     parameters: tuple[Parameter, ...] = ()
     OPTIONS: dict[str, tuple[float, float, float, str]] = {}
+    #: its parameters are knots in time, one every ``delta_s`` (the report clusters them: `results.clusters`); and
+    #: each knot shapes the signal only near it (PCHIP: knot k on (t_{k-2}, t_{k+2})), not everywhere (a global spline)
+    knots_in_time: bool = False
+    local_knots: bool = False
 
     def __init__(self, **options: float):
         self.options = resolve_attack_options(self.name, options)
@@ -193,6 +197,7 @@ class Knots(AttackFamily):
     """
 
     name = "knots"
+    knots_in_time = local_knots = True
     OPTIONS = {"delta_s": (6.0, 0.05, 600.0, "seconds"), "horizon_s": (48.0, 0.05, 3600.0, "seconds")}
 
     def __init__(self, **options: float):
@@ -225,6 +230,7 @@ class Spline(Knots):
     [-1, 1]; kept for comparison."""
 
     name = "spline"
+    local_knots = False  # a global cubic spline: every knot reaches every time
 
     def _signal(self, x, t):
         tk = self.knot_times_s
@@ -299,6 +305,7 @@ class KnotsCoded(AttackFamily):
     played from the episode's first step; after the last knot the spline goes on (splev extrapolates)."""
 
     name = "knots-coded"
+    knots_in_time = True  # a global B-spline: every knot reaches every time
     parameters = tuple(Parameter(f"m{i}", -1.0, 1.0) for i in range(8))
     knot_times_s = np.linspace(0.0, 40.0, 8)
     signals = (8,)  # the knots: one signal

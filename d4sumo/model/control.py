@@ -189,8 +189,9 @@ class FollowerController(Protocol):
     Constructed as ``cls(params, setpoint_m=..., target_speed_mps=..., vehicle=..., step_s=...)`` where
     ``params`` is an instance of ``cls.Params`` (a dataclass built from the config's controller table).
     ``mode`` (optional) is recorded in the trace each step. A controller may instead answer
-    ``observe(observation)`` (`sensing.Observation`), called in place of ``command`` where it has one.
-    Either is given what the follower's radar measured (`sensing`).
+    ``observe(observation)`` (`sensing.Observation`), called in place of ``command`` where it has one (the
+    cooperative laws answer only that: they need the beacons an observation holds). Either is given what the
+    follower's radar measured (`sensing`).
     """
 
     Params: type
@@ -510,8 +511,6 @@ class PathCACC:
         a = self.desired_acceleration(obs.gap_m, speed, ahead, leader)
         return acceleration_to_command(min(a, (self.target_speed_mps - speed) / self.step_s), self.vehicle)  # below_target, inlined
 
-    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
-        raise ConfigError("controller", "cacc", "a platoon that exchanges V2V beacons (the [v2v] table)")
 
 
 @dataclass(frozen=True)
@@ -574,8 +573,6 @@ class PloegCACC:
         self.u = u = min(self.u, (self.target_speed_mps - obs.speed_mps) / self.step_s)
         return acceleration_to_command(u, self.vehicle)
 
-    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
-        raise ConfigError("controller", "ploeg", "a platoon that exchanges V2V beacons (the [v2v] table)")
 
 
 @dataclass(frozen=True)
@@ -659,8 +656,6 @@ class ConsensusCACC:
         a = self.desired_acceleration(obs.position_m, speed, obs.time_s, messages)
         return acceleration_to_command(min(a, (self.target_speed_mps - speed) / self.step_s), self.vehicle)  # below_target, inlined
 
-    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
-        raise ConfigError("controller", "consensus", "a platoon that exchanges V2V beacons (the [v2v] table)")
 
 
 # --- registry of follower controllers ------------------------------------------------------------

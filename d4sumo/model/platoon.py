@@ -127,9 +127,9 @@ class PythonFollower:
                 raise
             raise ControllerError(f"the controller of v{car} ({config.cls}) could not be made: {type(exc).__name__}: {exc}") from exc
         self.actuator = Actuator(self.vehicle, episode.step_s, float("inf"))
-        command, observe = self.controller.command, getattr(self.controller, "observe", None)
+        command, observe = getattr(self.controller, "command", None), getattr(self.controller, "observe", None)
         if users:
-            command = _named_errors(command, car, config.cls)
+            command = command and _named_errors(command, car, config.cls)
             observe = observe and _named_errors(observe, car, config.cls)
         #: what it does with the truth (gap, own speed, speed ahead): through its radar, to its controller
         self.command = sensed_command(command, observe, episode.radar, episode.step_s, car, beacons=episode.v2v is not None)

@@ -71,7 +71,7 @@ def may_import() -> bool:
 
 def import_controller(name: str) -> type:
     """The class a user's "package.module:ClassName" names, checked to be a controller (a Params
-    dataclass and a command method)."""
+    dataclass and a command or observe method)."""
     if not _IMPORTS.get():
         raise NotImported("controller.class", name, "a controller read by its name only (nothing is imported here)")
     module_name, _, attr = name.partition(":")
@@ -89,8 +89,9 @@ def import_controller(name: str) -> type:
     if cls is None:
         raise ControllerImportError.no_class(name, module)
     params = getattr(cls, "Params", None)
-    if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not callable(getattr(cls, "command", None)):
-        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() method")
+    answers = callable(getattr(cls, "command", None)) or callable(getattr(cls, "observe", None))
+    if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not answers:
+        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() or observe() method")
     return cls
 
 

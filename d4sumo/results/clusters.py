@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..model.attacks import make_attack
+from ..model.attacks import FAMILY_CLASSES, make_attack
 from .analysis import group, run_label, runs
 from .records import Record
 
@@ -19,8 +19,8 @@ from .records import Record
 FEW_ATTACKS = 3
 
 
-#: the attack families whose parameters are knots in time, to cluster
-KNOT_FAMILIES = ("knots", "spline", "knots-coded")
+#: the attack families whose parameters are knots in time, to cluster (each says so: `AttackFamily.knots_in_time`)
+KNOT_FAMILIES = tuple(name for name, cls in FAMILY_CLASSES.items() if cls.knots_in_time)
 
 
 def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "knots") -> np.ndarray:
@@ -38,7 +38,7 @@ def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "
     sampled once a step, so the rule may keep a knot whose reach before t_c is shorter than a step.
     """
     knot_times_s = np.asarray(knot_times_s, dtype=float)
-    if attack != "knots" or knot_times_s.size < 2:  # a global cubic spline (spline, knots-coded): every knot reaches
+    if not getattr(FAMILY_CLASSES.get(attack), "local_knots", False) or knot_times_s.size < 2:  # a global spline: every knot reaches
         return np.full(knot_times_s.shape, collision_s > 0.0)
     delta_s = knot_times_s[1] - knot_times_s[0]
     return np.maximum(knot_times_s - 2.0 * delta_s, 0.0) < collision_s

@@ -31,3 +31,20 @@ def test_within_names_only_a_users_controller_is_never_imported(tmp_path, monkey
     with names_only(), pytest.raises(ConfigError, match="read by its name only"):
         import_controller(f"{name}:X")
     assert not (tmp_path / "ran").exists()
+
+
+def test_a_users_subclass_of_a_cooperative_law_answers_observe_only_and_is_taken(tmp_path, monkeypatch):
+    """The cooperative laws answer observe() only (they no longer carry a command() that raised): a user's subclass of
+    one is a controller all the same, and one with neither method is refused in one line."""
+    import uuid
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{name}.py").write_text(
+        "from d4sumo.model.control import PathCACC\n\n\nclass Mine(PathCACC):\n    pass\n\n\n"
+        "from dataclasses import dataclass\n\n\nclass Mute:\n    @dataclass\n    class Params:\n        pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    from d4sumo.model.control import PathCACC
+
+    assert issubclass(import_controller(f"{name}:Mine"), PathCACC) and not hasattr(PathCACC, "command")
+    with pytest.raises(ConfigError, match="a command\\(\\) or observe\\(\\) method"):
+        import_controller(f"{name}:Mute")
