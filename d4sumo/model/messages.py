@@ -181,6 +181,8 @@ class Knots(Lie):
 
 #: the message attacks by name (`Lie`): `attack.message` names one, `register_lie` adds one
 LIES: dict[str, type[Lie]] = {cls.name: cls for cls in (Offset, Scaling, Sinusoid, Delay, Replay, Jam, Knots)}
+#: d4sumo's own message attacks, by name
+MESSAGE_ATTACKS = tuple(LIES)
 
 
 def register_lie(cls: type[Lie]) -> type[Lie]:
