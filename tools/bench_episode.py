@@ -27,7 +27,8 @@ import numpy as np
 
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_episode, simulate
-from d4sumo.engine.sumo import load_platoon, sumo_command
+from d4sumo.engine.command import sumo_command
+from d4sumo.engine.sumo import load_platoon
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from toolargs import Parser, run_main
 

@@ -36,7 +36,9 @@ import numpy as np
 
 from d4sumo.engine.scenarios import build_road, config_road
 from d4sumo.engine.simulation import check_episode
-from d4sumo.engine.sumo import clear_platoon_places, load_platoon, sumo_command, traffic_state
+from d4sumo.engine.command import sumo_command
+from d4sumo.engine.sumo import clear_platoon_places, load_platoon
+from d4sumo.engine.warmup import traffic_state
 from d4sumo.model.config import EpisodeConfig
 from bench_episode import episode  # the same episode timing: simulate, start to close
 from toolargs import Parser, run_main

@@ -58,7 +58,7 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.scenarios import MAX_COPIES, config_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
-from d4sumo.engine.sumo import traffic_state
+from d4sumo.engine.warmup import traffic_state
 from d4sumo.errors import ConfigError
 from d4sumo.inputs import campaign_of
 from d4sumo.model.attacks import FAMILIES

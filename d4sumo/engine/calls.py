@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 
 def api_call(api, domain: str, name: str):
     """``api.<domain>.<name>``; for libsumo its C function itself, without the one-line Python wrapper around it
@@ -33,3 +35,14 @@ def route_junctions(api, route: tuple[str, ...], path: tuple[int, ...]):
         length = sum(api.lane.getLength(via) for via in via_lanes(api, lane, to_lane))
         yield edge, lane, to_lane, along, length
         along += length
+
+
+def vehicle_call(api, name: str):
+    """``api.vehicle.<name>``, bound (`calls.api_call`)."""
+    return api_call(api, "vehicle", name)
+
+
+def simulation_step(api):
+    """``api.simulationStep``; for libsumo its C function (d4sumo registers no step listeners)."""
+    raw = getattr(getattr(api, "_libsumo", None), "simulation_step", None)
+    return functools.partial(raw, 0.0) if raw else api.simulationStep  # a partial: no Python frame a step

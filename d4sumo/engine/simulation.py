@@ -10,7 +10,6 @@ first one: SUMO lets the cars drive through each other afterwards, so later data
 
 from __future__ import annotations
 
-import math
 import contextlib
 import logging
 import os
@@ -28,7 +27,9 @@ from ..model.platoon import followers_of, longest_duration_s, road_needed_m
 from ..model.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, config_road
-from .sumo import check_additional, check_options, followers_file, load_platoon, open_world, sumo_command, traffic_files, traffic_state
+from .command import check_additional, check_options, followers_file, sumo_command, traffic_files
+from .sumo import load_platoon, open_world
+from .warmup import traffic_state
 
 log = logging.getLogger(__name__)
 

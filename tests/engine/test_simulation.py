@@ -258,7 +258,7 @@ def test_sumo_models_cannot_run_without_sumo():
 
 
 def test_a_cache_folder_that_cannot_be_written_is_one_error(tmp_path, monkeypatch, road):
-    from d4sumo.engine import sumo
+    from d4sumo.engine import command as sumo  # the vehicle types' check is SUMO's command line's
     from d4sumo.errors import SumoError
 
     (tmp_path / "d4sumo").mkdir()

@@ -247,9 +247,10 @@ def test_the_traffic_after_its_warm_up_is_the_same_whatever_the_process_that_war
     import subprocess
     import sys
 
-    from d4sumo.engine import sumo
+    from d4sumo.engine import command, warmup
 
-    monkeypatch.setattr(sumo, "default_cache_dir", lambda: tmp_path / "here" / "d4sumo" / "nets")  # warmed up anew
+    for module in (command, warmup):  # warmed up anew
+        monkeypatch.setattr(module, "default_cache_dir", lambda: tmp_path / "here" / "d4sumo" / "nets")
     u = np.full(BUSY.steps, -0.2)
     here = simulate(BUSY, u).min_gaps
     code = ("import json, numpy as np; from d4sumo.engine.simulation import simulate; from test_traffic import BUSY; "
@@ -263,7 +264,7 @@ def test_the_traffic_after_its_warm_up_is_the_same_whatever_the_process_that_war
 def test_a_traffic_type_an_earlier_check_passed_is_checked_again(tmp_path, monkeypatch):
     """Regression: a demand 0.16's check passed was kept in the cache under its text's name, so a misspelt
     type attribute it had let through was taken without a word where it had run before, refused elsewhere."""
-    from d4sumo.engine import sumo
+    from d4sumo.engine import command as sumo  # the demand's check is SUMO's command line's
 
     monkeypatch.setattr(sumo, "default_cache_dir", lambda: tmp_path / "d4sumo" / "nets")
     monkeypatch.setattr(sumo, "_CHECKED", {})
@@ -370,7 +371,7 @@ def test_the_warm_up_cache_keeps_its_most_recently_used_and_never_one_in_use(tmp
     import os
     import time
 
-    from d4sumo.engine.sumo import IN_USE_S, _prune
+    from d4sumo.engine.warmup import IN_USE_S, _prune
 
     now = time.time()
     for k in range(10):
