@@ -16,7 +16,7 @@ import sys
 from typing import Callable
 
 from .commands import checked_command  # the Python's error for a command that is not one
-from .control import ConsensusCACC, PathCACC, PloegCACC
+from .cacc import ConsensusCACC, PathCACC, PloegCACC
 from .messages import BeaconFalsifier
 from .sensing import Radar
 from .v2v import Message

@@ -9,7 +9,7 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.control import ConsensusCACC, ConsensusParams, PathCACC, PathParams, PloegCACC, PloegParams
+from d4sumo.model.cacc import ConsensusCACC, ConsensusParams, PathCACC, PathParams, PloegCACC, PloegParams
 from d4sumo.model.sensing import Observation
 from d4sumo.model.platoon import Platoon
 from d4sumo.model.v2v import Channel, ChannelParams, Message
