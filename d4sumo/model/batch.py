@@ -24,7 +24,8 @@ from .arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per
 from .control import CruiseControl
 from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
 from .commands import checked_command
-from .platoon import Platoon, PythonFollower, assemble_trace, cruise_params, followers_of
+from .platoon import Platoon, PythonFollower, cruise_params, followers_of
+from .recording import assemble_trace
 from .trace import Collision, Episode
 
 #: episodes of a campaign played side by side at most, by default (the results never depend on it, only the speed)

@@ -10,7 +10,8 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import EpisodeConfig
-from d4sumo.model.platoon import assemble_trace, followers_of
+from d4sumo.model.platoon import followers_of
+from d4sumo.model.recording import assemble_trace
 from d4sumo.model.traffic import TrafficParams, demand_xml
 from d4sumo.search.spec import Specification
 
