@@ -16,7 +16,7 @@ from typing import Any
 
 from .. import ledger
 from ..errors import ConfigError, NotSimulable, check_int, check_number
-from ..model.attacks import FAMILIES, AttackFamily, make_attack, resolve_attack_options
+from ..model.attacks import FAMILY_CLASSES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig, network_digest
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
@@ -63,8 +63,8 @@ class Campaign:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
         if not isinstance(self.config, EpisodeConfig):
             raise ConfigError("config", self.config, "an EpisodeConfig")
-        if not isinstance(self.attack, str) or self.attack not in FAMILIES:
-            raise ConfigError("attack.family", self.attack, f"one of {', '.join(FAMILIES)}")
+        if not isinstance(self.attack, str) or self.attack not in FAMILY_CLASSES:  # (one registered from Python too)
+            raise ConfigError("attack.family", self.attack, f"one of {', '.join(FAMILY_CLASSES)}")
         attack_options = dict(self.attack_options) if not isinstance(self.attack_options, dict) else self.attack_options
         fix("attack_options", tuple(resolve_attack_options(self.attack, attack_options).items()))
         self.family()  # validates the options together (knots: a horizon of whole steps of delta_s)

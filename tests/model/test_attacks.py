@@ -180,3 +180,29 @@ def test_attack_signal_refuses_bad_arguments_naming_them(change, said):
     args = {"family": make_attack("knots"), "params": [0.0] * 9, "steps": 400, "step_s": 0.15, "start_step": 0, **change}
     with pytest.raises(ConfigError, match=said):
         attack_signal(args.pop("family"), args.pop("params"), **args)
+
+
+def test_a_pedal_family_of_ones_own_is_a_class_registered_by_its_name():
+    """docs/contributing.md's route: a subclass of AttackFamily and register_family, then a campaign of it."""
+    import numpy as np
+
+    from d4sumo.model.attacks import FAMILY_CLASSES, AttackFamily, Parameter, register_family
+    from d4sumo.search.campaign import Campaign
+
+    class Ramp(AttackFamily):
+        name = "ramp"
+        parameters = (Parameter("a", -1.0, 1.0), Parameter("b", -1.0, 1.0))
+
+        def _signal(self, x, t):
+            return x[0] + (x[1] - x[0]) * (t - t[0]) / max(t[-1] - t[0], 1e-9)
+
+    register_family(Ramp)
+    try:
+        with pytest.raises(ValueError):
+            register_family(type("Other", (AttackFamily,), {"name": "knots"}))  # never silently replaced
+        campaign = Campaign(attack="ramp", optimizer="random", samples=2)
+        assert campaign.family().names == ("a", "b")
+        u = campaign.family().signal(np.array([1.0, -1.0]), np.linspace(0.0, 10.0, 11))
+        assert u[0] == 1.0 and u[-1] == -1.0
+    finally:
+        del FAMILY_CLASSES["ramp"]
