@@ -613,7 +613,7 @@ def test_falsify_names_a_campaign_among_traffic_an_earlier_version_ran(tmp_path)
 def test_falsify_names_a_cooperative_campaign_0_19_ran_with_beacons_read_whatever_the_radar_saw(tmp_path):
     """d4sumo 0.19's cooperative followers read the platoon's beacons with another car cut in between: its campaign
     is another one now, and falsify with the same flags says so, with the flag that goes on with it."""
-    flags = ["--start", "steady", "--controller", "cacc", "--set", "scenario.maneuver=\"cutin\"", "--duration", "10",
+    flags = ["--start", "steady", "--controller", "cacc", "--set", "traffic.vehicles_per_hour=600", "--duration", "10",
              "--optimizer", "random", "--samples", "2", "--db", str(tmp_path / "r.sqlite"), "--quiet"]
     assert main(["falsify", *flags, "--set", "v2v.match_radar=false"]) == 0  # as 0.19 stored it
     now = run("falsify", *flags)

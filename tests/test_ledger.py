@@ -45,6 +45,8 @@ def test_every_default_campaign_of_today_holds_no_key_at_its_earlier_value():
                    EpisodeConfig(start="steady", maneuver="cutin", controller=ControllerConfig("cacc"))):
         definition = Campaign(config=config).definition()
         for entry in ledger.LEDGER:
-            held = definition["config"].get(entry.table) if entry.table in TABLES else definition.get(entry.table)
+            held = (definition["config"].get(entry.table) if entry.table in TABLES else
+                    definition["optimizer_options"] if entry.table == f"search.{definition['optimizer']}" else
+                    definition.get(entry.table))
             if isinstance(held, dict) and entry.name in held:
                 assert held[entry.name] != entry.earlier, entry.key

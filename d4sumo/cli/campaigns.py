@@ -26,7 +26,7 @@ def _as_earlier_versions_ran(campaign):
             changed[version] = (before, flags)
     input_flags = [*(["--set 'scenario.network_sha256=\"\"'"] if campaign.config.network_sha256 else []),
                    *(["--set traffic.insertion_checks=false"] if campaign.config.traffic else []),
-                   *(changed[INPUTS_CHANGED[-1]][1] if INPUTS_CHANGED[-1] in changed else [])]
+                   *(f"--set {key}={value}" for key, value, _ in campaign.changes_of(INPUTS_CHANGED[-1]))]
     for base, flags in [(campaign, []), *changed.values(), *([(inputs, input_flags)] if inputs is not campaign else [])]:
         if campaign.optimizer == DEFAULT_OPTIMIZER:
             default_before = base.replace(optimizer=EARLIER_DEFAULT_OPTIMIZER)
@@ -115,7 +115,8 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if campaign.config.traffic is not None and not campaign.config.traffic.per_sample:  # one traffic: one episode tells
         from ..results.baseline import campaign_baseline
 
-        without = campaign_baseline(evaluator.without_attack, False, ((s.index, s.outcome) for s in summary.samples))
+        without = campaign_baseline(evaluator.without_attack, False, ((s.index, s.outcome, (s.collision or {}).get("time_s"))
+                                                                      for s in summary.samples), step_s=campaign.config.step_s)
     result = {
         "db": str(args.db),
         "campaign_id": summary.campaign_id,

@@ -509,9 +509,10 @@ class EpisodeConfig:
 
     @property
     def others_cut_in(self) -> bool:
-        """Whether a car other than the one ahead of it in the platoon may come between a follower and it: a
-        traffic car, or a lane-changing maneuver's (`v2v.ChannelParams.match_radar`)."""
-        return self.traffic is not None or self.maneuver_class.lateral
+        """Whether a car from outside the platoon may come between a follower and the car ahead of it in the
+        platoon: a traffic car (`v2v.ChannelParams.match_radar`). (A lane-changing maneuver's cars exchange
+        beacons in the platoon's own topology, the attacker leading it, as before.)"""
+        return self.traffic is not None
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":

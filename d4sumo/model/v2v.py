@@ -34,9 +34,9 @@ class ChannelParams:
     latency_s: float = 0.0  # from a beacon's sending to its delivery
     loss: float = 0.0  # the probability that a beacon is lost
     seed: int = 0  # the losses': every episode of the configuration loses the same beacons
-    #: a follower reads the beacons of the car ahead of it in the platoon only while its radar sees that car; where
-    #: another is between them (a traffic car that cut in, a maneuver's car) it falls back to its ACC, as CACC
-    #: systems do (`sensing.Observation.matched`). False: it reads them whatever its radar sees, as d4sumo 0.19
+    #: among traffic, a follower reads the beacons of the car ahead of it in the platoon only while its radar sees that
+    #: car; where a traffic car cut in between them it falls back to its ACC, as CACC systems do
+    #: (`sensing.Observation.matched`). False: it reads them whatever its radar sees, as d4sumo 0.19
     #: and before had it (`ledger`), for study
     match_radar: bool = True
 

@@ -2,8 +2,8 @@
 cruising (no pedal attack, no lane change, no lie), each in the traffic its samples met.
 
 Among traffic a platoon may crash without any attack: a traffic car that cuts in too close, a merge, a
-queue at a red light. A success counts for the attack only where the same traffic, without the attack,
-crashes no follower. Where every sample of a campaign meets the same traffic one episode tells; where each
+queue at a red light. A crash is the traffic's doing where the same traffic, without the attack, crashes the
+same way (a follower, or the attacker) no later than the sample did; else it counts for the attack. Where every sample of a campaign meets the same traffic one episode tells; where each
 meets its own (``traffic.per_sample``) the episode of each sample that crashed is played.
 """
 
@@ -40,31 +40,35 @@ class Baseline:
             mine.update(theirs)
 
 
-def campaign_baseline(without_attack: Callable[[int], object], per_sample: bool, samples: Iterable[tuple[int, str]],
-                      progress: Callable[[], None] | None = None) -> Baseline:
+def campaign_baseline(without_attack: Callable[[int], object], per_sample: bool,
+                      samples: Iterable[tuple[int, str, float | None]], progress: Callable[[], None] | None = None,
+                      step_s: float = 0.0) -> Baseline:
     """The baseline of a campaign among traffic: ``without_attack(index)`` plays sample ``index``'s episode with the
-    attacker cruising (`runner.Evaluator.without_attack`); ``samples``: each sample's (index, outcome)."""
+    attacker cruising (`runner.Evaluator.without_attack`); ``samples``: each sample's (index, outcome, time of its
+    first collision [s]). A crash is the traffic's doing where the same traffic without the attack crashes the
+    same way (a follower's, or the attacker's) no later than it did (within ``step_s``)."""
     samples = list(samples)
-    out = Baseline(crashes=Counter(o for _, o in samples if o in CRASHES))
-    crashed = [(i, o) for i, o in samples if o in CRASHES]
+    out = Baseline(crashes=Counter(o for _, o, _ in samples if o in CRASHES))
+    crashed = [(i, o, t) for i, o, t in samples if o in CRASHES]
     if not per_sample:  # one traffic for all: one episode tells
         played = [(None, without_attack(0))]
         out.collision = played[0][1].first_collision
     else:
         played = []
-        for i, _ in crashed:
+        for i, _, _ in crashed:
             played.append((i, without_attack(i)))
             if progress:
                 progress()
     out.played = len(played)
-    outcome_of = {}
+    first_of = {}
     for i, episode in played:
-        outcome_of[i] = episode.outcome
+        first_of[i] = (episode.outcome, episode.first_collision.time_s if episode.first_collision else None)
         if episode.outcome in CRASHES:
             out.crashed += 1
             out.kinds[crash_kind(episode.first_collision.pair)] += 1
-    for i, outcome in crashed:
-        if outcome_of.get(None if not per_sample else i) == outcome:
+    for i, outcome, time_s in crashed:
+        alone, alone_s = first_of.get(None if not per_sample else i, (None, None))
+        if alone == outcome and alone_s is not None and (time_s is None or alone_s <= time_s + step_s + 1e-9):
             out.traffics[outcome] += 1
     return out
 
@@ -101,8 +105,9 @@ def table_without_attack(records, evaluator_of, progress: Callable[[], None] | N
             except NotSimulable:  # its controller cannot be had here: counted as not played
                 unplayed += len(members)
                 continue
-            total.add(campaign_baseline(evaluator.without_attack, evaluator.campaign.config.traffic.per_sample,
-                                        ((r.index, r.outcome) for r in members), progress))
+            config = evaluator.campaign.config
+            total.add(campaign_baseline(evaluator.without_attack, config.traffic.per_sample,
+                                        ((r.index, r.outcome, r.time_s) for r in members), progress, config.step_s))
         kinds = ", ".join(f"{total.kinds[k]} {k}" for k in CRASH_KINDS if total.kinds[k]) or "-"
         rows.append((run_label(key), str(len(rs) - unplayed), str(total.played), str(total.crashed), kinds,
                      f"{total.traffics['success']} of {total.crashes['success']}",

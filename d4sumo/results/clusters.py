@@ -19,8 +19,13 @@ from .records import Record
 FEW_ATTACKS = 3
 
 
-#: the attack families whose parameters are knots in time, to cluster (each says so: `AttackFamily.knots_in_time`)
-KNOT_FAMILIES = tuple(name for name, cls in FAMILY_CLASSES.items() if cls.knots_in_time)
+def knot_families() -> tuple[str, ...]:
+    """The attack families whose parameters are knots in time, to cluster (each says so: `AttackFamily.knots_in_time`;
+    one registered from Python too)."""
+    return tuple(name for name, cls in FAMILY_CLASSES.items() if cls.knots_in_time)
+
+
+KNOT_FAMILIES = knot_families()  # d4sumo's own
 
 
 def relevant_knots(knot_times_s: np.ndarray, collision_s: float, attack: str = "knots") -> np.ndarray:
@@ -144,7 +149,7 @@ def cluster_knots(records: Sequence[Record], condition: str, max_k: int = 6, see
     from sklearn.cluster import DBSCAN
     from sklearn.metrics.pairwise import nan_euclidean_distances
 
-    wins = [r for r in records if r.outcome == "success" and r.attack in KNOT_FAMILIES
+    wins = [r for r in records if r.outcome == "success" and r.attack in knot_families()
             and r.time_from_attack_start_s is not None and r.time_from_attack_start_s > 0]  # else no knot mattered
     if len(wins) < 4 or len({(len(r.params), r.attack, r.delta_s, len(r.signal_params)) for r in wins}) != 1:
         return None
@@ -184,7 +189,7 @@ def richest_conditions(records: Sequence[Record]) -> list[tuple[str, list[Record
     """For each (scenario, system,) attack, optimiser and start of knot campaigns, the setpoint and speed with
     the most successes."""
     out = []
-    knots = [r for r in records if r.attack in KNOT_FAMILIES]
+    knots = [r for r in records if r.attack in knot_families()]
     for key, rs in runs(knots, "attack", "optimizer", "start")[1].items():
         *scenario_system, attack, optimizer, start = key
         conditions = group(rs, "network", "setpoint_m", "speed_mps")

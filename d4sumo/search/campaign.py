@@ -148,6 +148,10 @@ class Campaign:
             attack = definition["attack"]
             config = definition["config"]  # keys later versions added, as the earlier ones played it:
             config = {**config, "scenario": ledger.restored("scenario", config.get("scenario", {}))}
+            if isinstance(config.get("vehicle"), dict):  # [vehicle]'s own keys (a car's [vehicle.vI] holds what differs)
+                base = {k: v for k, v in config["vehicle"].items() if not isinstance(v, dict)}
+                cars = {k: v for k, v in config["vehicle"].items() if isinstance(v, dict)}
+                config = {**config, "vehicle": {**ledger.restored("vehicle", base), **cars}}
             for table in ("traffic", "v2v"):
                 if isinstance(config.get(table), dict):
                     config = {**config, table: ledger.restored(table, config[table])}

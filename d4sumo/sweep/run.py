@@ -54,7 +54,9 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
                 for key, (value, _) in then.items()]
         if (before := sweep.with_inputs_of(version)) is not sweep and before not in [b for b, _, _ in versions.values()]:
             versions[version] = (before, keys, ", ".join(did for _, did in then.values()))
-    oldest = versions.get(INPUTS_CHANGED[-1], (None, [], ""))[1]
+    oldest_then = {key: value for c in sweep.campaigns for key, value, _ in c.changes_of(INPUTS_CHANGED[-1])}
+    oldest = [f"`{key.partition('.')[2]} = {json.dumps(value) if value == 'ignore' else value}` in [{key.partition('.')[0]}]"
+              for key, value in oldest_then.items()]
     input_keys = [*(["`network_sha256 = \"\"` in [scenario]"] if any(c.config.network_sha256 for c in sweep.campaigns) else []),
                   *(["`insertion_checks = false` in [traffic] (or in each table of grid.traffic)"]
                     if any(c.config.traffic for c in sweep.campaigns) else []), *oldest]

@@ -160,30 +160,34 @@ def test_a_cooperative_follower_whose_radar_sees_another_car_than_the_beacons_fa
         pytest.approx(-(4.0 + 0.1 * (1.2 * 24.0 - 6.0)) / 1.2 / vehicle.max_decel_mps2)
 
 
-def test_a_cooperative_follower_behind_a_car_that_cut_in_reads_the_beacons_only_with_match_radar():
-    """The attacker cuts in ahead of v2 (a cacc): with ``match_radar`` (the default) v2 follows it with its ACC; without,
-    it keeps reading v1's beacons, as d4sumo 0.19 had it."""
-    positions, speeds = [92.0, 100.0, 84.0, 111.5], [25.0] * 4  # v0 cut in 3.5 m ahead of v2
+def test_a_cooperative_follower_behind_a_traffic_car_that_cut_in_reads_the_beacons_only_with_match_radar():
+    """A traffic car cut in ahead of v2 (a cacc): with ``match_radar`` (the default) v2 follows it with its ACC; without,
+    it keeps reading v1's beacons, as d4sumo 0.19 had it. v1, behind the attacker, reads its beacons all along."""
+    positions, speeds = [100.0, 90.5, 78.0, 86.0], [25.0] * 4  # v0, v1, v2, and a traffic car (index 3) 3.5 m ahead of v2
+    pairs = [(0, 1, 5.0), (1, 3, 0.0), (3, 2, 3.5)]
     commands = {}
     for match in (True, False):
-        config = EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"),
+        config = EpisodeConfig(followers=2, start="steady", controller=ControllerConfig("cacc"), traffic={},
                                v2v=ChannelParams(match_radar=match))
         platoon = Platoon(config, np.full(config.steps, np.nan), attacker_max_speed_mps=40.0)
         for k in range(2):  # the first beacons arrive
-            platoon.advance(k, positions, speeds, platoon.maneuver.pairs(positions, [(0,), (0,), (0,), (0,)]))
-        commands[match] = platoon.commands[-1][2]
-    acc = -(0.1 * (1.2 * 25.0 + 2.0 - 3.5)) / 1.2  # its ACC on the attacker 3.5 m ahead at its own speed
-    assert commands[True] == pytest.approx(acc / VehicleParams().max_decel_mps2)
-    assert commands[False] != pytest.approx(commands[True])
+            platoon.advance(k, positions, speeds, pairs)
+        commands[match] = platoon.commands[-1][1:3]
+    acc = -(0.1 * (1.2 * 25.0 + 2.0 - 3.5)) / 1.2  # v2's ACC on the traffic car 3.5 m ahead at its own speed
+    assert commands[True][1] == pytest.approx(acc / VehicleParams().max_decel_mps2)
+    assert commands[False][1] != pytest.approx(commands[True][1])
+    assert commands[True][0] == commands[False][0]  # v1 sees the attacker, whose beacons it reads
 
 
-def test_match_radar_is_stored_where_another_car_may_come_between_and_read_back_as_0_19_had_it():
-    cut_in = EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"))
-    assert cut_in.to_dict()["v2v"]["match_radar"] is True
-    assert "match_radar" not in EpisodeConfig(maneuver="cutin", followers=2, start="steady", controller=ControllerConfig("cacc"),
+def test_match_radar_is_stored_among_traffic_and_read_back_as_0_19_had_it():
+    among = EpisodeConfig(followers=2, start="steady", controller=ControllerConfig("cacc"), traffic={})
+    assert among.to_dict()["v2v"]["match_radar"] is True
+    assert "match_radar" not in EpisodeConfig(followers=2, start="steady", controller=ControllerConfig("cacc"), traffic={},
                                               v2v=ChannelParams(match_radar=False)).to_dict()["v2v"]  # as 0.19 stored it
-    column = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"), v2v=ChannelParams(match_radar=False))
-    assert column.v2v.match_radar and "match_radar" not in column.to_dict()["v2v"]  # the same column either way: one identity
+    for alone in (EpisodeConfig(followers=2, controller=ControllerConfig("cacc"), v2v=ChannelParams(match_radar=False)),
+                  EpisodeConfig(followers=2, start="steady", maneuver="cutin", controller=ControllerConfig("cacc"))):
+        assert alone.v2v.match_radar and "match_radar" not in alone.to_dict()["v2v"]  # nothing comes between: one identity
+        assert Platoon(alone, np.full(alone.steps, np.nan), 40.0)._match is False
     with pytest.raises(ConfigError) as info:
         ChannelParams(match_radar="yes")
     assert info.value.field == "v2v.match_radar"

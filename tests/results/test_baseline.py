@@ -26,13 +26,14 @@ def test_one_traffic_for_all_samples_is_one_episode_without_the_attack_that_spea
         played.append(index)
         return _episode("traffic.3-v2")  # a traffic car's rear-end by v2: a success without any attack
 
-    samples = [(0, "success"), (1, "no_crash"), (2, "success"), (3, "attacker_crash")]
-    b = campaign_baseline(without_attack, False, samples)
+    # the crash without the attack comes at 12.5 s: a success at 20 s is the traffic's doing, one at 8 s the attack's
+    samples = [(0, "success", 20.0), (1, "no_crash", None), (2, "success", 8.0), (3, "attacker_crash", 15.0), (4, "success", 12.5)]
+    b = campaign_baseline(without_attack, False, samples, step_s=0.05)
     assert played == [0] and (b.played, b.crashed) == (1, 1)
     assert b.kinds == {"follower into traffic": 1}
-    assert b.traffics == {"success": 2} and b.crashes == {"success": 2, "attacker_crash": 1}
+    assert b.traffics == {"success": 2} and b.crashes == {"success": 3, "attacker_crash": 1}
     assert baseline_text(b) == ("without the attack (the attacker only cruising, in the same traffic): 1 of 1 episode "
-                                "crashed (1 follower into traffic) (traffic.3-v2 at 12.50 s); the traffic's doing: 2 of 2 "
+                                "crashed (1 follower into traffic) (traffic.3-v2 at 12.50 s); the traffic's doing: 2 of 3 "
                                 "successes, 0 of 1 attacker crash")
 
 
@@ -45,14 +46,14 @@ def test_traffic_of_each_sample_own_plays_the_episode_of_each_crash_without_the_
         return _episode(outcomes[index])
 
     ticks = []
-    b = campaign_baseline(without_attack, True, [(0, "attacker_crash"), (1, "no_crash"), (2, "success"), (3, "success")],
-                          lambda: ticks.append(1))
+    b = campaign_baseline(without_attack, True, [(0, "attacker_crash", 30.0), (1, "no_crash", None), (2, "success", 30.0),
+                                                 (3, "success", 30.0)], lambda: ticks.append(1))
     assert played == [0, 2, 3] and len(ticks) == 3  # the crashes' traffic only, each with a tick of the progress bar
     assert (b.played, b.crashed) == (3, 2)
     assert b.kinds == {"attacker into traffic": 1, "followers": 1}
     assert b.traffics == {"attacker_crash": 1, "success": 1}  # sample 2 crashed only under attack
     assert b.collision is None  # no one episode speaks for all
-    quiet = campaign_baseline(lambda i: _episode(None), True, [(0, "no_crash")])
+    quiet = campaign_baseline(lambda i: _episode(None), True, [(0, "no_crash", None)])
     assert quiet.played == 0 and baseline_text(quiet).endswith("no crash in 0 episodes")
 
 
