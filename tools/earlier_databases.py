@@ -68,6 +68,9 @@ CAMPAIGNS = {
     "cutin": ["--maneuver", "cutin", "--start", "steady", "--optimizer", "random"],
     "swerve": ["--maneuver", "swerve", "--start", "steady", "--optimizer", "random", "--duration", "20"],
     "own_road": ["--network", "examples/roads/three_edges", "--start", "steady", "--optimizer", "random"],
+    "cacc_traffic": ["--controller", "cacc", "--start", "steady", "--setpoint", "5", "--set", "traffic.vehicles_per_hour=600",
+                     "--optimizer", "random"],
+    "cacc_cutin": ["--controller", "cacc", "--maneuver", "cutin", "--start", "steady", "--optimizer", "random"],
 }
 
 
