@@ -60,6 +60,10 @@ class Lie:
     def own(self, field: str, window_s: float) -> tuple[Parameter, ...]:
         return ()
 
+    def accelerations(self, x, config: EpisodeSettings, sender: int) -> np.ndarray | None:
+        """What it reports at each step, where it reports a signal of its own over the attack (`Knots`); else None."""
+        return None
+
     def told(self, f: "BeaconFalsifier", k: int, message: Message) -> Message | None:
         """The beacon sent at step ``k`` for the sender's true one (None: none)."""
         return message if k < f.start else self.lie(f, k, message)
@@ -73,9 +77,9 @@ class _FieldLie(Lie):
 
     def lie(self, f, k, message):
         name = f.attribute
-        return dataclasses.replace(message, **{name: self.value(getattr(message, name), f.values, (k - f.start) * f.step_s)})
+        return dataclasses.replace(message, **{name: self.value(getattr(message, name), f.values)})
 
-    def value(self, true: float, v: dict, t_s: float) -> float:
+    def value(self, true: float, v: dict) -> float:
         raise NotImplementedError
 
 
@@ -86,7 +90,7 @@ class Offset(_FieldLie):
         bound, unit = FIELD_BOUNDS[field]
         return (Parameter("msg_value", -bound, bound, unit),)
 
-    def value(self, true, v, t_s):
+    def value(self, true, v):
         return true + v["msg_value"]
 
 
@@ -96,11 +100,11 @@ class Scaling(_FieldLie):
     def own(self, field, window_s):
         return (Parameter("msg_factor", 0.0, 3.0),)
 
-    def value(self, true, v, t_s):
+    def value(self, true, v):
         return true * v["msg_factor"]
 
 
-class Sinusoid(_FieldLie):
+class Sinusoid(Lie):
     name = "sinusoid"
 
     def own(self, field, window_s):
@@ -225,7 +229,7 @@ class MessageAttack(ManeuverAttack):
     def falsifier(self, params, config: EpisodeSettings) -> "BeaconFalsifier":
         x = self.check(params)[self._first_added:]
         values = dict(zip((p.name for p in self.parameters[self._first_added:]), x))
-        accel = self.lie.accelerations(x, config, self.sender) if isinstance(self.lie, Knots) else None
+        accel = self.lie.accelerations(x, config, self.sender)
         return BeaconFalsifier(self.kind, self.field, values, config.step_s, config.attack_start_step, accel, self.sender,
                                lie=self.lie)
 

@@ -192,27 +192,23 @@ class Campaign:
         """The campaign as d4sumo 0.16 and before ran it: every input a later version changed what it does with
         (`ledger`: its road's files without a digest, its traffic entering after the warm-up without insertion
         checks, its platoon driving through red lights, ...) as it was then."""
-        config = self.config
-        for entry in ledger.added_after("0.16"):
-            if not entry.did or entry.table not in ("scenario", "traffic", "v2v"):
-                continue
-            if entry.table == "scenario":
-                config = dataclasses.replace(config, **{entry.name: entry.earlier})
-            elif getattr(config, entry.table) is not None:
-                config = dataclasses.replace(config, **{entry.table: dataclasses.replace(getattr(config, entry.table),
-                                                                                          **{entry.name: entry.earlier})})
-        return self if config == self.config else self.replace(config=config)
+        return self._with_earlier([e.key for e in ledger.added_after("0.16") if e.did])
 
     def with_inputs_of(self, version: str) -> "Campaign":
         """The campaign as d4sumo ``version`` (one of `INPUTS_CHANGED`) and before ran it (`changes_of`); itself where
         that is what it does."""
+        return self._with_earlier([key for key, _, _ in self.changes_of(version)])
+
+    def _with_earlier(self, keys) -> "Campaign":
+        """The campaign with each of these keys of its scenario, traffic or channel at the value campaigns stored
+        without it ran with (`ledger`); itself where that changes nothing."""
         config = self.config
-        for key, _, _ in self.changes_of(version):
-            table, _, name = key.partition(".")
+        for key in keys:
+            table, _, name = key.rpartition(".")
             value = ledger.earlier(table)[name]
             if table == "scenario":
                 config = dataclasses.replace(config, **{name: value})
-            else:
+            elif getattr(config, table, None) is not None:
                 config = dataclasses.replace(config, **{table: dataclasses.replace(getattr(config, table), **{name: value})})
         return self if config == self.config else self.replace(config=config)
 
