@@ -49,8 +49,8 @@ def test_the_wheel_ships_every_scenario_variant(wheel):
     modules = {str(p.relative_to(ROOT)) for p in (ROOT / "d4sumo").rglob("*.py")}
     assert len(modules) > 30 and modules <= set(names)  # every module of every subpackage
     assert not any(n.startswith("tests/") for n in names)
-    # the cooperative followers stepped in C (d4sumo.model.cooperative), built for this platform
-    assert [n for n in names if n.startswith("d4sumo/model/_cooperative.") and n.endswith(".so")], names
+    # the followers stepped in C (d4sumo.model.compiled), built for this platform
+    assert [n for n in names if n.startswith("d4sumo/model/_followers.") and n.endswith(".so")], names
 
 
 @pytest.mark.sumo
@@ -70,7 +70,7 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     run = lambda *code: subprocess.run([str(python), *code], cwd=work, capture_output=True, text=True, env=env, timeout=300)
     # these four side by side: none reads what another writes
     where, listed, episode, built = side_by_side([
-        lambda: run("-c", "import d4sumo.sumo_scenarios as s, d4sumo.model._cooperative as c; print(s.__file__, c.__file__)"),
+        lambda: run("-c", "import d4sumo.sumo_scenarios as s, d4sumo.model._followers as c; print(s.__file__, c.__file__)"),
         lambda: run("-m", "d4sumo.cli", "scenarios"),
         lambda: run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json"),
         lambda: run("-m", "d4sumo.cli", "build-fmu", "--fmi", "3", "--out", "acc.fmu"),  # its C sources ship in the wheel

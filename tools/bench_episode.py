@@ -10,8 +10,8 @@ Both sides are timed the same way, start to close, interleaved in one run so mac
 With --fmu, the paper's controller also as the FMUs d4sumo ships (FMI 2.0 and 3.0, built here), and the
 ratio of their episodes to the Python controller's (the target: at most 2).
 
-Where a cooperative platoon's followers are stepped in C (d4sumo.model.cooperative), --python times the
-Python that stands for them instead.
+Where a platoon's followers are stepped in C (d4sumo.model.compiled: the paper's controller and the
+cooperative ones), --python times the Python that stands for them instead.
 
 Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC] [--fmu] [--python]
 """
@@ -61,12 +61,12 @@ def main() -> None:
     parser.add_argument("--followers", type=int, default=3)
     parser.add_argument("--systems", nargs="+", default=["switching", "sumo:ACC"])
     parser.add_argument("--fmu", action="store_true", help="also the shipped FMUs of the paper's controller")
-    parser.add_argument("--python", action="store_true", help="cooperative followers stepped by the Python, not in C")
+    parser.add_argument("--python", action="store_true", help="followers stepped by the Python, not in C")
     args = parser.parse_args()
     if args.python:
-        from d4sumo.model import cooperative
+        from d4sumo.model import compiled
 
-        cooperative.ENABLED = False
+        compiled.ENABLED = False
     parser.check_counts({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})
     with tempfile.TemporaryDirectory(prefix="bench-fmu-") as folder:
         fmus = {}

@@ -2,7 +2,7 @@
 Ploeg's and the consensus controller, as Plexe has them, with Plexe's cruise control where nobody is ahead, the
 mitigation the platoon-security literature proposes (`Fallback`), and their ACC where their radar sees another
 car than the one whose beacons they read (`unmatched`). Pure code, no SUMO; each is also stepped in C, bit for
-bit (`cooperative`, `_cooperative.c`).
+bit (`compiled`, `_followers.c`).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ car-following models, which the co-simulation only senses. `Platoon.advance` tak
 commands: the attacker plays its attack signal (or cruises where the signal is NaN) and each Python
 follower runs its controller. The step loop (`engine.loop.play`) calls it each step, in SUMO or in the
 SUMO-free ballistic world (`engine.ballistic.integrate`, for physics tests). A cooperative platoon's
-followers (with their radars and channel) may be stepped in C instead (`cooperative`), bit for bit.
+followers (with their radars and channel) may be stepped in C instead (`compiled`), bit for bit.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from ..errors import D4sumoError
 from . import carfollowing
 from .commands import ControllerError, checked_command  # noqa: F401 (re-exported: where they were)
 from .config import ControllerConfig, EpisodeConfig
-from .cooperative import compiled_followers
+from .compiled import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
 from .signals import SignalDriver, light_code
 from .vehicle import Actuator, acceleration_to_command
@@ -264,7 +264,7 @@ class Platoon:
         self._fed: dict[int, tuple] = {}
         self.beacons_for_sumo: list[tuple[int, bool, tuple]] = []
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
-        #: the followers, their radars and channel stepped in C where they may be (`cooperative`): as the Python below,
+        #: the followers, their radars and channel stepped in C where they may be (`compiled`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
         self._compiled = compiled_followers(self) if followers is None and not lights else None
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or

@@ -47,29 +47,31 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
             assert_same_episode(together, simulate(c, plan))
 
 
-@pytest.mark.parametrize("cls", ["cacc", "ploeg", "consensus"])
+@pytest.mark.parametrize("cls", ["switching", "cacc", "ploeg", "consensus"])
 @pytest.mark.parametrize("world", ["ideal", "imperfect"])
 def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls, world, monkeypatch):
-    """The followers stepped in C (`cooperative`) against the Python they stand for, on the paper's knots
-    attacks (a batch of them too), crashes included; ``imperfect``: a noisy, late radar of limited range, a
-    late and lossy channel, the mitigation, and the attacker's lies about its speed."""
-    from d4sumo.model import cooperative
+    """The followers stepped in C (`compiled`) against the Python they stand for, on the paper's knots
+    attacks (a batch of them too; the paper's controller alone, which batches play over arrays), crashes
+    included; ``imperfect``: a noisy, late radar of limited range, and for the cooperative laws a late and
+    lossy channel, the mitigation, and the attacker's lies about its speed."""
+    from d4sumo.model import compiled as in_c
     from d4sumo.model.messages import attack_box
     from d4sumo.model.sensing import RadarParams
 
-    headway = () if cls == "cacc" else (("h_s", 0.1),)  # closely spaced behind an attacker that brakes harder
+    paper = cls == "switching"
+    headway = () if cls in ("cacc", "switching") else (("h_s", 0.1),)  # closely spaced behind an attacker that brakes harder
     imperfect = world == "imperfect"
-    config = EpisodeConfig(controller=ControllerConfig(cls, headway + ((("fallback_mps", 1.0),) if imperfect else ())),
-                           start="steady", setpoint_m=3.0, duration_s=20.0,
+    config = EpisodeConfig(controller=ControllerConfig(cls, headway + ((("fallback_mps", 1.0),) if imperfect and not paper else ())),
+                           start="steady", setpoint_m=8.0 if paper else 3.0, duration_s=20.0,
                            vehicles={"v0": {"max_decel_mps2": 9.5}, "v1": {"max_decel_mps2": 5.0}},
                            radar=RadarParams(range_m=120.0, gap_noise_m=0.3, speed_noise_mps=0.2, latency_s=0.1, seed=3) if imperfect else None,
-                           v2v={"latency_s": 0.1, "loss": 0.2, "seed": 4} if imperfect else None)
-    family = attack_box(config, make_attack("knots"), "offset", "speed") if imperfect else make_attack("knots")
+                           v2v={"latency_s": 0.1, "loss": 0.2, "seed": 4} if imperfect and not paper else None)
+    family = attack_box(config, make_attack("knots"), "offset", "speed") if imperfect and not paper else make_attack("knots")
     rng = np.random.default_rng(11)
     plans = [attack_plan(family, family.lower + rng.random(family.dimension) * (family.upper - family.lower), config)
              for _ in range(8)]
-    compiled = simulate_batch(config, plans)
-    monkeypatch.setattr(cooperative, "ENABLED", False)
+    compiled = [simulate(config, plan) for plan in plans] if paper else simulate_batch(config, plans)
+    monkeypatch.setattr(in_c, "ENABLED", False)
     python = [simulate(config, plan) for plan in plans]
     for a, b in zip(compiled, python):
         assert_same_episode(a, b)

@@ -1,4 +1,4 @@
-"""A cooperative platoon's followers stepped in C against the Python they stand for: pure code, no SUMO."""
+"""A platoon's followers stepped in C against the Python they stand for: pure code, no SUMO."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from d4sumo.engine.ballistic import integrate
-from d4sumo.model import cooperative
+from d4sumo.model import compiled
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import PathCACC
 from d4sumo.model.maneuvers import maneuver_of
@@ -17,7 +17,8 @@ from d4sumo.model.platoon import ControllerError, Platoon
 from d4sumo.model.sensing import RadarParams
 from d4sumo.model.v2v import ChannelParams
 
-LAWS = ("cacc", "ploeg", "consensus")
+LAWS = ("switching", "cacc", "ploeg", "consensus", "mixed")  # mixed: switching and cooperative followers in one platoon
+COOPERATIVE = ("cacc", "ploeg", "consensus")
 LIES = (("offset", {"msg_value": -4.0}), ("scaling", {"msg_factor": 1.5}), ("sinusoid", {"msg_amplitude": 3.0, "msg_frequency_hz": 0.5}),
         ("jam", {"msg_duration_s": 3.0}), ("delay", {"msg_delay_s": 1.0}), ("replay", {"msg_window_s": 2.0}), ("knots", {}))
 
@@ -26,13 +27,13 @@ LIES = (("offset", {"msg_value": -4.0}), ("scaling", {"msg_factor": 1.5}), ("sin
 def python_only(monkeypatch):
     """Within it, every platoon is the Python's."""
     def off():
-        monkeypatch.setattr(cooperative, "ENABLED", False)
+        monkeypatch.setattr(compiled, "ENABLED", False)
     return off
 
 
 def test_the_extension_is_built_with_the_package():
-    assert cooperative.Followers is not None, (
-        "d4sumo.model._cooperative was not built: install d4sumo with a C compiler (pip install -e .)")
+    assert compiled.Followers is not None, (
+        "d4sumo.model._followers was not built: install d4sumo with a C compiler (pip install -e .)")
 
 
 def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: bool = False) -> EpisodeConfig:
@@ -47,21 +48,33 @@ def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: 
     if tight:
         vehicles["v0"] = {**vehicles.get("v0", {}), "max_decel_mps2": 9.5}
     headway = float(rng.uniform(0.1, 0.3) if tight else rng.uniform(0.3, 1.2))
-    params = {"cacc": (("c1", float(rng.uniform(0.2, 0.8))),), "ploeg": (("h_s", headway),), "consensus": (("h_s", headway),)}[law]
+    switching = (("acc_kp", float(rng.uniform(0.3, 1.5))), ("acc_kv", float(rng.uniform(0.5, 3.0))),
+                 ("eps_x_m", float(rng.choice([1.0, 0.5, 3.0]))), ("eps_v_mps", float(rng.choice([1.0, 0.2]))),
+                 ("cruise_kp", float(rng.uniform(0.1, 1.0))), ("cruise_integral_clamp", float(rng.choice([20.0, 2.0]))))
+    params = {"cacc": (("c1", float(rng.uniform(0.2, 0.8))),), "ploeg": (("h_s", headway),), "consensus": (("h_s", headway),),
+              "switching": switching if rng.random() < 0.7 else ()}
+    if imperfect and rng.random() < 0.5:  # the cooperative laws' mitigation
+        mitigation = (("fallback_mps", float(rng.uniform(0.5, 3.0))), ("fallback_headway_s", float(rng.uniform(0.8, 1.5))))
+        params.update({kind: params[kind] + mitigation for kind in COOPERATIVE})
+    if law == "mixed":  # each follower its own: the paper's, or a cooperative law reading the beacons
+        kinds = [str(rng.choice(("switching",) + COOPERATIVE)) for _ in range(followers)]
+        kinds[0] = "cacc"  # somebody listens: the platoon has its channel
+        rng.shuffle(kinds)
+        controller = tuple(ControllerConfig(kind, params[kind]) for kind in kinds)
+    else:
+        controller = ControllerConfig(law, params[law])
     radar, channel = None, {"beacon_interval_s": float(rng.choice([step, 0.1, 0.2, 0.5]))}
     if imperfect:
-        if rng.random() < 0.5:
-            params += (("fallback_mps", float(rng.uniform(0.5, 3.0))), ("fallback_headway_s", float(rng.uniform(0.8, 1.5))))
         if rng.random() < 0.5:
             radar = RadarParams(range_m=float(rng.choice([math.inf, 40.0, 150.0])), gap_noise_m=float(rng.choice([0.0, 0.5])),
                                 speed_noise_mps=float(rng.choice([0.0, 0.3])), latency_s=float(rng.choice([0.0, 2 * step])),
                                 seed=int(rng.integers(0, 100)))
         if rng.random() < 0.5:
             channel.update(latency_s=float(rng.choice([0.0, 3 * step])), loss=float(rng.choice([0.0, 0.3])), seed=int(rng.integers(0, 100)))
-    setpoint = float(rng.uniform(2.0, 5.0) if tight else rng.uniform(3.0, 25.0))
+    setpoint = float((rng.uniform(6.0, 30.0) if law == "switching" else rng.uniform(2.0, 5.0)) if tight else rng.uniform(3.0, 25.0))
     return EpisodeConfig(followers=followers, setpoint_m=setpoint, speed_mps=float(rng.uniform(15.0, 33.0)),
                          start=str(rng.choice(["rest", "steady"])), step_s=step, duration_s=20.0, vehicles=vehicles,
-                         controller=ControllerConfig(law, params), radar=radar, v2v=ChannelParams(**channel))
+                         controller=controller, radar=radar, v2v=None if law == "switching" else ChannelParams(**channel))
 
 
 def _liars(rng: np.random.Generator, config: EpisodeConfig) -> tuple:
@@ -82,12 +95,12 @@ def test_the_compiled_followers_command_what_the_python_does_bit_for_bit_whateve
     for _ in range(40):
         config = _config(rng, law, imperfect=True)
         attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
-        lie, told = _liars(rng, config)
-        compiled = Platoon(config, attack, 40.0, beacons=lie)
-        assert compiled._compiled is not None
+        lie, told = _liars(rng, config) if config.v2v is not None else (None, None)
+        fast = Platoon(config, attack, 40.0, beacons=lie)
+        assert fast._compiled is not None
         python_only()
         python = Platoon(config, attack, 40.0, beacons=told)
-        cooperative.ENABLED = True
+        compiled.ENABLED = True
         assert python._compiled is None
         pairs_at = maneuver_of(config).pairs
         n = config.followers + 1
@@ -99,10 +112,12 @@ def test_the_compiled_followers_command_what_the_python_does_bit_for_bit_whateve
                 x[0] += 2000.0
             v = [float(rng.choice([0.0, rng.uniform(0.0, 40.0)], p=[0.05, 0.95])) for _ in range(n)]
             pairs = pairs_at(x)
-            assert compiled.advance(k, x, v, pairs) == python.advance(k, x, v, pairs)
-        assert compiled.commands == python.commands
-        assert compiled.modes == python.modes
-        assert compiled.channel.sent == python.channel.sent
+            assert fast.advance(k, x, v, pairs) == python.advance(k, x, v, pairs)
+        assert fast.commands == python.commands
+        assert fast.modes == python.modes
+        assert len(fast.modes) == (200 if law == "switching" else len(fast.modes))  # every step's modes compared
+        if config.v2v is not None:
+            assert fast.channel.sent == python.channel.sent
 
 
 @pytest.mark.parametrize("law", LAWS)
@@ -114,15 +129,15 @@ def test_an_episode_with_compiled_followers_is_the_python_episode_bit_for_bit_cr
         period = int(rng.integers(2, 6)) * int(round(1.0 / config.step_s))  # full throttle, full brake, each for 2 to 5 s
         attack = np.tile(np.r_[np.ones(period), -np.ones(period)], config.steps)[:config.steps]
         attack[:config.attack_start_step] = np.nan
-        compiled = integrate(config, attack)
+        fast = integrate(config, attack)
         python_only()
         python = integrate(config, attack)
-        cooperative.ENABLED = True
-        assert compiled.collisions == python.collisions
-        assert compiled.min_gaps == python.min_gaps
-        assert compiled.trace.signals.keys() == python.trace.signals.keys()
+        compiled.ENABLED = True
+        assert fast.collisions == python.collisions
+        assert fast.min_gaps == python.min_gaps
+        assert fast.trace.signals.keys() == python.trace.signals.keys()
         for name, values in python.trace.signals.items():
-            np.testing.assert_array_equal(compiled.trace.signals[name], values, err_msg=name)
+            np.testing.assert_array_equal(fast.trace.signals[name], values, err_msg=name)
         crashes += bool(python.collisions)
     assert 3 <= crashes < 16, f"{crashes} of 16 attacks crash the platoon: the collision record is barely compared"
 
@@ -132,11 +147,11 @@ def test_a_follower_command_that_is_no_number_gets_the_python_error(python_only)
     attack = np.full(config.steps, np.nan)
     x, v = [100.0, 80.0, 60.0], [25.0, math.nan, 25.0]
     errors = []
-    for compiled in (True, False):
-        if not compiled:
+    for in_c in (True, False):
+        if not in_c:
             python_only()
         platoon = Platoon(config, attack, 40.0)
-        assert (platoon._compiled is not None) == compiled
+        assert (platoon._compiled is not None) == in_c
         with pytest.raises(ControllerError) as error:
             platoon.advance(0, x, v, maneuver_of(config).pairs(x))
         errors.append(str(error.value))
@@ -149,23 +164,29 @@ class _OwnCACC(PathCACC):
 
 @pytest.mark.parametrize("change", [
     {"controller": (ControllerConfig("cacc"), ControllerConfig("sumo:ACC"))},
-    {"controller": (ControllerConfig("cacc"), ControllerConfig("switching"))},
+    {"controller": (ControllerConfig("cacc"), ControllerConfig("timegap"))},
+    {"controller": ControllerConfig("switching", (("switching_rule", "code"),))},  # the authors' code's options
+    {"controller": ControllerConfig("switching", (("control_period_s", 0.1),))},
     {"maneuver": "cutin"},
+    {"controller": ControllerConfig("switching"), "maneuver": "cutout"},
 ])
 def test_the_python_plays_what_the_compiled_followers_do_not(change):
     config = EpisodeConfig(followers=2, **{"controller": ControllerConfig("cacc"), **change})
     assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is None
-    plain = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"))
-    assert Platoon(plain, np.full(plain.steps, np.nan), 40.0)._compiled is not None
+    for plain in (ControllerConfig("cacc"), ControllerConfig("switching"), (ControllerConfig("cacc"), ControllerConfig("switching"))):
+        config = EpisodeConfig(followers=2, controller=plain)
+        assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"))
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0, lights=True)._compiled is None
 
 
 def test_the_python_plays_a_user_subclass():
     config = EpisodeConfig(followers=2, controller=ControllerConfig("cacc"))
     platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
-    assert cooperative.compiled_followers(platoon) is not None
+    assert compiled.compiled_followers(platoon) is not None
     own = platoon.followers[1].controller
     own.__class__ = _OwnCACC  # a user's subclass may change anything: the law is looked up by the exact class
-    assert cooperative.compiled_followers(platoon) is None
+    assert compiled.compiled_followers(platoon) is None
 
 
 def test_what_the_python_would_compute_otherwise_is_the_python_s():
@@ -188,7 +209,7 @@ def test_the_extension_refuses_what_it_cannot_play_exactly_and_is_collected_in_a
     import gc
 
     with pytest.raises(RuntimeError):
-        cooperative.Followers.__new__(cooperative.Followers).advance(0, [], [], [], [], [], [])
+        compiled.Followers.__new__(compiled.Followers).advance(0, [], [], [], [], [], [])
     config = EpisodeConfig(followers=1, controller=ControllerConfig("cacc"))
     platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
     with pytest.raises(TypeError, match="positions: a float"):
@@ -206,8 +227,8 @@ def test_the_extension_refuses_what_it_cannot_play_exactly_and_is_collected_in_a
     from d4sumo.model.platoon import checked_command
     from d4sumo.model.v2v import Message
 
-    law = (1, (5.0, 25.0, 0.05, 3.5, 8.0), (0.5, 0.5, -0.1, -0.2, -0.04), 0.0, (0.0, 0.0), (3.5, 8.0, 0.1, 0.05, math.inf, 0.0, 0.0), None)
-    lie.followers = cooperative.Followers((0.05, 2, 0, 0.0), [4.5, 4.5], [(0,)], [], (lie, 0, Message, []), [law], checked_command)
+    law = (1, False, (5.0, 25.0, 0.05, 3.5, 8.0), (0.5, 0.5, -0.1, -0.2, -0.04), 0.0, (0.0, 0.0), (3.5, 8.0, 0.1, 0.05, math.inf, 0.0, 0.0), None)
+    lie.followers = compiled.Followers((0.05, 2, 0, 0.0), [4.5, 4.5], [(0,)], [], (lie, 0, Message, []), [law], checked_command)
     lie.followers.advance(0, [50.0, 40.0], [25.0, 25.0], [(0, 1, 5.5)], [], [], [])
     del lie
     gc.collect()

@@ -1,0 +1,97 @@
+/* The followers' types (part of _followers.c, included once from it) and the Python's draws. */
+
+enum { LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4 };
+
+#define FREE_ROAD_GAP_M 1000.0 /* maneuvers.FREE_ROAD_GAP_M: nobody ahead */
+#define CC_KP 1.0              /* control.CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2: Plexe's cruise control */
+#define CC_ACCEL_MPS2 1.5
+#define CC_DECEL_MPS2 1.5
+
+typedef struct { /* a beacon (v2v.Message) */
+    int sender;
+    double time_s, position_m, speed_mps, accel_mps2, length_m;
+} Beacon;
+
+typedef struct { /* a beacon in flight to a receiver */
+    long due;
+    int receiver;
+    Beacon beacon;
+} Flight;
+
+typedef struct { /* a radar's reading: gap, speed ahead, whether a car is ahead in range */
+    double gap, lead;
+    int seen;
+} Reading;
+
+typedef struct {
+    int law;
+    double setpoint_m, target_mps, step_s, max_accel, max_decel; /* the controller's */
+    /* CACC: a1..a5; Ploeg: h_s, kp, kd; consensus: b, k_leader_v1, k_leader, k_front, h_s; switching: its
+     * SwitchingParams' cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2, acc_kp,
+     * acc_kv, eps_x_m, eps_v_mps */
+    double c[9];
+    Switching sw; /* the switching law's state and variables, as its FMU's (switching.h) */
+    int has_mode; /* whether its mode is recorded: the switching law's, or the mitigation's */
+    double u;    /* Ploeg's integrated command */
+    double fallback_mps, fallback_headway_s, mode; /* the mitigation (fallback_mps 0: none), its mode */
+    /* its actuator (vehicle.Actuator) */
+    double act_accel_max, act_decel_max, alpha, act_step_s, max_speed_mps, accel_mps2, coast;
+    /* its radar (sensing.Radar; perfect: none of it) */
+    int perfect;
+    double range_m, gap_noise_m, speed_noise_mps;
+    PyObject *normal; /* its generator's normal() */
+    Reading *readings; /* the newest delay + 1, oldest first from `first` */
+    int kept, first, capacity;
+} Follower;
+
+typedef struct {
+    PyObject_HEAD
+    int channel;    /* whether the platoon exchanges beacons (none: the rest of the channel's fields are unused) */
+    int cars;       /* the platoon's: the attacker and its followers */
+    long every;     /* a beacon every this many steps */
+    long delay;     /* steps from a beacon's sending to its delivery */
+    double step_s;  /* the channel's */
+    int direct;     /* no latency, no loss: each beacon straight into its receivers' inboxes */
+    double loss;
+    int has_last;
+    double *last, *x, *v, *acc, *gap, *length; /* each car's speed a step ago; this step's position, speed, acceleration,
+                                                gap to the car ahead; length */
+    int *sources;   /* receiver i's sources: sources[i * cars + j], j < n_sources[i] */
+    int *n_sources;
+    PyObject **random; /* each link's generator's random() (with loss), in the order of `sources` */
+    Py_ssize_t links;  /* how many */
+    int *is_sender;
+    int *heard;     /* heard[i * cars + s]: whether receiver i has a beacon of s */
+    Beacon *inbox;  /* inbox[i * cars + s]: its newest */
+    Beacon *step_beacons; /* this step's, by sender; a liar's may be none */
+    int *sent_now;
+    Flight *flights;
+    Py_ssize_t head, tail, flights_capacity;
+    PyObject *falsify, *message, *sent; /* the lie (None: nobody lies), the Message class, Channel.sent */
+    int liar;
+    Follower *f;    /* f[1] .. f[cars - 1] */
+    int with_mode;  /* how many followers have a mode recorded */
+    PyObject *checked; /* platoon.checked_command: a command that is not one raises its error */
+} Followers;
+
+static int take_double(PyObject *value, double *out) { /* a new reference's value as a double, the reference released */
+    if (value == NULL)
+        return -1;
+    *out = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+static int draw(PyObject *method, PyObject *args, double *out) { /* a generator's draw, as the Python makes it */
+    return take_double(PyObject_CallObject(method, args), out);
+}
+
+static int normal(Follower *f, double sd, double *out) {
+    PyObject *args = Py_BuildValue("(dd)", 0.0, sd);
+    if (args == NULL)
+        return -1;
+    int status = draw(f->normal, args, out);
+    Py_DECREF(args);
+    return status;
+}
+
