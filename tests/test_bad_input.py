@@ -389,7 +389,7 @@ class ParamsNotADataclass:
 @pytest.mark.parametrize("module, cls, said", [
     ("raise RuntimeError('boom at import')", "X", "a module that imports without error ({m} raised RuntimeError: boom at import)"),
     ("def broken(:\n", "X", "a module that imports without error ({m} raised SyntaxError: invalid syntax"),
-    (CONTROLLERS, "ParamsNotADataclass", "a class with a Params dataclass and a command() or observe() method"),
+    (CONTROLLERS, "ParamsNotADataclass", "a class with a Params dataclass and an observe() method (or command() on three floats)"),
     (CONTROLLERS, "Missing", "allowed: a class of {m}; {m} imported ("),
     (CONTROLLERS, "FailsToBuild", "the controller of v1 ({m}:FailsToBuild) could not be made: ValueError: init fails"
                                   " (d4sumo -v shows its traceback)"),

@@ -186,19 +186,19 @@ class CodePID:
 
 
 class FollowerController(Protocol):
-    """What the co-simulation needs of a follower's controller.
+    """What the co-simulation needs of a follower's controller: one observation in, one command out.
 
     Constructed as ``cls(params, setpoint_m=..., target_speed_mps=..., vehicle=..., step_s=...)`` where
     ``params`` is an instance of ``cls.Params`` (a dataclass built from the config's controller table).
-    ``mode`` (optional) is recorded in the trace each step. A controller may instead answer
-    ``observe(observation)`` (`sensing.Observation`), called in place of ``command`` where it has one (the
-    cooperative laws answer only that: they need the beacons an observation holds). Either is given what the
-    follower's radar measured (`sensing`).
+    Each step ``observe(observation)`` is given what the car knows (`sensing.Observation`: what its radar
+    measured, its own state and, where it listens, the beacons) and returns the command u in [-1, 1].
+    ``mode`` (optional) is recorded in the trace each step. A user's class written to the three-float form,
+    ``command(gap_m, speed_mps, lead_speed_mps)``, keeps working (`plugins.observer`, the one adapter).
     """
 
     Params: type
 
-    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float: ...
+    def observe(self, observation) -> float: ...
 
 
 class SwitchingController:
@@ -282,7 +282,12 @@ class SwitchingController:
             return self.cruise.acceleration(speed_mps)
         return self._acc_kp * (gap_m - self.desired_gap_m(speed_mps)) + self._acc_kv * (lead_speed_mps - speed_mps)
 
+    def observe(self, o) -> float:
+        """The command from what its radar measured (Eq. 1 reads the gap, its own speed, the speed ahead)."""
+        return self.command(o.gap_m, o.speed_mps, o.lead_speed_mps)
+
     def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+        """Eq. 1 on the three numbers it reads, through the actuator's inverse map to the pedal."""
         if self._as_run:
             return self.command_as_run(gap_m, speed_mps, lead_speed_mps)
         # acceleration_to_command inlined: this runs for every follower at every step

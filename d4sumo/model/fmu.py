@@ -370,9 +370,10 @@ class FmuController:
             vrs = (ctypes.c_uint32 * len(values))(*(v for v, _ in values))
             set_real(handle, vrs, len(values), (ctypes.c_double * len(values))(*(x for _, x in values)))
 
-    def command(self, gap_m: float, speed_mps: float, lead_speed_mps: float) -> float:
+    def observe(self, o) -> float:
+        """The FMU's step on the three numbers its inputs take: what the radar measured (gap, speed ahead), its own speed."""
         h, t, values = self._handle, self.time_s, self._in
-        values[0], values[1], values[2] = gap_m, speed_mps, lead_speed_mps
+        values[0], values[1], values[2] = o.gap_m, o.speed_mps, o.lead_speed_mps
         if self.fmu.version == 2:
             status = self._set_real(h, self._in_vr, 3, values)
             status = status if status > 1 else self._do_step(h, t, self.step_s, 1)

@@ -13,6 +13,7 @@ followers (with their radars and channel) may be stepped in C instead (`compiled
 from __future__ import annotations
 
 import math
+from types import MappingProxyType
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from .commands import ControllerError, checked_command  # noqa: F401 (re-exporte
 from .config import ControllerConfig, EpisodeConfig
 from .compiled import compiled_followers
 from .control import CautiousDriver, CruiseControl, SwitchingController, SwitchingParams, user_code
+from .plugins import observer
 from .signals import SignalDriver, light_code
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
@@ -32,7 +34,7 @@ from .v2v import Channel
 
 
 def _named_errors(command, car: int, name: str):
-    """A user's controller's command(), its errors a ControllerError naming the car and the class."""
+    """A user's controller's observe(), its errors a ControllerError naming the car and the class."""
     def checked(*args):
         try:
             return command(*args)
@@ -127,12 +129,11 @@ class PythonFollower:
                 raise
             raise ControllerError(f"the controller of v{car} ({config.cls}) could not be made: {type(exc).__name__}: {exc}") from exc
         self.actuator = Actuator(self.vehicle, episode.step_s, float("inf"))
-        command, observe = getattr(self.controller, "command", None), getattr(self.controller, "observe", None)
+        observe = observer(self.controller)
         if users:
-            command = command and _named_errors(command, car, config.cls)
-            observe = observe and _named_errors(observe, car, config.cls)
-        #: what it does with the truth (gap, own speed, speed ahead): through its radar, to its controller
-        self.command = sensed_command(command, observe, episode.radar, episode.step_s, car, beacons=episode.v2v is not None)
+            observe = _named_errors(observe, car, config.cls)
+        #: what it does with the truth (gap, own speed, speed ahead): the observation, through its radar, to its controller
+        self.command = sensed_command(observe, episode.radar, episode.step_s, car, beacons=episode.v2v is not None)
         self.has_mode = hasattr(self.controller, "mode")
         self.hears_all = bool(getattr(self.controller, "hears_all", False))
 
@@ -252,7 +253,7 @@ class Platoon:
                         if config.v2v is not None else None)
         self._last_speeds: list[float] | None = None
         #: each Python follower, as the step loop calls it: its index, its command, its actuator, its inbox
-        self._python = [(i, f.command, f.actuator.apply, self.channel.inbox(i) if self.channel is not None else None)
+        self._python = [(i, f.command, f.actuator.apply, MappingProxyType(self.channel.inbox(i)) if self.channel is not None else None)
                         for i, f in enumerate(self.followers, start=1) if not f.sumo_driven]
         #: whether the cars are the paper's column, pair i - 1 car i and the car ahead (no lane change, no traffic)
         self._one_ahead = not self.maneuver.lateral and config.traffic is None

@@ -15,7 +15,7 @@ import dataclasses
 import importlib
 import os
 import sys
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from ..errors import ConfigError
 
@@ -71,7 +71,7 @@ def may_import() -> bool:
 
 def import_controller(name: str) -> type:
     """The class a user's "package.module:ClassName" names, checked to be a controller (a Params
-    dataclass and a command or observe method)."""
+    dataclass and an observe method, or a command method on three floats: `observer`)."""
     if not _IMPORTS.get():
         raise NotImported("controller.class", name, "a controller read by its name only (nothing is imported here)")
     module_name, _, attr = name.partition(":")
@@ -91,8 +91,19 @@ def import_controller(name: str) -> type:
     params = getattr(cls, "Params", None)
     answers = callable(getattr(cls, "command", None)) or callable(getattr(cls, "observe", None))
     if not (isinstance(params, type) and dataclasses.is_dataclass(params)) or not answers:
-        raise ConfigError("controller.class", name, "a class with a Params dataclass and a command() or observe() method")
+        raise ConfigError("controller.class", name, "a class with a Params dataclass and an observe() method (or command() on three floats)")
     return cls
+
+
+def observer(controller: Any) -> Callable[[Any], float]:
+    """What the step loop calls for a follower's command: its controller's ``observe(observation)``, the one
+    contract (`sensing.Observation`). A class written to the three-float form, ``command(gap_m, speed_mps,
+    lead_speed_mps)`` (what its radar measured), is given those three of the observation: the one adapter."""
+    observe = getattr(controller, "observe", None)
+    if callable(observe):
+        return observe
+    command = controller.command
+    return lambda o: command(o.gap_m, o.speed_mps, o.lead_speed_mps)
 
 
 def build_params(cls: type, values: Mapping[str, Any]) -> Any:

@@ -19,10 +19,11 @@ bit for bit what it was. The verdicts (gaps, collisions, the specification) alwa
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -71,19 +72,19 @@ class RadarParams:
         return self.range_m == math.inf and not self.gap_noise_m and not self.speed_noise_mps and not self.latency_s
 
 
-@dataclass(slots=True)  # made for every follower at every step: not frozen, whose construction costs thrice
-class Observation:
-    """What a follower's controller knows at a step: its own speed (and its acceleration over its last
-    step), what its radar measures of the car ahead in its lane (``leader``: whether there is one in range;
-    without, the gap is a free road's and the speed ahead the car's own), and, in a platoon that exchanges
-    V2V beacons (`v2v`), the newest beacon it received from the platoon's leader and from the car ahead of
-    it in the platoon (None until one has arrived; for v1 both are the leader's), every newest beacon it
-    received by sender (``messages``), and where and when it is (its GPS: ``position_m`` along the road,
-    its front bumper's, and ``time_s``, the step's start), which a controller that places itself among
-    the beacons' positions reads. ``matched``: whether the car its radar sees is the one whose beacons
-    ``front_message`` holds. It is not where another car is between them (a traffic car that cut in, a
-    maneuver's car): a cooperative controller then follows what its radar sees with its ACC, as CACC
-    systems do (`v2v.ChannelParams.match_radar`)."""
+class Observation(NamedTuple):
+    """What a follower's controller knows at a step, the one thing every controller is given (`observe`), a
+    read-only value: its own speed (and its acceleration over its last step), what its radar measures of the
+    car ahead in its lane (``leader``: whether there is one in range; without, the gap is a free road's and
+    the speed ahead the car's own), and, in a platoon that exchanges V2V beacons (`v2v`), the newest beacon it
+    received from the platoon's leader and from the car ahead of it in the platoon (None until one has
+    arrived; for v1 both are the leader's), every newest beacon it received by sender (``messages``, a
+    read-only mapping), and where and when it is (its GPS: ``position_m`` along the road, its front
+    bumper's, and ``time_s``, the step's start), which a controller that places itself among the beacons'
+    positions reads. ``matched``: whether the car its radar sees is the one whose beacons ``front_message``
+    holds. It is not where another car is between them (a traffic car that cut in, a maneuver's car): a
+    cooperative controller then follows what its radar sees with its ACC, as CACC systems do
+    (`v2v.ChannelParams.match_radar`)."""
 
     speed_mps: float
     gap_m: float
@@ -101,6 +102,11 @@ class Observation:
     def relative_speed_mps(self) -> float:
         """The speed of the car ahead relative to its own (negative: closing in), as a radar measures it."""
         return self.lead_speed_mps - self.speed_mps
+
+
+#: an Observation made from its every field, as the step loop makes one for every follower at every step:
+#: a third of the cost of calling the class
+_made = functools.partial(tuple.__new__, Observation)
 
 
 class Radar:
@@ -125,29 +131,19 @@ class Radar:
             reading = (gap_m, lead_speed_mps, True)
         self.readings.append(reading)
         gap, lead, seen = self.readings[0]  # the oldest kept: latency_s ago, or the first
-        return Observation(speed_mps, gap, lead if seen else speed_mps, seen)
+        return _made((speed_mps, gap, lead if seen else speed_mps, seen, 0.0, None, None, None, 0.0, 0.0, True))
 
 
-def sensed_command(command: Callable[[float, float, float], float], observe: Callable[[Observation], float] | None,
-                   params: RadarParams | None, step_s: float, car: int,
+def sensed_command(observe: Callable[[Observation], float], params: RadarParams | None, step_s: float, car: int,
                    beacons: bool = False) -> Callable[..., float]:
-    """A follower's command from the truth (gap, own speed, speed ahead): through its radar when it is not
-    the perfect one, to the controller's ``observe`` (given an `Observation`) where it has one, else to its
-    ``command`` (gap, own speed, speed ahead, as measured). The perfect radar and a controller without
-    ``observe``: the command itself, untouched. With ``beacons`` (a platoon that exchanges V2V beacons) the
-    command also takes the car's own acceleration, its inbox (`v2v.Channel.inbox`), its position, the
-    time and whether its radar sees the car ahead of it in the platoon (`Observation.matched`), which
-    ``observe`` is given."""
+    """A follower's command from the truth (gap, own speed, speed ahead): the `Observation` its controller's
+    ``observe`` is given, through its radar where it is not the perfect one. With ``beacons`` (a platoon that
+    exchanges V2V beacons) it also takes the car's own acceleration, its inbox (a read-only view of
+    `v2v.Channel.inbox`), its position, the time and whether its radar sees the car
+    ahead of it in the platoon (`Observation.matched`)."""
     radar = Radar(params, step_s, car) if params is not None and not params.perfect else None
     if beacons:
         front = car - 1
-        if radar is None and observe is not None:  # the common case, at every step: nothing to decide
-            def heard(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float,
-                      matched: bool = True) -> float:
-                return observe(Observation(own, gap, lead, gap < FREE_ROAD_GAP_M, accel, inbox.get(0), inbox.get(front), inbox,
-                                           position, time, matched))
-
-            return heard
 
         def listening(gap: float, own: float, lead: float, accel: float, inbox, position: float, time: float,
                       matched: bool = True) -> float:
@@ -156,21 +152,10 @@ def sensed_command(command: Callable[[float, float, float], float], observe: Cal
                 gap, lead, seen = o.gap_m, o.lead_speed_mps, o.leader
             else:
                 seen = gap < FREE_ROAD_GAP_M
-            if observe is None:
-                return command(gap, own, lead)
-            return observe(Observation(own, gap, lead, seen, accel, inbox.get(0), inbox.get(front), inbox, position, time,
-                                       matched))
+            return observe(_made((own, gap, lead, seen, accel, inbox.get(0), inbox.get(front), inbox, position, time, matched)))
 
         return listening
-    if radar is None and observe is None:
-        return command
     if radar is None:
-        return lambda gap, own, lead: observe(Observation(own, gap, lead, gap < FREE_ROAD_GAP_M))
-    if observe is not None:
-        return lambda gap, own, lead: observe(radar.observe(gap, own, lead))
-
-    def measured(gap: float, own: float, lead: float) -> float:
-        o = radar.observe(gap, own, lead)
-        return command(o.gap_m, own, o.lead_speed_mps)
-
-    return measured
+        return lambda gap, own, lead: observe(_made((own, gap, lead, gap < FREE_ROAD_GAP_M, 0.0, None, None, None, 0.0,
+                                                     0.0, True)))
+    return lambda gap, own, lead: observe(radar.observe(gap, own, lead))

@@ -44,12 +44,6 @@ class RadarACC:
         follow = self.p.k_gap * (o.gap_m - wanted) + self.p.k_speed * o.relative_speed_mps
         return self._pedal(min(cruise, follow))
 
-    def command(self, gap_m, speed_mps, lead_speed_mps):
-        """The three numbers every controller is given; this one answers through ``observe``."""
-        from d4sumo.model.sensing import Observation
-
-        return self.observe(Observation(speed_mps, gap_m, lead_speed_mps, gap_m < 1000.0))
-
     def _pedal(self, accel_mps2):
         limit = self.vehicle.max_accel_mps2 if accel_mps2 >= 0 else self.vehicle.max_decel_mps2
         return max(-1.0, min(1.0, accel_mps2 / limit))

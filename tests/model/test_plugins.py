@@ -46,5 +46,5 @@ def test_a_users_subclass_of_a_cooperative_law_answers_observe_only_and_is_taken
     from d4sumo.model.control import PathCACC
 
     assert issubclass(import_controller(f"{name}:Mine"), PathCACC) and not hasattr(PathCACC, "command")
-    with pytest.raises(ConfigError, match="a command\\(\\) or observe\\(\\) method"):
+    with pytest.raises(ConfigError, match=r"an observe\(\) method \(or command\(\) on three floats\)"):
         import_controller(f"{name}:Mute")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from types import MappingProxyType
 
 import numpy as np
 import pytest
@@ -20,14 +21,23 @@ from d4sumo.model.sensing import Observation, Radar, RadarParams, sensed_command
 KNOTS = [0.2, -0.5, 0.3, -0.8, 0.5, 0.5, 0.5, 0.5, 0.5]  # one every 6 s, the last held
 
 
-def truth(gap, own, lead):
-    return (gap, own, lead)
+def truth(o):
+    return o
 
 
-def test_the_perfect_radar_hands_the_controller_its_command_untouched():
-    """No [radar] table, or one that changes nothing: the very function, so every earlier episode stays bit for bit."""
-    assert sensed_command(truth, None, None, 0.05, 1) is truth
-    assert sensed_command(truth, None, RadarParams(), 0.05, 1) is truth
+def test_the_perfect_radar_hands_the_controller_the_truth_as_a_read_only_observation():
+    """No [radar] table, or one that changes nothing: the truth, so every earlier episode stays bit for bit."""
+    for params in (None, RadarParams()):
+        o = sensed_command(truth, params, 0.05, 1)(12.5, 20.0, 18.0)
+        assert o == Observation(20.0, 12.5, 18.0, True) and type(o) is Observation
+        assert sensed_command(truth, params, 0.05, 1)(FREE_ROAD_GAP_M, 20.0, 20.0).leader is False
+        with pytest.raises(AttributeError):
+            o.gap_m = 3.0  # a value: a controller cannot change what another reads
+    inbox = {0: "beacon"}
+    o = sensed_command(truth, None, 0.05, 1, beacons=True)(12.5, 20.0, 18.0, 0.5, MappingProxyType(inbox), 40.0, 1.0)
+    assert o.leader_message == o.front_message == "beacon" and o.accel_mps2 == 0.5 and (o.position_m, o.time_s) == (40.0, 1.0)
+    with pytest.raises(TypeError):
+        o.messages[1] = "a beacon of one's own"  # the channel's inbox, read only
     assert EpisodeConfig(radar=RadarParams(range_m=math.inf)).radar is None
     assert EpisodeConfig(radar={"seed": 3}).to_dict() == EpisodeConfig().to_dict()
 
