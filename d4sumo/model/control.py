@@ -21,6 +21,7 @@ from ..errors import ConfigError, check_number
 from .cacc import (MODE_CACC, MODE_FALLBACK, ConsensusCACC, ConsensusParams, Fallback, PathCACC, PathParams,  # noqa: F401
                    PloegCACC, PloegParams, acc_acceleration, below_target, cruise_acceleration, unmatched)
 from .fmu import PREFIX as FMU_PREFIX, fmu_controller, is_fmu
+from .laws import LAWS
 from .plugins import import_controller
 from .vehicle import VehicleParams, acceleration_to_command
 
@@ -412,6 +413,8 @@ register_controller("timegap", TimeGapController)
 register_controller("cacc", PathCACC)
 register_controller("ploeg", PloegCACC)
 register_controller("consensus", ConsensusCACC)
+for _name, _law in LAWS.items():  # the laws of one file each (`laws`)
+    register_controller(_name, _law)
 
 
 def registered_controllers() -> tuple[str, ...]:
