@@ -754,3 +754,13 @@ def test_a_campaigns_best_parameters_name_what_the_pedals_do_not_set():
     assert text == "0.500, " * 8 + "0.500; msg_value -14.150, msg_start_s 1.250"
     plain = campaign_of({}).family()
     assert params_text(plain, [0.25] * 9) == ", ".join(["0.250"] * 9)
+
+
+def test_the_controller_flag_names_every_registered_controller(capsys):
+    """Found by review: the IDM, registered from its own file, was missing from --controller's help."""
+    from d4sumo.model.control import registered_controllers, resolve_controller
+
+    assert main(["simulate", "--help"]) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    own = [name for name in registered_controllers() if resolve_controller(name).__module__.startswith("d4sumo.")]
+    assert len(own) >= 6 and all(re.search(rf"\b{name}\b", said) for name in own), said  # (tests register others)

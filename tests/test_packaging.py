@@ -94,3 +94,29 @@ def test_toml_is_read_through_one_import_that_falls_back_on_python_3_10():
     source = (ROOT / "d4sumo" / "model" / "config.py").read_text()
     assert "if sys.version_info >= (3, 11):\n    import tomllib\nelse:" in source and "import tomli as tomllib" in source
     assert "tomli>=1.1; python_version < '3.11'" in (ROOT / "pyproject.toml").read_text()
+
+
+def test_the_source_distribution_holds_every_file_the_extension_is_built_from(tmp_path):
+    """Found by review: its headers were package data of a folder that is no package, which setuptools warned it
+    would ignore. They are the extension's dependencies (setup.py) instead, which the sdist holds: an install
+    from it without them would go on without the extension, at the Python's speed, and say nothing."""
+    src = tmp_path / "src"
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True)
+    if files.returncode != 0:
+        pytest.skip("not a git checkout")
+    for name in files.stdout.split():
+        if (ROOT / name).is_file():
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    build = subprocess.run([sys.executable, "setup.py", "-q", "sdist", "-d", str(tmp_path / "dist")], cwd=src,
+                           capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stderr
+    import tarfile
+
+    (archive,) = (tmp_path / "dist").glob("d4sumo-*.tar.gz")
+    names = {n.split("/", 1)[1] for n in tarfile.open(archive).getnames() if "/" in n}
+    setup = (ROOT / "setup.py").read_text()
+    needed = {"d4sumo/model/_followers.c", *(part for part in names if part.startswith("d4sumo/model/csrc/"))}
+    assert {"d4sumo/model/csrc/followers.h", "d4sumo/model/csrc/laws.h", "d4sumo/model/csrc/channel.h",
+            "d4sumo/fmus/switching.h"} <= names and needed <= names
+    assert all(f'"{part}"' in setup for part in needed if part.endswith(".h"))  # each a dependency of the build

@@ -47,7 +47,7 @@ def _add_episode_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, help="seconds from the attack's start to the episode's end [60]")
     g.add_argument("--length", type=float, help="vehicle length in m [4.5]")
     g.add_argument("--controller",
-                   help="follower controller: switching, timegap, the cooperative cacc, ploeg or consensus (they read V2V "
+                   help="follower controller: switching, timegap, idm, the cooperative cacc, ploeg or consensus (they read V2V "
                         "beacons), a SUMO car-following model as sumo:MODEL (sumo:ACC, sumo:CACC, sumo:IDM, sumo:CC, ...), an FMU "
                         "as fmu:PATH or package.module:ClassName; a comma-separated list gives one per follower, v1 first [switching]")
     g.add_argument(

@@ -1,6 +1,8 @@
 /* The paper's switching ACC (d4sumo.model.control.SwitchingController, its printed form), in C for the
- * FMUs d4sumo ships (fmi2.c, fmi3.c). Every operation is the Python's, in the same order, in IEEE doubles:
- * its commands equal the Python controller's. */
+ * FMUs d4sumo ships (fmi2.c, fmi3.c) and for the followers d4sumo steps in C (d4sumo/model/_followers.c),
+ * which also run its time-gap variant (control.TimeGapController: the desired gap s0 + h v; the FMUs keep
+ * the printed law, h unused). Every operation is the Python's, in the same order, in IEEE doubles: its
+ * commands equal the Python controller's. */
 #ifndef D4SUMO_SWITCHING_H
 #define D4SUMO_SWITCHING_H
 
@@ -27,6 +29,8 @@ typedef struct {
     double v[N_VARIABLES];
     double integral, prev_error;
     int has_prev, mode_known;
+    int time_gap;      /* the time-gap variant: the desired gap is s0 + time_gap_s v (not an FMU variable) */
+    double time_gap_s;
 } Switching;
 
 static void switching_defaults(Switching *s) {
@@ -42,6 +46,8 @@ static void switching_defaults(Switching *s) {
     s->prev_error = 0.0;
     s->has_prev = 0;
     s->mode_known = 0;
+    s->time_gap = 0;
+    s->time_gap_s = 0.0;
 }
 
 /* CruiseControl.acceleration: a PID on speed, its integral and its output clamped */
@@ -64,7 +70,7 @@ static double cruise_acceleration(Switching *s, double speed, double step) {
 static void switching_step(Switching *s, double step) {
     double *v = s->v;
     double gap = v[VR_GAP_M], speed = v[VR_SPEED_MPS], lead = v[VR_LEAD_SPEED_MPS];
-    double desired = v[VR_SETPOINT_M];
+    double desired = s->time_gap ? v[VR_SETPOINT_M] + s->time_gap_s * speed : v[VR_SETPOINT_M];
     double cc_speed = v[VR_TARGET_SPEED_MPS] + v[VR_EPS_V_MPS] - SPEED_TOLERANCE_MPS;
     double acc_speed = v[VR_TARGET_SPEED_MPS] + SPEED_TOLERANCE_MPS;
     double mode;

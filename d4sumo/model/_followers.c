@@ -1,6 +1,6 @@
 /* A platoon's followers, one step at a time, out of the interpreter: each follower's radar (range, noise,
  * latency), the V2V channel (beacon interval, latency, loss, a liar's beacons), the paper's switching ACC
- * (its printed form), Rajamani's CACC (PATH), Ploeg's CACC and the consensus controller, the mitigation, and
+ * (its printed form) and its time-gap variant, Rajamani's CACC (PATH), Ploeg's CACC and the consensus controller, the mitigation, and
  * each car's actuator.
  *
  * The reference is the Python of d4sumo.model (sensing.Radar.observe, v2v.Channel.send,
@@ -204,7 +204,7 @@ static int read_tuple(PyObject *tuple, double *out, Py_ssize_t n, const char *wh
  *   randoms  each link's generator's random(), in that order (with loss), else []
  *   lie      (falsify, liar, Message, Channel.sent), or None
  *   laws     each follower's, from v1: (law, whether its mode is recorded, (setpoint_m, target_mps, step_s,
- *            max_accel, max_decel), its gains (9 for the switching law, else 5), u, (fallback_mps,
+ *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
  *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
  *            speed_noise_mps, delay steps, normal)) */
 static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
@@ -300,18 +300,19 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
         if (!PyArg_ParseTuple(PyList_GET_ITEM(laws, i - 1), "ipO!O!dO!O!O", &f->law, &f->has_mode, &PyTuple_Type, &own,
                               &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar))
             return -1;
-        if (f->law < LAW_CACC || f->law > LAW_SWITCHING || (f->law != LAW_SWITCHING && !self->channel)) {
+        int switching = f->law == LAW_SWITCHING || f->law == LAW_TIMEGAP;
+        if (f->law < LAW_CACC || f->law > LAW_TIMEGAP || (!switching && !self->channel)) {
             PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
             return -1;
         }
         double o[5], m[2], a[7];
-        if (read_tuple(own, o, 5, "the controller") < 0 || read_tuple(gains, f->c, f->law == LAW_SWITCHING ? 9 : 5, "its gains") < 0
+        if (read_tuple(own, o, 5, "the controller") < 0 || read_tuple(gains, f->c, switching ? 9 + (f->law == LAW_TIMEGAP) : 5, "its gains") < 0
             || read_tuple(mitigation, m, 2, "its mitigation") < 0 || read_tuple(actuator, a, 7, "its actuator") < 0)
             return -1;
         f->setpoint_m = o[0], f->target_mps = o[1], f->step_s = o[2], f->max_accel = o[3], f->max_decel = o[4];
         f->fallback_mps = m[0], f->fallback_headway_s = m[1], f->mode = 0.0;
         self->with_mode += f->has_mode;
-        if (f->law == LAW_SWITCHING) { /* its FMU's variables: the scenario's, the car's, the gains */
+        if (switching) { /* its FMU's variables: the scenario's, the car's, the gains (and the time gap) */
             double *v = f->sw.v;
             switching_defaults(&f->sw);
             v[VR_SETPOINT_M] = o[0], v[VR_TARGET_SPEED_MPS] = o[1], v[VR_MAX_ACCEL_MPS2] = o[3], v[VR_MAX_DECEL_MPS2] = o[4];
@@ -319,6 +320,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
                                  VR_ACC_KP, VR_ACC_KV, VR_EPS_X_M, VR_EPS_V_MPS};
             for (int g = 0; g < 9; g++)
                 v[gain[g]] = f->c[g];
+            f->sw.time_gap = f->law == LAW_TIMEGAP;
+            f->sw.time_gap_s = f->law == LAW_TIMEGAP ? f->c[9] : 0.0;
         }
         f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
         f->accel_mps2 = a[5], f->coast = a[6];

@@ -3,7 +3,7 @@ same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for b
 cost (docs/v2v.md, docs/benchmarks.md).
 
 It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
-`cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
+`timegap`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
 the mitigation, in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
 noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
 Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
@@ -19,7 +19,7 @@ from typing import Callable
 
 from .commands import checked_command  # the Python's error for a command that is not one
 from .cacc import ConsensusCACC, PathCACC, PloegCACC
-from .control import SwitchingController
+from .control import SwitchingController, TimeGapController
 from .messages import BeaconFalsifier
 from .sensing import Radar
 from .v2v import Message
@@ -33,7 +33,7 @@ except ImportError:  # not built: the Python plays every platoon
 ENABLED = True
 
 #: each controller's law, as the extension numbers them
-LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4}
+LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4, TimeGapController: 5}
 if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is compensated from Python 3.12 on
     del LAWS[ConsensusCACC]
 
@@ -52,14 +52,14 @@ def compiled_followers(platoon) -> Callable | None:
     for i, follower in enumerate(platoon.followers, start=1):
         controller = follower.controller
         law = LAWS.get(type(controller))
-        if law is None or (law != 4 and channel is None):
+        if law is None or (law < 4 and channel is None):
             return None
-        if law == 4:  # the paper's controller as printed (the authors' code's options are the Python's)
+        if law >= 4:  # the paper's controller as printed, or its time-gap variant (the authors' code's options are the Python's)
             if controller._as_run:
                 return None
             p = controller.params
             gains = (p.cruise_kp, p.cruise_ki, p.cruise_kd, p.cruise_integral_clamp, p.cruise_output_limit_mps2,
-                     p.acc_kp, p.acc_kv, p.eps_x_m, p.eps_v_mps)
+                     p.acc_kp, p.acc_kv, p.eps_x_m, p.eps_v_mps) + ((controller.time_gap_s,) if law == 5 else ())
         elif law == 1:  # PATH's coefficients, as its constructor derived them
             gains = (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5)
         elif law == 2:
@@ -75,7 +75,7 @@ def compiled_followers(platoon) -> Callable | None:
             r = Radar(config.radar, config.step_s, i)
             radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
         vehicle, actuator = controller.vehicle, follower.actuator
-        step_s = controller.cruise.step_s if law == 4 else controller.step_s  # the step its cruise PID integrates over
+        step_s = controller.cruise.step_s if law >= 4 else controller.step_s  # the step its cruise PID integrates over
         own = (controller.setpoint_m, controller.target_speed_mps, step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
         drive = (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
                  actuator.accel_mps2, actuator.coast)

@@ -47,7 +47,7 @@ def test_a_lossy_late_channel_plays_another_episode_the_same_every_time_and_batc
             assert_same_episode(together, simulate(c, plan))
 
 
-@pytest.mark.parametrize("cls", ["switching", "cacc", "ploeg", "consensus"])
+@pytest.mark.parametrize("cls", ["switching", "timegap", "cacc", "ploeg", "consensus"])
 @pytest.mark.parametrize("world", ["ideal", "imperfect"])
 def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls, world, monkeypatch):
     """The followers stepped in C (`compiled`) against the Python they stand for, on the paper's knots
@@ -58,8 +58,8 @@ def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls,
     from d4sumo.model.messages import attack_box
     from d4sumo.model.sensing import RadarParams
 
-    paper = cls == "switching"
-    headway = () if cls in ("cacc", "switching") else (("h_s", 0.1),)  # closely spaced behind an attacker that brakes harder
+    paper = cls in ("switching", "timegap")
+    headway = {"cacc": (), "switching": (), "timegap": (("time_gap_s", 0.3),)}.get(cls, (("h_s", 0.1),))  # closely spaced behind an attacker that brakes harder
     imperfect = world == "imperfect"
     config = EpisodeConfig(controller=ControllerConfig(cls, headway + ((("fallback_mps", 1.0),) if imperfect and not paper else ())),
                            start="steady", setpoint_m=8.0 if paper else 3.0, duration_s=20.0,

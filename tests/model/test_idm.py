@@ -42,6 +42,22 @@ def test_on_a_free_road_it_accelerates_to_the_target_speed_and_no_further():
     assert law.observe(Observation(35.0, 1000.0, 35.0, False)) < 0.0
 
 
+def test_closing_in_brakes_as_treibers_formula_says():
+    """Found by review: only a full brake was asserted, which the closing-in term's mistakes also give."""
+    v, lead, gap = 20.0, 17.0, 30.0
+    wanted = 2.0 + v * 1.0 + v * (v - lead) / (2.0 * math.sqrt(1.0 * 1.5))  # s* = s0 + v T + v dv / (2 sqrt(a b))
+    a = 1.0 * (1.0 - (v / 30.0) ** 4 - (wanted / gap) ** 2)
+    assert -1.0 < a / VEHICLE.max_decel_mps2 < 0.0  # a moderate brake: the pedal says the acceleration exactly
+    assert idm().observe(Observation(v, gap, lead, True)) == pytest.approx(a / VEHICLE.max_decel_mps2, rel=1e-12)
+    # moving apart, the closing-in term lowers the wanted gap ...
+    wanted = 2.0 + v * 1.0 + v * (v - 22.0) / (2.0 * math.sqrt(1.5))
+    a = 1.0 - (v / 30.0) ** 4 - (wanted / 40.0) ** 2
+    assert idm().observe(Observation(v, 40.0, 22.0, True)) == pytest.approx(a / VEHICLE.max_accel_mps2, rel=1e-12)
+    # ... never below s0: the term inside max(0, ...) may not go negative
+    a = 1.0 - (v / 30.0) ** 4 - (2.0 / 40.0) ** 2
+    assert idm().observe(Observation(v, 40.0, 40.0, True)) == pytest.approx(a / VEHICLE.max_accel_mps2, rel=1e-12)
+
+
 def test_closing_in_fast_on_a_short_gap_is_a_full_brake():
     assert idm().observe(Observation(25.0, 5.0, 10.0, True)) == -1.0
     assert idm().observe(Observation(25.0, 0.0, 25.0, True)) == -1.0  # touching: no division by zero

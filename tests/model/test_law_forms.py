@@ -1,7 +1,7 @@
 """Each law that has more than one form, checked form against form over its whole input space, mechanically:
-the paper's switching controller (`control.SwitchingController`, its arrays `arrays.SwitchingArray` and its C
-in `fmus/switching.h`, which the compiled followers and the FMUs both run), with the rules it goes through
-(acceleration to pedal, the actuator). Pure code, no SUMO.
+the paper's switching controller and its time-gap variant (`control.SwitchingController`, `TimeGapController`,
+their arrays `arrays.SwitchingArray` and their C in `fmus/switching.h`, which the compiled followers and the
+FMUs both run), with the rules they go through (acceleration to pedal, the actuator). Pure code, no SUMO.
 
 Random draws alone would rarely land on the switch's thresholds, where a rounding would change the mode; so
 every step draws each input from the thresholds themselves, a few units in the last place either side,
@@ -19,7 +19,8 @@ import pytest
 from d4sumo.model import compiled
 from d4sumo.model.arrays import ActuatorArray, SwitchingArray
 from d4sumo.model.commands import checked_command
-from d4sumo.model.control import GAP_TOLERANCE_M, SPEED_TOLERANCE_MPS, SwitchingController, SwitchingParams
+from d4sumo.model.control import (GAP_TOLERANCE_M, SPEED_TOLERANCE_MPS, SwitchingController, SwitchingParams, TimeGapController,
+                                  TimeGapParams)
 from d4sumo.model.maneuvers import FREE_ROAD_GAP_M
 from d4sumo.model.vehicle import Actuator, VehicleParams
 
@@ -33,28 +34,36 @@ def _near(value: float, rng: np.random.Generator) -> float:
     return value
 
 
-def _forms(rng: np.random.Generator):
-    params = SwitchingParams(acc_kp=float(rng.uniform(0.2, 2.0)), acc_kv=float(rng.uniform(0.2, 3.0)),
+def _forms(rng: np.random.Generator, time_gap: bool):
+    params = (TimeGapParams if time_gap else SwitchingParams)(acc_kp=float(rng.uniform(0.2, 2.0)), acc_kv=float(rng.uniform(0.2, 3.0)),
                              eps_x_m=float(rng.choice([1.0, 0.3, 4.0])), eps_v_mps=float(rng.choice([1.0, 0.1, 2.5])),
                              cruise_kp=float(rng.uniform(0.1, 1.0)), cruise_ki=float(rng.choice([0.01, 0.0, 0.2])),
                              cruise_kd=float(rng.choice([0.1, 0.0, 0.5])), cruise_integral_clamp=float(rng.choice([20.0, 0.5])),
-                             cruise_output_limit_mps2=float(rng.choice([3.0, 1.0])))
+                             cruise_output_limit_mps2=float(rng.choice([3.0, 1.0])),
+                             **({"time_gap_s": float(rng.choice([0.0, 0.4, 1.5]))} if time_gap else {}))
     vehicle = VehicleParams(max_accel_mps2=float(rng.uniform(1.0, 5.0)), max_decel_mps2=float(rng.uniform(3.0, 10.0)),
                             actuator_lag_s=float(rng.choice([0.0, 0.5, 0.3])))
     setpoint, target, step = float(rng.uniform(2.0, 30.0)), float(rng.uniform(5.0, 40.0)), float(rng.choice([0.05, 0.1, 0.01]))
     own = dict(setpoint_m=setpoint, target_speed_mps=target, vehicle=vehicle, step_s=step)
-    python = SwitchingController(params, **own)
-    arrays = SwitchingArray(SwitchingController(params, **own), (1, 1), step)
+    cls = TimeGapController if time_gap else SwitchingController
+    python = cls(params, **own)
+    arrays = SwitchingArray(cls(params, **own), (1, 1), step)
     drive = Actuator(vehicle, step, math.inf)
     drive_arrays = ActuatorArray(vehicle, step, (1, 1), math.inf)
     gains = (params.cruise_kp, params.cruise_ki, params.cruise_kd, params.cruise_integral_clamp, params.cruise_output_limit_mps2,
-             params.acc_kp, params.acc_kv, params.eps_x_m, params.eps_v_mps)
-    law = (4, True, (setpoint, target, step, vehicle.max_accel_mps2, vehicle.max_decel_mps2), gains, 0.0, (0.0, 0.0),
+             params.acc_kp, params.acc_kv, params.eps_x_m, params.eps_v_mps) + ((params.time_gap_s,) if time_gap else ())
+    law = (5 if time_gap else 4, True, (setpoint, target, step, vehicle.max_accel_mps2, vehicle.max_decel_mps2), gains, 0.0, (0.0, 0.0),
            (drive.accel_max, drive.decel_max, drive.alpha, drive.step_s, drive.max_speed_mps, 0.0, drive.coast), None)
     in_c = compiled.Followers(None, [0.0, 0.0], [()], [], None, [law], checked_command).advance
-    # the inputs that decide: the switch's thresholds as the law computes them, and the domain's edges
-    gaps = (setpoint + params.eps_x_m - GAP_TOLERANCE_M, setpoint + GAP_TOLERANCE_M, setpoint, setpoint + params.eps_x_m,
-            0.0, -0.5, FREE_ROAD_GAP_M)
+    h = params.time_gap_s if time_gap else 0.0
+
+    def gaps(speed: float) -> tuple[float, ...]:
+        """The inputs that decide: the switch's thresholds on the gap as the law computes them at this speed,
+        and the domain's edges."""
+        desired = setpoint + h * speed if time_gap else setpoint
+        return (desired + params.eps_x_m - GAP_TOLERANCE_M, desired + GAP_TOLERANCE_M, desired, desired + params.eps_x_m,
+                0.0, -0.5, FREE_ROAD_GAP_M)
+
     speeds = (target + params.eps_v_mps - SPEED_TOLERANCE_MPS, target + SPEED_TOLERANCE_MPS, target, 0.0,
               target + params.eps_v_mps)
     return python, arrays, drive, drive_arrays, in_c, gaps, speeds, target
@@ -64,15 +73,17 @@ def _draw(rng: np.random.Generator, special: tuple[float, ...], low: float, high
     return _near(float(rng.choice(special)), rng) if rng.random() < 0.6 else float(rng.uniform(low, high))
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_the_switching_law_is_the_same_float_in_python_in_arrays_and_in_c_over_its_whole_input_space(seed):
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("law", ["switching", "timegap"])
+def test_the_switching_laws_are_the_same_float_in_python_in_arrays_and_in_c_over_their_whole_input_space(law, seed):
     rng = np.random.default_rng(seed)
     thresholds_met = set()
     for _ in range(25):
-        python, arrays, drive, drive_arrays, in_c, gaps, speeds, target = _forms(rng)
+        python, arrays, drive, drive_arrays, in_c, gaps_at, speeds, target = _forms(rng, law == "timegap")
         for k in range(400):
-            gap = _draw(rng, gaps, -1.0, 120.0)
             speed = _draw(rng, speeds, 0.0, 1.3 * target)
+            gaps = gaps_at(speed)
+            gap = _draw(rng, gaps, -1.0, 120.0)
             lead = speed if rng.random() < 0.3 else _draw(rng, speeds, 0.0, 1.3 * target)
             u = python.command(gap, speed, lead)
             u_arrays = arrays.command(np.array([[gap]]), np.array([[speed]]), np.array([[lead]]))

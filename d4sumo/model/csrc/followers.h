@@ -1,6 +1,6 @@
 /* The followers' types (part of _followers.c, included once from it) and the Python's draws. */
 
-enum { LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4 };
+enum { LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5 };
 
 #define FREE_ROAD_GAP_M 1000.0 /* maneuvers.FREE_ROAD_GAP_M: nobody ahead */
 #define CC_KP 1.0              /* control.CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2: Plexe's cruise control */
@@ -28,8 +28,8 @@ typedef struct {
     double setpoint_m, target_mps, step_s, max_accel, max_decel; /* the controller's */
     /* CACC: a1..a5; Ploeg: h_s, kp, kd; consensus: b, k_leader_v1, k_leader, k_front, h_s; switching: its
      * SwitchingParams' cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2, acc_kp,
-     * acc_kv, eps_x_m, eps_v_mps */
-    double c[9];
+     * acc_kv, eps_x_m, eps_v_mps; time gap: those, and time_gap_s */
+    double c[10];
     Switching sw; /* the switching law's state and variables, as its FMU's (switching.h) */
     int has_mode; /* whether its mode is recorded: the switching law's, or the mitigation's */
     double u;    /* Ploeg's integrated command */

@@ -85,7 +85,8 @@ static double command(Followers *self, int i, Reading r, double now) {
     int seen = r.seen;
     const Beacon *ahead = newest(self, i, i - 1), *leader = newest(self, i, 0);
     switch (f->law) {
-    case LAW_SWITCHING: { /* the FMU's law, on what the radar measured */
+    case LAW_SWITCHING:
+    case LAW_TIMEGAP: { /* the FMU's law, on what the radar measured */
         double *v = f->sw.v;
         v[VR_GAP_M] = gap, v[VR_SPEED_MPS] = speed, v[VR_LEAD_SPEED_MPS] = lead;
         switching_step(&f->sw, f->step_s);
