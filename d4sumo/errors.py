@@ -84,3 +84,10 @@ def table_of(cls, table: object, section: str):
         if key not in keys:
             raise ConfigError(f"{section}.{key}", value, f"a key of [{section}]: {', '.join(keys)}")
     return cls(**table)
+
+
+def check_keys(section: str, table, allowed: list[str]) -> None:
+    """Every key of ``table`` one of ``allowed``, else a ConfigError naming the first that is not."""
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")

@@ -35,7 +35,9 @@ import numpy as np
 from . import sumocfg
 from .errors import ConfigError, is_number
 from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
-from .model.config import TABLES, EpisodeConfig, VehicleParams, read_toml
+from .model.config import EpisodeConfig, VehicleParams
+from .model.definition import TABLES
+from .tomlfiles import read_toml
 from .model.sensing import RadarParams
 from .model.traffic import TrafficParams
 from .model.v2v import ChannelParams

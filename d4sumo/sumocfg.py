@@ -7,7 +7,7 @@ A user's SUMO scenario *is* a ``.sumocfg``: its network, its demand, its additio
 - ``route-files``: ``traffic.demand``, merged by departure as SUMO merges them;
 - ``additional-files``: ``scenario.additional`` (detectors, variable speed signs, rerouters, signal programmes
   of one's own, vehicle types), loaded by every episode and its traffic's warm-up;
-- options that change nothing d4sumo decides (`model.config.passed_option`): ``scenario.sumo_options``, given to SUMO as they are.
+- options that change nothing d4sumo decides (`model.network.passed_option`): ``scenario.sumo_options``, given to SUMO as they are.
 
 Paths are taken relative to the ``.sumocfg``'s folder, as SUMO takes them. What d4sumo sets itself
 (`OWN`: the clock, the step, the collisions, the random seed, insertion) is overridden, each named in one
@@ -26,7 +26,7 @@ from typing import Any, Mapping
 from xml.etree import ElementTree as ET
 
 from .errors import ConfigError
-from .model.config import SUMO_OPTION_GROUPS_PASSED as GROUPS, SUMO_OPTIONS_PASSED as PASSED, passed_option
+from .model.network import SUMO_OPTION_GROUPS_PASSED as GROUPS, SUMO_OPTIONS_PASSED as PASSED, passed_option
 
 log = logging.getLogger(__name__)
 

@@ -87,11 +87,11 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
 
 def test_toml_is_read_through_one_import_that_falls_back_on_python_3_10():
     """Regression: `import tomllib` (Python 3.11+) in three modules; on Python 3.10, which pyproject.toml
-    allows, every command ended in ModuleNotFoundError. config.py alone imports it, with tomli before 3.11."""
+    allows, every command ended in ModuleNotFoundError. tomlfiles.py alone imports it, with tomli before 3.11."""
     importing = sorted(str(p.relative_to(ROOT)) for d in ("d4sumo", "tools") for p in (ROOT / d).rglob("*.py")
                        if "import tomllib" in p.read_text())
-    assert importing == ["d4sumo/model/config.py"]
-    source = (ROOT / "d4sumo" / "model" / "config.py").read_text()
+    assert importing == ["d4sumo/tomlfiles.py"]
+    source = (ROOT / "d4sumo" / "tomlfiles.py").read_text()
     assert "if sys.version_info >= (3, 11):\n    import tomllib\nelse:" in source and "import tomli as tomllib" in source
     assert "tomli>=1.1; python_version < '3.11'" in (ROOT / "pyproject.toml").read_text()
 

@@ -30,7 +30,7 @@ from d4sumo import __version__
 from d4sumo.errors import refusal
 from d4sumo.inputs import with_overrides
 from d4sumo.presets import apply_preset
-from d4sumo.model.config import read_toml
+from d4sumo.tomlfiles import read_toml
 from d4sumo.results import paper
 from d4sumo.results.analysis import most_severe
 from d4sumo.results.records import Record, load_records

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..engine.scenarios import MAX_COPIES
 from ..errors import ConfigError, D4sumoError
-from ..model.config import toml_value
+from ..tomlfiles import toml_value
 from ..model.maneuvers import MANEUVERS
 
 EXIT_USAGE = 2

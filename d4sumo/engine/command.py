@@ -19,6 +19,7 @@ from xml.sax.saxutils import escape as xml_escape
 from ..cache import default_cache_dir
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
+from ..model.network import files_digest
 from ..model.platoon import SumoFollower, followers_of
 from ..model.traffic import demand_files_xml, type_elements
 from ..sumohome import sumo_binary, sumo_home
@@ -229,8 +230,6 @@ def check_additional(config: EpisodeConfig, road: Road) -> None:
     a ConfigError naming them."""
     if not config.additional:
         return
-    from ..model.config import files_digest
-
     if files_digest("scenario.additional", config.additional) != config.additional_sha256:
         raise ConfigError("scenario.additional", list(config.additional), "the additional files this campaign was run "
                                                                            "with (their content has changed since)")

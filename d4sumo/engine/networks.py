@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..cache import default_cache_dir
 from ..errors import ConfigError
-from ..model.config import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files
+from ..model.network import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files, network_digest, network_files
 from .netconvert import plain_xml
 
 log = logging.getLogger(__name__)
@@ -50,8 +50,6 @@ def kept_road(sha256: str) -> Path:
 def keep_road(network: str, sha256: str) -> None:
     """Keep the files of a campaign's road of one's own by their content (once, whoever is first), so that its
     samples replay from any folder of this machine, and after the files were moved: `use_kept_road`."""
-    from ..model.config import network_digest, network_files
-
     kept = kept_road(sha256)
     files = network_files(network)
     if kept.is_dir() or not files or network_digest(network) != sha256:

@@ -1,36 +1,31 @@
 """The episode configuration: frozen, validated on construction, round-trips through TOML/JSON.
 
 Its tables in a config file are [scenario], [vehicle] and [controller] (every key optional; defaults
-from SPEC section 1); `inputs` reads the whole file, flags included.
+from SPEC section 1); `inputs` reads the whole file, flags included. Beside it: the [controller] table
+(`controllers`), which road a campaign plays on (`network`), and its form as a campaign's definition
+stores it (`definition`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
-import os
 import re
-import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # Python 3.10: the same parser, published as tomli
-    import tomli as tomllib
 
 from .. import ledger
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
-from .control import AS_RUN_DEFAULTS, SwitchingParams, resolve_controller, user_module
-from .fmu import SHA_KEY, file_sha256, is_fmu
-from .plugins import ControllerImportError, NotImported, build_params
+from .control import SwitchingParams
+from . import definition
+from .controllers import ControllerConfig, listens as _listens
+from .definition import TABLES
+from .network import builds_network, files_digest, is_network_path, network_digest, sumo_options
 from .sensing import RadarParams
 from .traffic import TrafficParams
 from .v2v import ChannelParams
-from .vehicle import VehicleParams
+from .vehicle import VehicleParams, car_tables
 from .maneuvers import MANEUVERS as MANEUVER_CLASSES, REAR_START_M, SWERVE_KNOTS, SWERVE_LANES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
@@ -44,83 +39,6 @@ MAX_LANE = 15  # the leftmost lane index scenario.lane may name
 #: in front of a follower; cutout: it leads, then leaves the lane to reveal a slower car; swerve: it leads,
 #: its lane over time searched with its pedals (see `maneuvers`)
 MANEUVERS = tuple(MANEUVER_CLASSES)
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """One follower's controller and its parameters (as (name, value) pairs, all resolved).
-
-    ``cls`` is a Python controller ("switching", "timegap", "package.module:ClassName") or one of
-    SUMO's car-following models ("sumo:ACC", "sumo:IDM", ...), whose parameters are SUMO's attributes
-    for that model (see `carfollowing`).
-    """
-
-    cls: str = "switching"
-    params: tuple[tuple[str, Any], ...] = ()
-    where: str = dataclasses.field(default="controller", compare=False)  # its place in the config, for messages
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.cls, str) or not self.cls:
-            raise ConfigError(f"{self.where}.class", self.cls,
-                              "a registered controller name, 'sumo:MODEL' or 'package.module:ClassName'")
-        if carfollowing.is_sumo(self.cls):
-            object.__setattr__(self, "params", carfollowing.check_params(self.cls, dict(self.params), self.where))
-            return
-        try:
-            controller = resolve_controller(self.cls, self.params)
-            resolved = build_params(controller, dict(self.params))  # validates every value
-        except NotImported:  # read by name only: its parameters as given
-            object.__setattr__(self, "params", tuple(self.params))
-            return
-        except ConfigError as exc:  # name the follower of a mixed platoon: controller.v2.acc_kp
-            if self.where == "controller" or not exc.field.startswith("controller") or isinstance(exc, ControllerImportError):
-                raise
-            raise ConfigError(self.where + exc.field.removeprefix("controller"), exc.given, exc.allowed) from None
-        object.__setattr__(self, "params", tuple(dataclasses.asdict(resolved).items()))
-
-    @property
-    def sumo_model(self) -> str | None:
-        """The SUMO car-following model driving this follower, or None for a Python controller."""
-        return carfollowing.model_of(self.cls) if carfollowing.is_sumo(self.cls) else None
-
-    def controller_class(self) -> type:
-        return resolve_controller(self.cls, self.params)
-
-    def build_params(self) -> Any:
-        return build_params(self.controller_class(), dict(self.params))
-
-    def to_dict(self) -> dict:
-        """As a definition stores it: the authors' code's options only where they differ from the paper's
-        text (`control.AS_RUN_DEFAULTS`), so campaigns stored before them keep their identity."""
-        params = dict(self.params)
-        if not self.sumo_model:
-            params = {k: v for k, v in params.items() if not (k in AS_RUN_DEFAULTS and v == AS_RUN_DEFAULTS[k])}
-        return {"class": self.cls, **params}
-
-    @property
-    def label(self) -> str:
-        """A short name for reports: the class and the parameters that differ from its defaults."""
-        if self.sumo_model:
-            defaults = dict(carfollowing.check_params(self.cls, {}))
-        elif is_fmu(self.cls):  # its content, not its defaults (which its file holds): a short hash
-            sha = dict(self.params).get(SHA_KEY, "")
-            return f"{self.cls}({sha[:8]})" if sha else self.cls
-        elif user_module(self.cls) is None:
-            defaults = dataclasses.asdict(self.controller_class().Params())
-        else:  # a user's class is not imported for a name: every parameter is shown
-            defaults = {}
-        changed = [f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.params if defaults.get(k) != v]
-        return self.cls + (f"({', '.join(changed)})" if changed else "")
-
-    @classmethod
-    def from_table(cls, table: Any, where: str = "controller") -> "ControllerConfig":
-        """From a [controller] table, or a bare class name."""
-        if isinstance(table, str):
-            return cls(cls=table, where=where)
-        if not isinstance(table, Mapping):
-            raise ConfigError(where, table, "a table with a class key, or a controller name")
-        values = dict(table)
-        return cls(cls=values.pop("class", "switching"), params=tuple(values.items()), where=where)
 
 
 @dataclass(frozen=True)
@@ -194,10 +112,23 @@ class EpisodeConfig:
     sumo_options: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
+        """Every key checked, each in one line naming it and what is allowed, in the order a reader meets them:
+        the road, the clock, the systems under test, the world around them, the maneuver."""
+        self._check_road()
+        self._check_clock()
+        controllers = self._check_systems()
+        self._check_world(controllers)
+        self._check_maneuver()
+
+    def _fix(self, name: str, value: Any) -> None:
+        object.__setattr__(self, name, value)  # a frozen dataclass's own checks normalise its values
+
+    def _check_road(self) -> None:
+        """The road, where on it the platoon drives, how many cars, how fast, the lights and SUMO's own files."""
+        fix = self._fix
         if not isinstance(self.network, str) or not self.network:
             raise ConfigError("scenario.network", self.network, "a shipped variant (see `d4sumo scenarios`), a folder of node "
                                                                 "and edge files, or a *.net.xml")
-        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
         if self.network_sha256 is None or not is_network_path(self.network):
             fix("network_sha256", network_digest(self.network))
         elif not isinstance(self.network_sha256, str) or not re.fullmatch(r"([0-9a-f]{64})?", self.network_sha256):
@@ -227,17 +158,25 @@ class EpisodeConfig:
         if not isinstance(self.additional_sha256, str) or (self.additional_sha256 and not self.additional):
             raise ConfigError("scenario.additional_sha256", self.additional_sha256, "the digest d4sumo takes of "
                                                                                     "scenario.additional (leave it out)")
-        fix("sumo_options", _sumo_options(self.sumo_options))
+        fix("sumo_options", sumo_options(self.sumo_options))
         fix("join_m", check_number("scenario.join_m", self.join_m, 0.0, 100_000.0, "metres along the route's first edge"))
         if not isinstance(self.rebuild, bool):
             raise ConfigError("scenario.rebuild", self.rebuild, "true or false")
         if builds_network(self.network):  # node and edge files are built by netconvert: nothing else to do
             fix("rebuild", True)
+
+    def _check_clock(self) -> None:
+        """The step, the episode's duration and the warm-up."""
+        fix = self._fix
         fix("step_s", check_number("scenario.step_s", self.step_s, 0.001, 1.0, "seconds"))
         fix("duration_s", check_number("scenario.duration_s", self.duration_s, self.step_s, 3600.0, "seconds"))
         fix("warmup_s", check_number("scenario.warmup_s", self.warmup_s, 0.0, 600.0, "seconds"))
         if self.start == "warmup" and not _on_grid(self.warmup_s, self.step_s):  # read only with a warm-up
             raise ConfigError("scenario.warmup_s", self.warmup_s, f"a whole number of steps of {self.step_s:g} s")
+
+    def _check_systems(self) -> tuple[ControllerConfig, ...]:
+        """The cars, the followers' controllers (one, or one each) and their radar."""
+        fix = self._fix
         if not isinstance(self.vehicle, VehicleParams):
             raise ConfigError("vehicle", self.vehicle, "a [vehicle] table")
         if isinstance(self.controller, (list, tuple)):
@@ -270,6 +209,11 @@ class EpisodeConfig:
                                                                  "(SUMO's models sense on their own)")
             elif not _on_grid(self.radar.latency_s, self.step_s):
                 raise ConfigError("radar.latency_s", self.radar.latency_s, f"a whole number of steps of {self.step_s:g} s")
+        return controllers
+
+    def _check_world(self, controllers: tuple[ControllerConfig, ...]) -> None:
+        """The maneuver's name, the V2V channel, SUMO's traffic."""
+        fix = self._fix
         if self.maneuver not in MANEUVERS:
             raise ConfigError("scenario.maneuver", self.maneuver, f"one of {', '.join(MANEUVERS)}")
         if isinstance(self.v2v, Mapping):
@@ -305,7 +249,11 @@ class EpisodeConfig:
                 fix("traffic", dataclasses.replace(self.traffic, junction_collisions=True))  # configuration, whatever it says
         if self.v2v is not None and not self.v2v.match_radar and not self.others_cut_in:  # the radar sees the platoon's
             fix("v2v", dataclasses.replace(self.v2v, match_radar=True))  # car ahead all along: one configuration
-        fix("vehicles", self._checked_vehicles())
+
+    def _check_maneuver(self) -> None:
+        """Each car's own vehicle, the attacker's declared brake, the maneuver's settings and when an episode ends."""
+        fix = self._fix
+        fix("vehicles", car_tables(self.vehicles, self.vehicle, self.vehicle_ids, self.followers))
         declared = self.vehicle_of(0).max_decel_mps2 if self.attacker_declared_decel_mps2 is None else self.attacker_declared_decel_mps2
         fix("attacker_declared_decel_mps2", check_number("scenario.attacker_declared_decel_mps2", declared, 0.0, 20.0,
                                                          "m/s^2 (positive)", low_open=True))
@@ -376,35 +324,6 @@ class EpisodeConfig:
         """The vehicle of car ``car`` (an index into `vehicle_ids`: 0 the attacker, I the follower vI)."""
         return self.car_vehicles[car]
 
-    def _checked_vehicles(self) -> tuple[tuple[str, tuple[tuple[str, Any], ...]], ...]:
-        """The [vehicle.vI] tables, checked (a car of the platoon, keys of [vehicle], values in range) and
-        reduced to what differs from [vehicle]: a table that changes nothing is dropped."""
-        given = self.vehicles
-        if isinstance(given, Mapping):
-            given = tuple(given.items())
-        if not isinstance(given, (list, tuple)) or not all(isinstance(t, (list, tuple)) and len(t) == 2 for t in given):
-            raise ConfigError("vehicle", given, "a [vehicle.vI] table per car that differs")
-        ids = self.vehicle_ids
-        keys = [f.name for f in dataclasses.fields(VehicleParams)]
-        base = dataclasses.asdict(self.vehicle)
-        out = {}
-        for car, table in given:
-            if car not in ids:
-                raise ConfigError(f"vehicle.{car}", _short_table(table),
-                                  f"a car of this platoon: {', '.join(ids)} (v0 the attacker, v1..v{self.followers} the followers)")
-            table = dict(table) if isinstance(table, (Mapping, list, tuple)) else table
-            if not isinstance(table, dict):
-                raise ConfigError(f"vehicle.{car}", table, "a table of [vehicle] keys")
-            _check_keys(f"vehicle.{car}", table, keys)
-            try:
-                own = VehicleParams(**{**base, **table})
-            except ConfigError as exc:  # name the car's table: vehicle.v2.length_m
-                raise ConfigError(exc.field.replace("vehicle.", f"vehicle.{car}.", 1), exc.given, exc.allowed) from None
-            differs = tuple((k, v) for k, v in dataclasses.asdict(own).items() if v != base[k])
-            if differs:
-                out[car] = differs
-        return tuple(sorted(out.items(), key=lambda item: ids.index(item[0])))
-
     @property
     def controllers(self) -> tuple[ControllerConfig, ...]:
         """Each follower's controller, v1 first."""
@@ -470,43 +389,6 @@ class EpisodeConfig:
         """The attacker's maneuver (a class of `maneuvers`)."""
         return MANEUVER_CLASSES[self.maneuver]
 
-    # --- TOML/JSON round trip -----------------------------------------------------------------
-
-    def to_dict(self) -> dict:
-        scenario = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in TABLES}
-        # Keys without effect are not part of what identifies the episode.
-        if self.start != "warmup":
-            del scenario["warmup_s"]
-        if not self.sumo_driven:  # only SUMO's models read what the attacker declares
-            del scenario["attacker_declared_decel_mps2"]
-        for key in {k for m in MANEUVER_CLASSES.values() for k in m.settings} - set(self.maneuver_class.settings):
-            del scenario[key]  # a maneuver's settings have no effect on another
-        scenario = ledger.stored("scenario", scenario)  # keys added later, where they hold what earlier campaigns ran
-        if "route" in scenario:
-            scenario["route"] = list(scenario["route"])
-        if not is_network_path(self.network):  # d4sumo's own roads have no traffic lights: one configuration
-            scenario.pop("signals", None)
-        if "additional" in scenario:
-            scenario["additional"] = list(scenario["additional"])
-        if "sumo_options" in scenario:
-            scenario["sumo_options"] = dict(scenario["sumo_options"])
-        controller = (self.controller.to_dict() if isinstance(self.controller, ControllerConfig)
-                      else [c.to_dict() for c in self.controller])
-        vehicle = self.vehicle.to_dict()
-        vehicle.update({car: dict(differs) for car, differs in self.vehicles})  # [vehicle.vI]: where a car differs
-        out = {"scenario": scenario, "vehicle": vehicle, "controller": controller}
-        if self.radar is not None:  # stored where there is one: earlier campaigns keep their identity
-            out["radar"] = self.radar.to_dict()
-        if self.traffic is not None:
-            out["traffic"] = self.traffic.to_dict()
-            if not is_network_path(self.network):  # d4sumo's own roads are one edge: no junction to look into
-                out["traffic"].pop("junction_collisions", None)
-        if self.v2v is not None:
-            out["v2v"] = self.v2v.to_dict()
-            if not self.others_cut_in:  # what campaigns stored before it was a key hold (`ledger`), and the same
-                out["v2v"].pop("match_radar", None)
-        return out
-
     @property
     def others_cut_in(self) -> bool:
         """Whether a car from outside the platoon may come between a follower and the car ahead of it in the
@@ -514,205 +396,20 @@ class EpisodeConfig:
         beacons in the platoon's own topology, the attacker leading it, as before.)"""
         return self.traffic is not None
 
+    # --- TOML/JSON round trip: its definition (`definition`) ---------------------------------------
+
+    def to_dict(self) -> dict:
+        """As a campaign's definition stores it (`definition.stored`)."""
+        return definition.stored(self)
+
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "EpisodeConfig":
-        """Build from the [scenario], [vehicle] and [controller] tables of a document; [controller] may
-        be a list of tables (TOML's [[controller]]) or names, one per follower."""
-        tables = {name: dict(_table(doc, name)) for name in ("scenario", "vehicle")}
-        scenario_keys = [f.name for f in dataclasses.fields(cls) if f.name not in TABLES]
-        _check_keys("scenario", tables["scenario"], scenario_keys)
-        if tables["scenario"].get("route", None) == []:  # left out (or restored: ()), the network's one chain; given, edges
-            raise ConfigError("scenario.route", [], "a list of one edge id or more, e.g. [\"e1\", \"e2\"] (leave it out "
-                                                    "for a network of one chain of edges)")
-        # [vehicle.vI]: a car's own table (the config checks the car); any other key is one of [vehicle]
-        keys = [f.name for f in dataclasses.fields(VehicleParams)]
-        cars = {k: tables["vehicle"].pop(k) for k in list(tables["vehicle"])
-                if isinstance(tables["vehicle"][k], Mapping) and k not in keys}
-        _check_keys("vehicle", tables["vehicle"], keys + ["vI (a car's own table)"])
-        given = doc.get("controller", {})
-        if isinstance(given, (list, tuple)):
-            controller: Any = tuple(ControllerConfig.from_table(t, f"controller.v{i}") for i, t in enumerate(given, 1))
-        else:
-            controller = ControllerConfig.from_table(_table(doc, "controller"))
-        radar = RadarParams.from_table(doc["radar"]) if doc.get("radar") is not None else None
-        traffic = TrafficParams.from_table(doc["traffic"]) if doc.get("traffic") is not None else None
-        v2v = ChannelParams.from_table(doc["v2v"]) if doc.get("v2v") is not None else None
-        return cls(**tables["scenario"], vehicle=VehicleParams(**tables["vehicle"]), vehicles=tuple(cars.items()),
-                   controller=controller, radar=radar, traffic=traffic, v2v=v2v)
-
-
-def read_toml(path: str | Path, field: str = "--config") -> dict:
-    """Parse a TOML file; an unreadable, non-UTF-8 or malformed file is a ConfigError naming ``field``."""
-    p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise ConfigError(field, str(p), f"a readable TOML file ({exc.strerror})") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(field, str(p), f"a UTF-8 text file (byte {exc.start} is not UTF-8)") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(field, str(p), f"valid TOML ({exc})") from None
-
-
-def toml_value(text: str) -> Any:
-    """A flag's value as TOML reads it (number, bool, quoted string, list), else the bare string."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
-def _table(doc: Mapping[str, Any], name: str) -> Mapping[str, Any]:
-    value = doc.get(name, {})
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"[{name}]", value, "a table")
-    return value
-
-
-#: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
-TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")
-#: SUMO options given as they are (`EpisodeConfig.sumo_options`): they change what SUMO's traffic does, nothing
-#: d4sumo decides
-SUMO_OPTIONS_PASSED = ("time-to-teleport", "time-to-teleport.highways", "max-depart-delay", "ignore-route-errors",
-                       "default.speeddev", "default.action-step-length", "ignore-junction-blocker",
-                       "device.rerouting.probability", "device.rerouting.period", "routing-algorithm",
-                       "lanechange.overtake-right", "time-to-impatience", "scale", "default.carfollowmodel",
-                       "max-num-vehicles", "tls.all-off", "device.emissions.probability")
-#: ... and the options of these SUMO devices (`device.rerouting.adaptation-steps`)
-SUMO_OPTION_GROUPS_PASSED = ("device.rerouting.", "device.emissions.", "device.battery.")
-
-
-def passed_option(name: str) -> bool:
-    """Whether d4sumo gives SUMO option ``name`` as it is (`EpisodeConfig.sumo_options`)."""
-    return name in SUMO_OPTIONS_PASSED or name.startswith(SUMO_OPTION_GROUPS_PASSED)
+        """Build from the [scenario], [vehicle] and [controller] tables of a document (`definition.tables`)."""
+        return cls(**definition.tables(doc, [f.name for f in dataclasses.fields(cls) if f.name not in TABLES]))
 
 
 #: what the platoon does at a red light (`EpisodeConfig.signals`)
 SIGNAL_RULES = ("obey", "attacker_runs_red", "ignore")
-#: [scenario] keys that identify a campaign's inputs (its road's files' digest), not describe its scenario
-IDENTITY_KEYS = ("network_sha256", "additional_sha256")
-
-
-#: the names of SUMO's network files (netconvert's, netgenerate's, SUMO's own examples': compressed)
-NETWORK_FILE_SUFFIXES = (".net.xml", ".net.xml.gz")
-
-
-def _shipped_variants() -> Path:
-    # Installed, the variants are data inside the package (pyproject.toml maps sumo_scenarios/ to
-    # d4sumo/sumo_scenarios). Run from a checkout, or an editable install, they are the folder beside it.
-    package = Path(__file__).resolve().parent.parent
-    inside = package / "sumo_scenarios"
-    return inside if inside.is_dir() else package.parent / "sumo_scenarios"
-
-
-#: The variants shipped with d4sumo (a folder of data).
-SCENARIOS_DIR = _shipped_variants()
-
-
-def is_network_path(network: str) -> bool:
-    """Whether a network is named by a path, not by a shipped variant's name (which is taken first, as
-    `engine.networks.scenario_folder` does)."""
-    return "/" in network or os.sep in network or not (SCENARIOS_DIR / network).is_dir()
-
-
-def builds_network(network: str) -> bool:
-    """Whether the road of ``network`` is built by netconvert from node and edge files: a shipped variant, or a folder
-    of them. A network file, or a folder holding one and nothing else, may run as given (`EpisodeConfig.rebuild`)."""
-    if not is_network_path(network):
-        return True
-    path = Path(network).expanduser()
-    if path.name.endswith(NETWORK_FILE_SUFFIXES) or not path.is_dir():  # (a folder no longer there: as stored)
-        return False
-    nodes, edges, nets = folder_files(path)
-    return not (not nodes and not edges and len(nets) == 1)
-
-
-def network_files(network: str) -> list[Path]:
-    """The files a network path names, those its road is built from: a network file, or a folder's node and
-    edge files, else its one network file (none for a shipped variant's name, or a path with none there)."""
-    if not is_network_path(network):
-        return []
-    path = Path(network).expanduser()
-    if path.is_file():
-        return [path]
-    if not path.is_dir():
-        return []
-    nodes, edges, nets = folder_files(path)
-    return sorted(nodes + edges) if len(nodes) == 1 and len(edges) == 1 else sorted(nodes + edges + nets)
-
-
-def folder_files(folder: Path) -> tuple[list[Path], list[Path], list[Path]]:
-    """A road folder's node, edge and network files, each sorted: a road is one node and one edge file, or one
-    network file (`engine.networks` builds it from them)."""
-    return tuple(sorted(f for pattern in patterns for f in folder.glob(pattern) if f.is_file())
-                 for patterns in (("*.nod.xml",), ("*.edg.xml",), tuple(f"*{s}" for s in NETWORK_FILE_SUFFIXES)))
-
-
-def files_digest(field: str, paths) -> str:
-    """sha256 over files' bytes, in order; an unreadable file is a ConfigError naming ``field`` and it."""
-    digest = hashlib.sha256()
-    for path in paths:
-        try:
-            digest.update(Path(path).read_bytes())
-        except OSError as exc:
-            raise ConfigError(field, path, f"a readable file ({exc.strerror or exc})") from None
-        digest.update(b"\0")
-    return digest.hexdigest()
-
-
-def _sumo_options(options: Any) -> tuple[tuple[str, str], ...]:
-    """SUMO options to give as they are, by name (`sumocfg.PASSED`), as sorted (name, value) pairs of strings."""
-    pairs = options.items() if isinstance(options, Mapping) else options
-    try:
-        pairs = [(k, v) for k, v in pairs]
-    except (TypeError, ValueError):
-        raise ConfigError("scenario.sumo_options", options, "a table of SUMO options, e.g. {time-to-teleport = \"-1\"}") from None
-    for name, value in pairs:
-        if not passed_option(name):
-            raise ConfigError(f"scenario.sumo_options.{name}", value, f"an option d4sumo can honour, one of "
-                              f"{', '.join([*SUMO_OPTIONS_PASSED, *(g + '*' for g in SUMO_OPTION_GROUPS_PASSED)])}")
-        if not isinstance(value, (str, int, float)) or isinstance(value, bool):
-            raise ConfigError(f"scenario.sumo_options.{name}", value, "a value as SUMO takes it (a string or a number)")
-    return tuple(sorted((k, str(v)) for k, v in pairs))
-
-
-def network_digest(network: str) -> str:
-    """sha256 over the files a network path names (a *.net.xml, or a folder's node, edge and network files, by
-    name); "" for a shipped variant's name (a name without a "/": d4sumo's own roads, versioned with it) and a
-    path with no such files."""
-    files = network_files(network)
-    try:
-        if len(files) == 1:
-            return file_sha256(files[0])
-        return hashlib.sha256("".join(f"{f.name}\0{file_sha256(f)}\0" for f in files).encode()).hexdigest() if files else ""
-    except OSError as exc:
-        raise ConfigError("scenario.network", network, f"a road whose files can be read ({exc.strerror or exc}: "
-                                                       f"{exc.filename})") from None
-
-
-def _short_table(table: Any) -> Any:
-    return dict(table) if isinstance(table, (list, tuple)) and all(isinstance(t, (list, tuple)) and len(t) == 2 for t in table) else table
-
-
-def _check_keys(section: str, table: Mapping[str, Any], allowed: list[str]) -> None:
-    for key in table:
-        if key not in allowed:
-            raise ConfigError(f"{section}.{key}", table[key], f"a key of [{section}]: {', '.join(allowed)}")
-
-
-def _listens(controller: ControllerConfig) -> bool | None:
-    """Whether a follower's controller reads V2V beacons (its class's ``listens``); None where a user's
-    class may not be imported here (`plugins.names_only`: a stored definition says what it had)."""
-    if controller.sumo_model:
-        return carfollowing.listens(controller.sumo_model, dict(controller.params))
-    try:
-        return bool(getattr(controller.controller_class(), "listens", False))
-    except NotImported:
-        return None
 
 
 def _on_grid(value: float, step: float) -> bool:

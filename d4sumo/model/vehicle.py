@@ -10,9 +10,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any, Mapping
 
 from .. import ledger
-from ..errors import ConfigError, check_number
+from ..errors import ConfigError, check_keys, check_number
 
 #: SUMO's classes of road vehicle (its vClass): a lane's permissions say which may drive on it
 VEHICLE_CLASSES = ("passenger", "private", "taxi", "hov", "emergency", "authority", "army", "vip", "evehicle", "delivery",
@@ -104,3 +105,36 @@ class Actuator:
         # wind up while the car stands still or rides the speed limit.
         self.accel_mps2 = (v - speed_mps) / self.step_s + drag
         return v
+
+
+def car_tables(given: Any, vehicle: VehicleParams, ids: tuple[str, ...], followers: int) -> tuple[tuple[str, tuple], ...]:
+    """The [vehicle.vI] tables (a mapping, or (car id, table) pairs), checked (a car of the platoon, whose ids are
+    ``ids``, keys of [vehicle], values in range) and reduced to what differs from ``vehicle``: a table that
+    changes nothing is dropped."""
+    if isinstance(given, Mapping):
+        given = tuple(given.items())
+    if not isinstance(given, (list, tuple)) or not all(isinstance(t, (list, tuple)) and len(t) == 2 for t in given):
+        raise ConfigError("vehicle", given, "a [vehicle.vI] table per car that differs")
+    keys = [f.name for f in dataclasses.fields(VehicleParams)]
+    base = dataclasses.asdict(vehicle)
+    out = {}
+    for car, table in given:
+        if car not in ids:
+            raise ConfigError(f"vehicle.{car}", _short_table(table),
+                              f"a car of this platoon: {', '.join(ids)} (v0 the attacker, v1..v{followers} the followers)")
+        table = dict(table) if isinstance(table, (Mapping, list, tuple)) else table
+        if not isinstance(table, dict):
+            raise ConfigError(f"vehicle.{car}", table, "a table of [vehicle] keys")
+        check_keys(f"vehicle.{car}", table, keys)
+        try:
+            own = VehicleParams(**{**base, **table})
+        except ConfigError as exc:  # name the car's table: vehicle.v2.length_m
+            raise ConfigError(exc.field.replace("vehicle.", f"vehicle.{car}.", 1), exc.given, exc.allowed) from None
+        differs = tuple((k, v) for k, v in dataclasses.asdict(own).items() if v != base[k])
+        if differs:
+            out[car] = differs
+    return tuple(sorted(out.items(), key=lambda item: ids.index(item[0])))
+
+
+def _short_table(table: Any) -> Any:
+    return dict(table) if isinstance(table, (list, tuple)) and all(isinstance(t, (list, tuple)) and len(t) == 2 for t in table) else table

@@ -8,7 +8,8 @@ import csv
 import dataclasses
 from typing import Any, TextIO
 
-from ..model.config import IDENTITY_KEYS, EpisodeConfig
+from ..model.config import EpisodeConfig
+from ..model.definition import IDENTITY_KEYS
 from ..search.campaign import Campaign
 from ..search.store import Store
 from .records import system_label

@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ..errors import ConfigError
-from ..model.config import IDENTITY_KEYS, TABLES, EpisodeConfig
+from ..model.config import EpisodeConfig
+from ..model.definition import IDENTITY_KEYS, TABLES
 from ..model.plugins import names_only
 from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 

@@ -17,7 +17,8 @@ from typing import Any
 from .. import ledger
 from ..errors import ConfigError, NotSimulable, check_int, check_number
 from ..model.attacks import FAMILY_CLASSES, AttackFamily, make_attack, resolve_attack_options
-from ..model.config import EpisodeConfig, network_digest
+from ..model.config import EpisodeConfig
+from ..model.network import network_digest
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
 from ..model.messages import MESSAGE_KEYS, attack_box, lie_label

@@ -18,6 +18,7 @@ from ..engine.scenarios import MAX_COPIES, NetworkSource, Road, batch_road, buil
 from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
+from ..model.config import EpisodeConfig
 from ..model.maneuvers import AttackPlan, attack_plan
 from ..model.trace import Episode
 from .campaign import Campaign, CampaignSummary, SampleResult

@@ -15,7 +15,7 @@ from ..engine.scenarios import build_road
 from ..engine.simulation import check_episode, check_traffic
 from ..errors import ConfigError
 from ..inputs import campaign_of, check_document, with_overrides
-from ..model.config import read_toml
+from ..tomlfiles import read_toml
 from ..model.maneuvers import MANEUVERS
 from ..search.campaign import Campaign
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER
