@@ -65,7 +65,8 @@ from d4sumo.model.attacks import FAMILIES
 from d4sumo.model.batch import batch_key
 from d4sumo.model.bodies import Body, body_gap_m
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import CAR_WIDTH_M, attack_plan, lane_pairs, maneuver_of, occupied_lanes
+from d4sumo.model.maneuvers import attack_plan, maneuver_of
+from d4sumo.model.lanes import CAR_WIDTH_M, lane_pairs, occupied_lanes
 from d4sumo.model.messages import MESSAGE_ATTACKS, MESSAGE_FIELDS
 from d4sumo.model.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store

@@ -5,7 +5,8 @@ lane-changing attacker, in each lane it covers. The pairs the step loop scores, 
 from __future__ import annotations
 
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import FREE_ROAD_GAP_M, Pair, lane_pairs, occupied_lanes
+from ..model.maneuvers import Pair
+from ..model.lanes import FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
 from .calls import vehicle_call
 from .scenarios import Road
 
@@ -83,7 +84,7 @@ class _TrafficSense:
 class _LateralTrafficSense:
     """Who follows whom among traffic when the attacker changes lanes (`maneuvers.LaneChange`, a road of
     one edge): in every lane each car covers (from its lateral position, a car changing lanes covering
-    both), the nearest cars, a traffic car included (`maneuvers.lane_pairs`: the arithmetic of the
+    both), the nearest cars, a traffic car included (`lanes.lane_pairs`: the arithmetic of the
     maneuver alone, bit for bit, between cars of the platoon). The traffic cars that may be next to a car
     of the platoon are SUMO's: its leader and follower, and its leaders and followers in the lanes beside
     it. Returns what `_TrafficSense` returns."""

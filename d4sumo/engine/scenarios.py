@@ -42,7 +42,7 @@ class Road:
     #: its lanes: positions along the route in different lanes are then comparable (lane changes need it)
     even_lanes: bool = True
     #: the widths of the lanes the platoon may use (0 .. lanes - 1) along the route, narrowest first: a lane
-    #: change reads lanes of one width (`maneuvers.occupied_lanes`)
+    #: change reads lanes of one width (`lanes.occupied_lanes`)
     lane_widths_m: tuple[float, ...] = (3.2,)  # SUMO's default
     #: lane index -> {vehicle class: the first edge of the route whose lane of that index it may not use}
     closed_to: tuple[tuple[tuple[str, str], ...], ...] = ()

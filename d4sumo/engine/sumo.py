@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import SumoError
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import CAR_WIDTH_M, maneuver_of, occupied_lanes
+from ..model.maneuvers import maneuver_of
+from ..model.lanes import CAR_WIDTH_M, occupied_lanes
 from ..model.carfollowing import beacon_parameters, vehicle_data
 from ..model.platoon import followers_of
 from ..model.vehicle import VehicleParams

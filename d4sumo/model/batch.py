@@ -22,7 +22,8 @@ import numpy as np
 from .config import EpisodeConfig
 from .arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per_row
 from .control import CruiseControl
-from .maneuvers import FREE_ROAD_GAP_M, Pair, maneuver_of
+from .maneuvers import Pair, maneuver_of
+from .lanes import FREE_ROAD_GAP_M
 from .commands import checked_command
 from .platoon import Platoon, PythonFollower, cruise_params, followers_of
 from .recording import assemble_trace

@@ -26,74 +26,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from ..errors import ConfigError
 from .attacks import AttackFamily, Parameter
-from .vehicle import VehicleParams
-
-#: the gap a car with nobody ahead in its lane sees [m]: beyond any ACC's range, and finite for rtamt
-FREE_ROAD_GAP_M = 1000.0
-#: car width [m] (SUMO's passenger car): how much of a lane a car changing lanes covers
-CAR_WIDTH_M = 1.8
-#: a car occupies a lane when it overlaps it by more than this [m]: a body exactly on the line does not
-LANE_TOLERANCE_M = 1e-6
-
-Pair = tuple[int, int, float]  # (leader index, follower index, bumper gap [m])
-
-
-class EpisodeSettings(Protocol):
-    """What a maneuver reads of an episode's configuration. `config.EpisodeConfig` is one: it checks each
-    maneuver's settings, so it imports the maneuvers, and they know it by what they read."""
-
-    @property
-    def followers(self) -> int: ...
-    @property
-    def join_m(self) -> float: ...
-    @property
-    def setpoint_m(self) -> float: ...
-    @property
-    def speed_mps(self) -> float: ...
-    @property
-    def start(self) -> str: ...
-    @property
-    def step_s(self) -> float: ...
-    @property
-    def steps(self) -> int: ...
-    @property
-    def duration_s(self) -> float: ...
-    @property
-    def warmup_s(self) -> float: ...
-    @property
-    def attack_start_step(self) -> int: ...
-    @property
-    def attack_start_s(self) -> float: ...
-    @property
-    def maneuver(self) -> str: ...
-    @property
-    def maneuver_class(self) -> type[Maneuver]: ...
-    @property
-    def vehicle_ids(self) -> tuple[str, ...]: ...
-    @property
-    def car_vehicles(self) -> tuple[VehicleParams, ...]: ...
-    def vehicle_of(self, car: int) -> VehicleParams: ...
-    @property
-    def cutin_follower(self) -> int: ...
-    @property
-    def cutin_offset_m(self) -> float: ...
-    @property
-    def obstacle_distance_m(self) -> float: ...
-    @property
-    def obstacle_speed_mps(self) -> float: ...
-    @property
-    def swerve_knots(self) -> int: ...
-    @property
-    def swerve_lanes(self) -> int: ...
-    @property
-    def lane(self) -> int | None: ...
-
+from .lanes import Pair, lane_pairs
+from .settings import EpisodeSettings
 
 @dataclass(frozen=True)
 class Car:
@@ -123,15 +63,6 @@ def initial_state(config: EpisodeSettings, front: int = 0) -> tuple[list[float],
 
 #: The rearmost car's rear bumper starts this far from the road's start [m], unless scenario.join_m says.
 REAR_START_M = 10.0
-
-
-def occupied_lanes(y_m: float, lane_width_m: float) -> tuple[int, ...]:
-    """The lanes a car whose centre is ``y_m`` from the road's right edge covers."""
-    half = CAR_WIDTH_M / 2.0
-    low = max(0, math.floor((y_m - half) / lane_width_m))
-    high = math.floor((y_m + half) / lane_width_m)
-    return tuple(j for j in range(low, high + 1)
-                 if min(y_m + half, (j + 1) * lane_width_m) - max(y_m - half, j * lane_width_m) > LANE_TOLERANCE_M)
 
 
 class Maneuver:
@@ -208,23 +139,6 @@ class LaneChange(Maneuver):
         if lanes is None:
             raise ValueError("a lane-changing maneuver needs each car's lanes")
         return lane_pairs(positions, lanes, self.lengths_m)
-
-
-def lane_pairs(positions: Sequence[float], lanes: Sequence[tuple[int, ...]], lengths_m: Sequence[float],
-               apart: int | None = None) -> list[Pair]:
-    """(leader, follower, gap) of the cars next to each other in each lane they cover, frontmost first;
-    ``apart``: cars from this index on are others' (traffic), and a pair of two of them is left out."""
-    by_lane: dict[int, list[int]] = {}
-    for i, covered in enumerate(lanes):
-        for lane in covered:
-            by_lane.setdefault(lane, []).append(i)
-    found = set()
-    for cars in by_lane.values():
-        cars.sort(key=lambda i: (-positions[i], i))
-        found.update(zip(cars, cars[1:]))
-    if apart is not None:
-        found = {(a, b) for a, b in found if a < apart or b < apart}
-    return sorted(((a, b, positions[a] - lengths_m[a] - positions[b]) for a, b in found), key=lambda p: (-positions[p[1]], p))
 
 
 class CutIn(LaneChange):

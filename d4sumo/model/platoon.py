@@ -27,7 +27,8 @@ from .plugins import observer
 from .signals import SignalDriver, light_code
 from .vehicle import Actuator, acceleration_to_command
 from .sensing import sensed_command
-from .maneuvers import CAR_WIDTH_M, FREE_ROAD_GAP_M, REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
+from .maneuvers import REAR_START_M, Pair, initial_state, maneuver_of  # noqa: F401 (re-exported)
+from .lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M
 from .recording import _hold_last, assemble_trace, sent_signals  # noqa: F401 (assemble_trace: importable from here too)
 from .trace import Collision, Trace, rows_array
 from .v2v import Channel

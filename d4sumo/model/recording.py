@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from .config import EpisodeConfig
-from .maneuvers import FREE_ROAD_GAP_M, Pair
+from .maneuvers import Pair
+from .lanes import FREE_ROAD_GAP_M
 from .trace import Trace
 from .traffic import TRAFFIC_ID
 

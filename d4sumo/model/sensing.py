@@ -3,7 +3,7 @@
 Pure code, no SUMO. The world senses the truth (who is ahead in the follower's lane, the bumper gap, its
 speed: `maneuvers`); the follower's `Radar` turns it into what the car's controller gets, as an ACC's
 radar does:
-- a range: a car ahead beyond it is not seen (a free road: `maneuvers.FREE_ROAD_GAP_M`, and the car's
+- a range: a car ahead beyond it is not seen (a free road: `lanes.FREE_ROAD_GAP_M`, and the car's
   own speed for the speed ahead, as with nobody ahead);
 - noise: Gaussian, on the gap and on the speed of the car ahead, drawn from a generator seeded by the
   [radar] table's seed and the car: the same sequence of draws in every episode of a configuration, one
@@ -28,7 +28,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from ..errors import ConfigError, check_int, check_number, table_of
-from .maneuvers import FREE_ROAD_GAP_M
+from .lanes import FREE_ROAD_GAP_M
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ import numpy as np
 from ..engine.netconvert import opendrive_output
 from ..errors import ConfigError
 from ..model.fmu import SIGNALS, is_fmu
-from ..model.maneuvers import CAR_WIDTH_M
+from ..model.lanes import CAR_WIDTH_M
 from ..model.trace import Collision
 from ..model.traffic import is_traffic
 from ..search.store import campaign_key

@@ -181,7 +181,8 @@ def test_a_swerving_attacker_among_traffic_senses_and_is_sensed_in_every_lane_it
     cars in each lane, traffic included) is what the followers and the attacker sensed, every sample."""
     from d4sumo.model.attacks import make_attack
     from d4sumo.model.config import ControllerConfig
-    from d4sumo.model.maneuvers import attack_plan, lane_pairs, maneuver_of, occupied_lanes
+    from d4sumo.model.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.lanes import lane_pairs, occupied_lanes
 
     config = EpisodeConfig(network="highway_3lane_120kmh", maneuver="swerve", start="steady", speed_mps=28.0,
                            controller=ControllerConfig("timegap"), duration_s=40.0, traffic={"vehicles_per_hour": 1200})

@@ -21,7 +21,7 @@ from d4sumo.model.arrays import ActuatorArray, SwitchingArray
 from d4sumo.model.commands import checked_command
 from d4sumo.model.control import (GAP_TOLERANCE_M, SPEED_TOLERANCE_MPS, SwitchingController, SwitchingParams, TimeGapController,
                                   TimeGapParams)
-from d4sumo.model.maneuvers import FREE_ROAD_GAP_M
+from d4sumo.model.lanes import FREE_ROAD_GAP_M
 from d4sumo.model.vehicle import Actuator, VehicleParams
 
 pytestmark = pytest.mark.skipif(compiled.Followers is None, reason="the extension was not built (no C compiler)")

@@ -8,8 +8,8 @@ import pytest
 from d4sumo.errors import ConfigError
 from d4sumo.model.attacks import make_attack
 from d4sumo.model.config import EpisodeConfig
-from d4sumo.model.maneuvers import (CAR_WIDTH_M, FREE_ROAD_GAP_M, CutIn, CutOut, Maneuver, attack_plan, inert_parameters, maneuver_of,
-                                    occupied_lanes)
+from d4sumo.model.lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M, occupied_lanes
+from d4sumo.model.maneuvers import CutIn, CutOut, Maneuver, attack_plan, inert_parameters, maneuver_of
 from d4sumo.model.platoon import Platoon, collisions_at
 from d4sumo.model.trace import Episode
 from d4sumo.search.campaign import Campaign

@@ -15,7 +15,7 @@ from d4sumo.engine.ballistic import integrate
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.control import SwitchingController, register_controller
-from d4sumo.model.maneuvers import FREE_ROAD_GAP_M
+from d4sumo.model.lanes import FREE_ROAD_GAP_M
 from d4sumo.model.sensing import Observation, Radar, RadarParams, sensed_command
 
 KNOTS = [0.2, -0.5, 0.3, -0.8, 0.5, 0.5, 0.5, 0.5, 0.5]  # one every 6 s, the last held
