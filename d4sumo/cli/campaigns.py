@@ -49,12 +49,23 @@ def _as_earlier_versions_ran(campaign):
 
 
 def cmd_falsify(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    """A campaign: checked before anything is written, run (resumed where one is stored), summarised."""
+    campaign, evaluator = _falsify_inputs(args)
+    summary, counts = _run_falsify(args, campaign, evaluator)
+    result, nearest, without = _falsify_result(args, campaign, evaluator, summary, counts)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        _say_falsify(args, campaign, summary, counts, nearest, without)
+    return 0
 
+
+def _falsify_inputs(args: argparse.Namespace):
+    """The campaign and its evaluator, every input checked (the formula parsed, the road built): it fails before
+    writing anything."""
     from ..engine.simulation import check_traffic
     from ..inputs import campaign_of
-    from ..search.campaign import open_store
-    from ..search.runner import Evaluator, run_campaign
+    from ..search.runner import Evaluator
 
     doc, _ = document(args)
     campaign = campaign_of(doc)
@@ -66,6 +77,16 @@ def cmd_falsify(args: argparse.Namespace) -> int:
         print(f"d4sumo: note: the options of {', '.join(f'[search.{k}]' for k in unused)} are unused: this campaign runs "
               f"{campaign.optimizer} (--optimizer {unused[0]} runs {unused[0]})", file=sys.stderr)
     check_batch(args.batch)
+    return campaign, evaluator
+
+
+def _run_falsify(args: argparse.Namespace, campaign, evaluator):
+    """The campaign run into its database with a progress bar: its summary and its outcomes counted."""
+    from tqdm import tqdm
+
+    from ..search.campaign import open_store
+    from ..search.runner import run_campaign
+
     counts = {"success": 0, "attacker_crash": 0, "no_crash": 0, "error": 0}
     best = [None]
     with open_store(args.db) as store, contextlib.ExitStack() as stack:
@@ -105,6 +126,11 @@ def cmd_falsify(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             exc.said = True  # main need not say it again
             raise
+    return summary, counts
+
+
+def _falsify_result(args: argparse.Namespace, campaign, evaluator, summary, counts):
+    """What `--json` prints, with how near the traffic came and what it does without the attack (among traffic)."""
     top = summary.best
     nearest = None
     if campaign.config.traffic is not None:  # how near the traffic came to each car of the platoon
@@ -133,9 +159,12 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             "params": list(top.params), "collision": top.collision,
         },
     }
-    if args.json:
-        print(json.dumps(result, indent=2))
-        return 0
+    return result, nearest, without
+
+
+def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, without) -> None:
+    """The summary in words."""
+    top = summary.best
     config = campaign.config
     attack = f"{config.maneuver}, {campaign.attack}" if config.maneuver_class.lateral else campaign.attack
     if campaign.lie:
@@ -168,7 +197,6 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             print(f"  first collision: {collision_text(top.collision)}")
         print(f"  params: {params_text(campaign.family(), top.params)}")
         print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
-    return 0
 
 
 def params_text(family, params) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..engine.scenarios import MAX_COPIES
-from ..errors import ConfigError, D4sumoError
+from ..errors import ConfigError
 from ..tomlfiles import toml_value
 from ..model.maneuvers import MANEUVERS
 

@@ -77,14 +77,29 @@ def _add_batch_option(p) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line: one subcommand each, its options in its own function below."""
     parser = Parser(prog="d4sumo", description="Adversarial driving maneuvers against ACC platoons, on SUMO.")
     parser.add_argument("--version", action="version", version=f"d4sumo {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    _add_scenarios(sub)
+    _add_simulate(sub)
+    _add_falsify(sub)
+    _add_sweep(sub)
+    _add_report(sub)
+    _add_plot(sub)
+    _add_replay(sub)
+    _add_export(sub)
+    _add_build_fmu(sub)
+    return parser
 
+
+def _add_scenarios(sub) -> None:
     p = sub.add_parser("scenarios", help="list the network variants shipped with d4sumo")
     p.set_defaults(func=cmd_scenarios)
 
+
+def _add_simulate(sub) -> None:
     p = sub.add_parser("simulate", help="play one episode and summarise it")
     _add_episode_options(p)
     g = p.add_argument_group("attack (with none, the attacker cruises at the target speed)")
@@ -102,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--gui", action="store_true", help="watch the episode in sumo-gui (needs a display)")
     p.set_defaults(func=cmd_simulate)
 
+
+def _add_falsify(sub) -> None:
     p = sub.add_parser("falsify", help="run a campaign: search for attacks that make the followers crash")
     _add_episode_options(p)
     g = p.add_argument_group("search")
@@ -118,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a machine-readable summary")
     p.set_defaults(func=cmd_falsify)
 
+
+def _add_sweep(sub) -> None:
     p = sub.add_parser("sweep", help="run a grid of campaigns (local processes or a Dask cluster); resumable")
     p.add_argument("sweep", type=Path, help="sweep file (TOML: [grid] of lists, [search] samples, fixed tables)")
     p.add_argument("--db", type=Path, default=Path("results.sqlite"), help="results database [results.sqlite]")
@@ -133,6 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 
+
+def _add_report(sub) -> None:
     p = sub.add_parser("report", help="HTML report: the paper's tables, heatmaps, time-space diagrams, clusters")
     p.add_argument("db", type=Path, nargs="+", help="results database(s)")
     p.add_argument("--out", type=Path, default=Path("report"), help="folder for index.html and figures [report]")
@@ -140,6 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_report)
 
+
+def _add_plot(sub) -> None:
     p = sub.add_parser("plot", help="draw one figure: time-space, accel, heatmap or clusters")
     p.add_argument("kind", choices=("time-space", "accel", "heatmap", "clusters"))
     p.add_argument("db", type=Path, nargs="+", help="results database(s)")
@@ -153,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", type=float, help="only this target speed in m/s")
     p.set_defaults(func=cmd_plot)
 
+
+def _add_replay(sub) -> None:
     p = sub.add_parser("replay", help="re-simulate one stored sample and check that it reproduces (exit 1 if not; FCD, sumo-gui)")
     p.add_argument("db", type=Path, help="results database")
     p.add_argument("sample", type=int, help="sample id (as printed by falsify and export)")
@@ -166,6 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "exported road.xodr, which netconvert imports)")
     p.set_defaults(func=cmd_replay)
 
+
+def _add_export(sub) -> None:
     p = sub.add_parser("export", help="write stored samples to CSV, or one as OpenSCENARIO and OpenDRIVE")
     p.add_argument("db", type=Path, help="results database")
     p.add_argument("sample", type=int, nargs="?", help="a sample id (with --openscenario)")
@@ -175,8 +202,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the sample's road (DIR/road.xodr) and episode (DIR/scenario.xosc, OpenSCENARIO 1.2)")
     p.set_defaults(func=cmd_export)
 
+
+def _add_build_fmu(sub) -> None:
     p = sub.add_parser("build-fmu", help="build the paper's switching controller as an FMU for this machine (CMake, a C compiler)")
     p.add_argument("--fmi", type=int, default=2, help="FMI version: 2 or 3 [2]")
     p.add_argument("--out", type=Path, default=Path("switching.fmu"), help="the FMU file to write [switching.fmu]")
     p.set_defaults(func=cmd_build_fmu)
-    return parser

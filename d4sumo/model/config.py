@@ -14,7 +14,6 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .. import ledger
 from ..errors import ConfigError, check_int, check_number
 from . import carfollowing
 from .control import SwitchingParams

@@ -302,7 +302,6 @@ class Platoon:
         """Commands for step k from the sensed state and the maneuver's ``pairs`` (who follows whom in
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
-        u = self.attack_u[k]
         if self._one_ahead or not self._python and self._attacker_driver is None:
             ahead = None  # the column (car i follows car i - 1, at pair i - 1's gap), or nobody Python commands asks
         else:
@@ -311,6 +310,38 @@ class Platoon:
                 if b not in ahead or gap < ahead[b][1]:
                     ahead[b] = (a, gap)
         speed = speeds[0]
+        u = self._attacker_command(k, speed, speeds, ahead)
+        stops = self.stops
+        if self._lit:  # on a route through traffic lights: what each car sees of the next one, recorded
+            self.lights.append([light_code(stop) for stop in stops] if stops else self._dark)
+        if 0 in self._drivers:  # its driver stops it for red, attacking or not
+            u = min(u, self._drivers[0].limit(stops[0] if stops else None, speed))
+        commands = [u]
+        new_speeds = [self.attacker_actuator.apply(u, speed)]
+        if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
+            v = self._motion[k]
+            commands[0] = acceleration_to_command((v - speed) / self.config.step_s, self.attacker_vehicle)
+            new_speeds[0] = v
+        self._followers_advance(k, positions, speeds, pairs, ahead, commands, new_speeds)
+        for i, cruise, actuator, vehicle in self._others:
+            if cruise is None:  # the obstacle holds its speed
+                commands.append(0.0)
+                new_speeds.append(self.config.obstacle_speed_mps)
+                continue
+            c = acceleration_to_command(cruise.acceleration(speeds[i]), vehicle)
+            if i in self._drivers:
+                c = min(c, self._drivers[i].limit(stops[i] if stops else None, speeds[i]))
+            commands.append(c)
+            new_speeds.append(actuator.apply(c, speeds[i]))
+        self.commands.append(commands)
+        if self._with_mode and self._compiled is None:
+            self.modes.append([c.mode for c in self._with_mode])
+        return new_speeds
+
+    def _attacker_command(self, k: int, speed: float, speeds: list[float], ahead: dict | None) -> float:
+        """The attacker's pedal at step k: its attack, or where the signal is NaN its cruise (among traffic, a
+        careful driver's behind what is ahead; with the authors' code's options, their controller's)."""
+        u = self.attack_u[k]
         if self._attacker_driver is not None and u != u:  # in traffic, between attacks: it follows what is ahead
             if self._attacking:
                 self._attacker_driver.cruise.reset()
@@ -329,17 +360,11 @@ class Platoon:
             u = acceleration_to_command(self.attacker_cruise.acceleration(speed), self.attacker_vehicle)
         else:
             self._attacking = True
-        stops = self.stops
-        if self._lit:  # on a route through traffic lights: what each car sees of the next one, recorded
-            self.lights.append([light_code(stop) for stop in stops] if stops else self._dark)
-        if 0 in self._drivers:  # its driver stops it for red, attacking or not
-            u = min(u, self._drivers[0].limit(stops[0] if stops else None, speed))
-        commands = [u]
-        new_speeds = [self.attacker_actuator.apply(u, speed)]
-        if self._motion is not None:  # it drives as the motion says; the trace keeps the pedal that asks for it
-            v = self._motion[k]
-            commands[0] = acceleration_to_command((v - speed) / self.config.step_s, self.attacker_vehicle)
-            new_speeds[0] = v
+        return u
+
+    def _followers_advance(self, k: int, positions: list[float], speeds: list[float], pairs: list[Pair], ahead: dict | None,
+                           commands: list[float], new_speeds: list[float]) -> None:
+        """Each follower Python commands: its command and its speed at the step's end, appended (in C where they may be)."""
         channel = self.channel
         if self._compiled is not None:  # its followers' modes too
             self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
@@ -367,20 +392,6 @@ class Platoon:
                     c = checked_command(c, i, k)
                 commands.append(c)
                 new_speeds.append(apply(c, speeds[i]))
-        for i, cruise, actuator, vehicle in self._others:
-            if cruise is None:  # the obstacle holds its speed
-                commands.append(0.0)
-                new_speeds.append(self.config.obstacle_speed_mps)
-                continue
-            c = acceleration_to_command(cruise.acceleration(speeds[i]), vehicle)
-            if i in self._drivers:
-                c = min(c, self._drivers[i].limit(stops[i] if stops else None, speeds[i]))
-            commands.append(c)
-            new_speeds.append(actuator.apply(c, speeds[i]))
-        self.commands.append(commands)
-        if self._with_mode and self._compiled is None:
-            self.modes.append([c.mode for c in self._with_mode])
-        return new_speeds
 
     def _feed_sumo(self) -> None:
         """The step's beacons for SUMO's cooperative followers: the newest of each car each reads, where one is new."""

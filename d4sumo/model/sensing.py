@@ -27,7 +27,7 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from ..errors import ConfigError, check_int, check_number, table_of
+from ..errors import check_int, check_number, table_of
 from .lanes import FREE_ROAD_GAP_M
 
 

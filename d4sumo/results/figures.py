@@ -142,29 +142,9 @@ def heatmaps_figure(panels: Sequence[tuple[str | tuple[str, str], Sequence[Recor
 
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import Normalize
     from matplotlib.ticker import MaxNLocator
 
-    every = [r for _, rs in panels for r in rs]
-    setpoints = sorted({r.setpoint_m for r in every})
-    speeds = sorted({r.speed_mps for r in every})
-    grids = []
-    for _, rs in panels:
-        _, _, wins = success_grid(rs, setpoints, speeds)
-        samples = np.zeros_like(wins)
-        for r in rs:
-            samples[setpoints.index(r.setpoint_m), speeds.index(r.speed_mps)] += 1
-        grids.append((wins, samples))
-    budgets = {int(n) for _, samples in grids for n in samples.ravel() if n}
-    same_budget = len(budgets) == 1
-    if same_budget:  # counts compare like with like
-        values = [wins.astype(float) for wins, _ in grids]
-        norm = Normalize(0, max(1, max(int(w.max()) for w, _ in grids)))
-        note, label = f"{count_noun(budgets.pop(), 'sample')} per cell", "successful attacks"
-    else:  # counts of different budgets do not: colour the share
-        values = [100.0 * np.divide(wins, samples, out=np.zeros(wins.shape), where=samples > 0) for wins, samples in grids]
-        norm = Normalize(0, max(1.0, max(float(v.max()) for v in values)))
-        note, label = "cells: successes/samples; cells ran different numbers of samples", "successful attacks [% of samples]"
+    setpoints, speeds, grids, values, norm, same_budget, note, label = _success_values(panels)
     cmap = colormaps[SUCCESS_CMAP].with_extremes(bad="0.88")
     places, row_labels, column_titles = _layout(panels, max(1, min(columns, len(panels))))
     rows, columns = max(r for r, _ in places) + 1, max(c for _, c in places) + 1
@@ -215,6 +195,34 @@ def heatmaps_figure(panels: Sequence[tuple[str | tuple[str, str], Sequence[Recor
         bar.update_ticks()
     fig.suptitle(textwrap.fill(f"{title} ({note})", int(fig.get_figwidth() * 72 / (0.55 * 10))), fontsize=10)
     return fig
+
+
+def _success_values(panels):
+    """Each panel's successes and samples per (setpoint, target speed) cell over the axes every panel shares, the
+    values its colours show (counts where every cell ran alike, else shares) on one colour range, and what they are."""
+    from matplotlib.colors import Normalize
+
+    every = [r for _, rs in panels for r in rs]
+    setpoints = sorted({r.setpoint_m for r in every})
+    speeds = sorted({r.speed_mps for r in every})
+    grids = []
+    for _, rs in panels:
+        _, _, wins = success_grid(rs, setpoints, speeds)
+        samples = np.zeros_like(wins)
+        for r in rs:
+            samples[setpoints.index(r.setpoint_m), speeds.index(r.speed_mps)] += 1
+        grids.append((wins, samples))
+    budgets = {int(n) for _, samples in grids for n in samples.ravel() if n}
+    same_budget = len(budgets) == 1
+    if same_budget:  # counts compare like with like
+        values = [wins.astype(float) for wins, _ in grids]
+        norm = Normalize(0, max(1, max(int(w.max()) for w, _ in grids)))
+        note, label = f"{count_noun(budgets.pop(), 'sample')} per cell", "successful attacks"
+    else:  # counts of different budgets do not: colour the share
+        values = [100.0 * np.divide(wins, samples, out=np.zeros(wins.shape), where=samples > 0) for wins, samples in grids]
+        norm = Normalize(0, max(1.0, max(float(v.max()) for v in values)))
+        note, label = "cells: successes/samples; cells ran different numbers of samples", "successful attacks [% of samples]"
+    return setpoints, speeds, grids, values, norm, same_budget, note, label
 
 
 def heatmaps(panels: Sequence[tuple[str, Sequence[Record]]], title: str, path: str | Path, *, columns: int = 4) -> Path:

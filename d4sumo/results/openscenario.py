@@ -297,49 +297,14 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
     traffic = near_traffic(tracks, ids, TRAFFIC_MEETS_M)
     entities = xosc.Entities()
     init = xosc.Init()
-
-    def start_at(vid: str, k: int = 0):
-        track = tracks[vid]
-        init.add_init_action(vid, xosc.TeleportAction(_position(xosc, track, k)))
-        init.add_init_action(vid, xosc.AbsoluteSpeedAction(track["speed"][k], xosc.TransitionDynamics(
-            xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)))
-
     for i, vid in enumerate(ids):
         vehicle = _vehicle(xosc, vid, config.vehicle_of(config.vehicle_ids.index(vid)), max(config.speed_mps, 70.0))
         follower = 1 <= i < n
         controller = _controller(xosc, i, config.controllers[i - 1], config) if follower else None
         entities.add_scenario_object(vid, vehicle, controller=controller)
-        start_at(vid)
+        _start_at(xosc, init, tracks[vid], vid)
     end = max(tracks[v]["time"][-1] for v in ids)
-    traffic_story = xosc.Story("traffic")
-    traffic_act = xosc.Act("traffic_as_played", _at_start(xosc, "traffic_at_start"))
-    for vid in traffic:
-        track = tracks[vid]
-        box = xosc.BoundingBox(TRAFFIC_WIDTH_M, TRAFFIC_LENGTH_M, CAR_HEIGHT_M, -TRAFFIC_LENGTH_M / 2.0, 0.0, CAR_HEIGHT_M / 2.0)
-        vehicle = xosc.Vehicle(vid, xosc.VehicleCategory.car, box, xosc.Axle(0.5, 0.6, 1.6, -1.0, 0.3),
-                               xosc.Axle(0.0, 0.6, 1.6, -4.0, 0.3), 70.0, 3.0, 9.0)
-        vehicle.add_property("sumo.type", track["type"])  # its size: SUMO's default passenger car's
-        entities.add_scenario_object(vid, vehicle)
-        late = track["time"][0] > t0 + 1e-9
-        events = []
-        if late:  # it enters the road after the platoon: out of the scene until then, where it entered
-            init.add_global_action(xosc.DeleteEntityAction(vid))
-            enter = xosc.Event(f"{vid}_enters", xosc.Priority.parallel)
-            enter.add_action(f"{vid}_added", xosc.AddEntityAction(vid, _position(xosc, track, 0)))
-            enter.add_trigger(xosc.ValueTrigger(f"{vid}_entering", 0.0, xosc.ConditionEdge.none,
-                                                xosc.SimulationTimeCondition(track["time"][0] - t0, xosc.Rule.greaterOrEqual)))
-            events.append(enter)
-        else:
-            start_at(vid, int(np.searchsorted(np.round(track["time"], 6), round(t0, 6))))
-        first_k = 0 if late else int(np.searchsorted(np.round(track["time"], 6), round(t0, 6)))
-        events.append(_trajectory_event(xosc, vid, track, t0, first_k))
-        if track["time"][-1] < end - 1e-9:  # it left the road (or SUMO's network) before the episode's end
-            leave = xosc.Event(f"{vid}_leaves", xosc.Priority.parallel)
-            leave.add_action(f"{vid}_deleted", xosc.DeleteEntityAction(vid))
-            leave.add_trigger(xosc.ValueTrigger(f"{vid}_leaving", 0.0, xosc.ConditionEdge.none, xosc.SimulationTimeCondition(
-                track["time"][-1] - t0 + config.step_s, xosc.Rule.greaterOrEqual)))
-            events.append(leave)
-        traffic_act.add_maneuver_group(_group(xosc, vid, *events))
+    traffic_act = _traffic_act(xosc, config, tracks, traffic, t0, end, entities, init)
     story = xosc.Story("attack")
     act = xosc.Act("as_played", _at_start(xosc, "at_start"))
     for i, vid in enumerate(ids):  # the cars d4sumo commands, not the systems under test: as they drove
@@ -358,9 +323,67 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
         if 1 <= i < n:
             followers.add_maneuver_group(_group(xosc, vid, _trajectory_event(xosc, vid, tracks[vid], t0)))
     story.add_act(followers)
+    stops = _stop_trigger(xosc, end - t0 + config.step_s, first)
+    storyboard = xosc.StoryBoard(init, stops)
+    storyboard.add_story(story)
+    if traffic:
+        traffic_story = xosc.Story("traffic")
+        traffic_story.add_act(traffic_act)
+        storyboard.add_story(traffic_story)
+    parameters = xosc.ParameterDeclarations()
+    parameters.add_parameter(xosc.Parameter(FOLLOWERS_AS_PLAYED, xosc.ParameterType.boolean, "true"))
+    header = _header(xosc, record, campaign, outcome, ids[1:n], traffic, first)
+    return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", parameters, entities, storyboard,
+                         xosc.RoadNetwork(ROAD_FILE), xosc.Catalog(), osc_minor_version=OSC_MINOR,
+                         header_properties=header)
+
+
+def _traffic_act(xosc, config, tracks: dict, traffic, t0: float, end: float, entities, init):
+    """The traffic that came near the platoon, each car as it drove, entering and leaving the scene where it
+    entered and left the road."""
+    traffic_act = xosc.Act("traffic_as_played", _at_start(xosc, "traffic_at_start"))
+    for vid in traffic:
+        track = tracks[vid]
+        box = xosc.BoundingBox(TRAFFIC_WIDTH_M, TRAFFIC_LENGTH_M, CAR_HEIGHT_M, -TRAFFIC_LENGTH_M / 2.0, 0.0, CAR_HEIGHT_M / 2.0)
+        vehicle = xosc.Vehicle(vid, xosc.VehicleCategory.car, box, xosc.Axle(0.5, 0.6, 1.6, -1.0, 0.3),
+                               xosc.Axle(0.0, 0.6, 1.6, -4.0, 0.3), 70.0, 3.0, 9.0)
+        vehicle.add_property("sumo.type", track["type"])  # its size: SUMO's default passenger car's
+        entities.add_scenario_object(vid, vehicle)
+        late = track["time"][0] > t0 + 1e-9
+        events = []
+        if late:  # it enters the road after the platoon: out of the scene until then, where it entered
+            init.add_global_action(xosc.DeleteEntityAction(vid))
+            enter = xosc.Event(f"{vid}_enters", xosc.Priority.parallel)
+            enter.add_action(f"{vid}_added", xosc.AddEntityAction(vid, _position(xosc, track, 0)))
+            enter.add_trigger(xosc.ValueTrigger(f"{vid}_entering", 0.0, xosc.ConditionEdge.none,
+                                                xosc.SimulationTimeCondition(track["time"][0] - t0, xosc.Rule.greaterOrEqual)))
+            events.append(enter)
+        else:
+            _start_at(xosc, init, track, vid, int(np.searchsorted(np.round(track["time"], 6), round(t0, 6))))
+        first_k = 0 if late else int(np.searchsorted(np.round(track["time"], 6), round(t0, 6)))
+        events.append(_trajectory_event(xosc, vid, track, t0, first_k))
+        if track["time"][-1] < end - 1e-9:  # it left the road (or SUMO's network) before the episode's end
+            leave = xosc.Event(f"{vid}_leaves", xosc.Priority.parallel)
+            leave.add_action(f"{vid}_deleted", xosc.DeleteEntityAction(vid))
+            leave.add_trigger(xosc.ValueTrigger(f"{vid}_leaving", 0.0, xosc.ConditionEdge.none, xosc.SimulationTimeCondition(
+                track["time"][-1] - t0 + config.step_s, xosc.Rule.greaterOrEqual)))
+            events.append(leave)
+        traffic_act.add_maneuver_group(_group(xosc, vid, *events))
+    return traffic_act
+
+
+def _start_at(xosc, init, track: dict, vid: str, k: int = 0) -> None:
+    """A car at the scenario's start where its track is at sample k, at its speed there."""
+    init.add_init_action(vid, xosc.TeleportAction(_position(xosc, track, k)))
+    init.add_init_action(vid, xosc.AbsoluteSpeedAction(track["speed"][k], xosc.TransitionDynamics(
+        xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)))
+
+
+def _stop_trigger(xosc, end_s: float, first):
+    """The scenario ends after its last step, or at the collision d4sumo found."""
     stop = xosc.ConditionGroup("stop")
     stop.add_condition(xosc.ValueTrigger("episode_end", 0.0, xosc.ConditionEdge.rising,
-                                         xosc.SimulationTimeCondition(end - t0 + config.step_s, xosc.Rule.greaterThan), "stop"))
+                                         xosc.SimulationTimeCondition(end_s, xosc.Rule.greaterThan), "stop"))
     stops = xosc.Trigger("stop")
     stops.add_conditiongroup(stop)
     if first is not None:  # the expected end: the collision d4sumo found
@@ -368,24 +391,20 @@ def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
         collided.add_condition(xosc.EntityTrigger("expected_collision", 0.0, xosc.ConditionEdge.rising,
                                                   xosc.CollisionCondition(first.follower), first.leader, triggeringpoint="stop"))
         stops.add_conditiongroup(collided)
-    storyboard = xosc.StoryBoard(init, stops)
-    storyboard.add_story(story)
-    if traffic:
-        traffic_story.add_act(traffic_act)
-        storyboard.add_story(traffic_story)
-    parameters = xosc.ParameterDeclarations()
-    parameters.add_parameter(xosc.Parameter(FOLLOWERS_AS_PLAYED, xosc.ParameterType.boolean, "true"))
+    return stops
+
+
+def _header(xosc, record: Record, campaign, outcome: str, systems: list[str], traffic, first):
+    """What the scenario says of where it comes from: the database, the sample, its campaign and outcome."""
     header = xosc.Properties()
     header.add_property("d4sumo.database", str(Path(record.db).resolve()))
     header.add_property("d4sumo.sample", str(record.sample_id))
     header.add_property("d4sumo.campaign", campaign_key(campaign.definition()))  # which campaign's sample: a replay checks it
     header.add_property("d4sumo.outcome", outcome)
-    header.add_property("d4sumo.systems_under_test", " ".join(ids[1:n]))
+    header.add_property("d4sumo.systems_under_test", " ".join(systems))
     if traffic:
         header.add_property("d4sumo.traffic", f"{len(traffic)} cars that came within {TRAFFIC_MEETS_M:g} m of the platoon")
     if first is not None:
         header.add_property("d4sumo.collision_pair", f"{first.leader}-{first.follower}")
         header.add_property("d4sumo.collision_time_s", repr(round(first.time_s, 9)))  # a whole step: 3.4, not 3.4000000000000004
-    return xosc.Scenario(f"d4sumo sample {record.sample_id}", "d4sumo", parameters, entities, storyboard,
-                         xosc.RoadNetwork(ROAD_FILE), xosc.Catalog(), osc_minor_version=OSC_MINOR,
-                         header_properties=header)
+    return header

@@ -23,6 +23,7 @@ from ..search.store import collision_dict
 from . import figures, paper, timespace
 from .analysis import (Table, attack_label, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes,
                        table_by_speed, table_crash_kinds, table_success_statistics, table_systems)
+from .baseline import table_without_attack
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records
 from .replays import evaluator_of, replay_to_fcd  # noqa: F401 (importable from here, where they were)
@@ -154,23 +155,31 @@ def build_report(
 def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, final: Path, severe: int,
                   step: Callable[[str], None]) -> None:
     """The report into ``out``, a folder beside ``final`` that will be moved there (the FCD files name
-    themselves as they will be)."""
+    themselves as they will be): its sections in order, then the page."""
     (out / "fcd").mkdir()
-    parts: list[str] = []
     db_names = [str(db) for db in dbs]
 
     def stem(r: Record) -> str:  # sample ids repeat across databases
         return f"sample_{r.sample_id}" if len(set(db_names)) == 1 else f"db{db_names.index(r.db) + 1}_sample_{r.sample_id}"
 
-    step("tables")
     systems = sorted({r.system for r in records})
     compare_systems = systems != ["switching"]
+    parts = _tables_section(records, out, compare_systems, step) + _heatmaps_section(records, out, step)
+    parts += _paper_section(records)
+    if compare_systems:
+        parts += _worst_section(records, systems, out, final, stem, step)
+    parts += _severe_section(records, severe, out, final, stem, step) + _clusters_section(records, out, step)
+    (out / "index.html").write_text(_page(records, db_names, parts), encoding="utf-8")
+
+
+def _tables_section(records: list[Record], out: Path, compare_systems: bool, step: Callable[[str], None]) -> list[str]:
+    """The tables (and tables.txt), among traffic with the traffic's own doing, the attack left out."""
+    step("tables")
+    parts: list[str] = []
     tables = [table_success_statistics(records), table_attacker_crashes(records), table_by_speed(records)]
     if compare_systems:
         tables.insert(0, table_systems(records))
     if has_traffic(records):
-        from .baseline import table_without_attack
-
         tables.append(table_crash_kinds(records))
         played = [0]
 
@@ -186,8 +195,12 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
     (out / "tables.txt").write_text("\n\n".join(t.to_text(width=TEXT_WIDTH) for t in tables) + "\n")
     parts.append("<p>The tables as text: <a href='tables.txt'>tables.txt</a>. Times count from the attack's start "
                  "(after the warm-up drive for start mode warmup).</p>")
+    return parts
 
+
+def _heatmaps_section(records: list[Record], out: Path, step: Callable[[str], None]) -> list[str]:
     step("heatmaps")
+    parts: list[str] = []
     panels = figures.heatmap_panels(records)
     parts.append("<h2>Successful attacks over setpoint and target speed</h2>"
                  f"<p>One panel per {'scenario, ' if len(set(scenario_labels(records).values())) > 1 else ''}"
@@ -197,7 +210,12 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
     figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
                      columns=figures.heatmap_columns(records))
     parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
+    return parts
 
+
+def _paper_section(records: list[Record]) -> list[str]:
+    """The paper's tables with ours under each row, where these databases cover its grids."""
+    parts: list[str] = []
     compared = paper.comparisons(records)
     if compared:
         parts.append("<h2>Compare with the paper</h2><p>The paper's tables (typed in from its source) with ours under "
@@ -205,30 +223,41 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
                      "<span class='far'>Highlighted</span>: ours more than twice or less than half the paper's. "
                      "docs/paper.md discusses each difference.</p>")
         parts += [_comparison_html(c) for c in compared]
+    return parts
 
-    if compare_systems:
-        step("worst counterexample per system")
-        parts.append("<h2>Worst counterexample per system under test</h2><p>For each system, its successful attack "
-                     f"with the {SEVERITY}, replayed through SUMO; a system without one is named with its budget.</p>")
-        for system in systems:
-            rs = [r for r in records if r.system == system]
-            worst = most_severe(rs, 1)
-            if not worst:
-                parts.append(f"<h3>{html.escape(system)}</h3><p>No successful attack in {count_noun(len(rs), 'sample')} "
-                             f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
-                continue
-            r = worst[0]
-            try:
-                fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml", final / "fcd" / f"worst_{stem(r)}.xml")
-            except NotSimulable as exc:  # read, not replayed: the page says why
-                parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; not replayed here: "
-                             f"{html.escape(str(exc))}</p>")
-                continue
-            ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
-            parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
-                         f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
 
+def _worst_section(records: list[Record], systems: list[str], out: Path, final: Path, stem: Callable[[Record], str],
+                   step: Callable[[str], None]) -> list[str]:
+    """Each system's worst counterexample, replayed through SUMO."""
+    parts: list[str] = []
+    step("worst counterexample per system")
+    parts.append("<h2>Worst counterexample per system under test</h2><p>For each system, its successful attack "
+                 f"with the {SEVERITY}, replayed through SUMO; a system without one is named with its budget.</p>")
+    for system in systems:
+        rs = [r for r in records if r.system == system]
+        worst = most_severe(rs, 1)
+        if not worst:
+            parts.append(f"<h3>{html.escape(system)}</h3><p>No successful attack in {count_noun(len(rs), 'sample')} "
+                         f"({sum(r.outcome == 'attacker_crash' for r in rs)} attacker crashes).</p>")
+            continue
+        r = worst[0]
+        try:
+            fcd = replay_to_fcd(r, out / "fcd" / f"worst_{stem(r)}.xml", final / "fcd" / f"worst_{stem(r)}.xml")
+        except NotSimulable as exc:  # read, not replayed: the page says why
+            parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; not replayed here: "
+                         f"{html.escape(str(exc))}</p>")
+            continue
+        ts = _sample_figure(r, "time-space", fcd, out / f"worst_time_space_{stem(r)}.png")
+        parts.append(f"<h3>{html.escape(system)}</h3><p>{html.escape(describe(r))}; replay: "
+                     f"<code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p>{_img(ts.name, 'time-space diagram')}")
+    return parts
+
+
+def _severe_section(records: list[Record], severe: int, out: Path, final: Path, stem: Callable[[Record], str],
+                    step: Callable[[str], None]) -> list[str]:
+    """The most severe attacks, each replayed: its time-space diagram and its accelerations."""
     step("time-space diagrams")
+    parts: list[str] = []
     top = most_severe(records, severe)
     parts.append("<h2>Most severe attacks</h2>" + (
         f"<p>{html.escape(severe_rule(records, top, severe))} Each is replayed through SUMO; its time-space diagram "
@@ -249,8 +278,13 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
                      f"<a href='fcd/{stem(r)}.xml'><code>fcd/{stem(r)}.xml</code></a>; {_openscenario_links(r, out, stem(r), out / 'fcd' / f'{stem(r)}.xml')}"
                      f"replay: <code>d4sumo replay {html.escape(r.db)} {r.sample_id} --gui</code></p><div class='row'>"
                      f"{_img(ts.name, 'time-space diagram')}{_img(acc.name, 'accelerations')}</div>")
+    return parts
 
+
+def _clusters_section(records: list[Record], out: Path, step: Callable[[str], None]) -> list[str]:
+    """The clusters of successful knot vectors, per condition with the most successes."""
     step("clusters")
+    parts: list[str] = []
     parts.append("<h2>Clusters of successful knot vectors</h2><p>For each attack, optimiser and start mode, the "
                  "configuration with the most successes. A knot counts only if it can have shaped the attack before "
                  "the collision (with PCHIP, knot k reaches back to the time of knot k-2); k-means and DBSCAN ignore "
@@ -266,8 +300,11 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         parts.append(f"<h3>{html.escape(condition)}</h3><p>{html.escape(clusters_caption(c))}</p>{_img(name, condition)}")
     if not found:
         parts.append("<p>No knot campaign with at least 4 successes.</p>")
+    return parts
 
-    page = (
+
+def _page(records: list[Record], db_names: list[str], parts: list[str]) -> str:
+    return (
         "<!doctype html><html><head><meta charset='utf-8'><title>d4sumo report</title><style>"
         "body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right;font-size:13px}td:first-child,th:first-child{text-align:left}"
@@ -277,7 +314,6 @@ def _write_report(records: list[Record], dbs: Sequence[str | Path], out: Path, f
         f"<h1>d4sumo report</h1><p>{count_noun(len(records), 'sample')} from {html.escape(', '.join(db_names))}; "
         f"d4sumo {__version__}.</p>" + "".join(parts) + "</body></html>"
     )
-    (out / "index.html").write_text(page, encoding="utf-8")
 
 
 def _replayed(record: Record, fcd_path: Path, name: Path) -> dict | str:

@@ -15,7 +15,8 @@ from ..errors import D4sumoError
 from ..model.batch import DEFAULT_BATCH, batch_key
 from ..model.fmu import receive
 from ..search.campaign import Campaign, SampleResult
-from ..search.runner import CampaignRunner, Evaluator, campaign_road, play_pending, step_together
+from ..search.evaluator import campaign_road
+from ..search.runner import CampaignRunner, Evaluator, play_pending, step_together
 from ..search.store import campaign_key
 
 log = logging.getLogger(__name__)

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+import d4sumo.search.evaluator as evaluator_module
 import d4sumo.search.runner as campaign_module
 from d4sumo.errors import ConfigError, NotSimulable, SumoError
 from d4sumo.model.config import EpisodeConfig
@@ -135,7 +136,7 @@ def test_a_stored_point_a_model_proposed_stands_and_one_the_seed_draws_must_matc
 
 
 def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goes_on(tmp_path, monkeypatch):
-    real = campaign_module.simulate
+    real = evaluator_module.simulate
     calls = {"n": 0}
 
     def flaky(*args, **kwargs):
@@ -144,7 +145,7 @@ def test_an_episode_that_fails_in_sumo_is_stored_as_errored_and_the_campaign_goe
             raise SumoError("SUMO failed during the episode: test")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(campaign_module, "simulate", flaky)
+    monkeypatch.setattr(evaluator_module, "simulate", flaky)
     with Store(tmp_path / "r.sqlite") as store:
         summary = run_campaign(SMALL.replace(optimizer="random", samples=4), store, batch=1)
         rows = store.samples()
@@ -158,7 +159,7 @@ def test_a_failure_every_sample_ends_in_is_said_twice_not_once_a_sample(tmp_path
     def failing(*args, **kwargs):
         raise SumoError("the same failure")
 
-    monkeypatch.setattr(campaign_module, "simulate", failing)
+    monkeypatch.setattr(evaluator_module, "simulate", failing)
     with Store(tmp_path / "r.sqlite") as store, caplog.at_level("WARNING"):
         run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=1)
         rows = store.samples()
@@ -171,7 +172,7 @@ def test_a_failure_every_sample_ends_in_is_said_twice_not_once_a_sample(tmp_path
 def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_play_alone(tmp_path, monkeypatch):
     """Regression: a SUMO failure errored every unfinished episode of the batch (in a sweep, of up to 32
     campaigns), where alone only the failing one would be: the results depended on the grouping."""
-    real = campaign_module.simulate_batch
+    real = evaluator_module.simulate_batch
     batches = []
 
     def failing_after_two(config, plans, *, road=None, on_episode=None):
@@ -186,7 +187,7 @@ def test_when_sumo_fails_in_a_batch_its_finished_episodes_count_and_the_rest_pla
         batches.append(len(plans))
         return real(config, plans, road=road, on_episode=hear)
 
-    monkeypatch.setattr(campaign_module, "simulate_batch", failing_after_two)
+    monkeypatch.setattr(evaluator_module, "simulate_batch", failing_after_two)
     with Store(tmp_path / "r.sqlite") as store:
         summary = run_campaign(SMALL.replace(optimizer="random", samples=6), store, batch=4)
         rows = store.samples()
@@ -501,7 +502,7 @@ def test_the_callers_own_exception_comes_out_of_a_batch_as_it_was_raised(monkeyp
         def failing(*args, **kwargs):
             raise SumoError("SUMO failed during the episode: test")
 
-        monkeypatch.setattr(campaign_module, "simulate_batch", failing)
+        monkeypatch.setattr(evaluator_module, "simulate_batch", failing)
 
     def interrupted(result):
         raise KeyboardInterrupt
