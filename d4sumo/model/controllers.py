@@ -102,3 +102,21 @@ def listens(controller: ControllerConfig) -> bool | None:
         return bool(getattr(controller.controller_class(), "listens", False))
     except NotImported:
         return None
+
+
+def as_stored_ran(table: Any) -> Any:
+    """A [controller] table as a campaign's definition stored it, with what its controller ran: the authors' code's
+    options are left out where they hold the paper's value (`ControllerConfig.to_dict`), by name, for every Python
+    controller. A class whose Params has such a key (a user's own, with its own default) gets the paper's value back,
+    which it ran with; a switching controller's default is that value already. (Found in 0.21: such a campaign
+    replayed with the class's default instead.)"""
+    if not isinstance(table, Mapping):
+        return table
+    name = table.get("class", "switching")
+    if not isinstance(name, str) or carfollowing.is_sumo(name) or is_fmu(name):
+        return table
+    try:
+        fields = {f.name for f in dataclasses.fields(resolve_controller(name).Params)}
+    except (ConfigError, TypeError):  # not importable here (names only, or not on this machine): as stored
+        return table
+    return {**table, **{k: v for k, v in AS_RUN_DEFAULTS.items() if k in fields and k not in table}}

@@ -18,6 +18,7 @@ from .. import ledger
 from ..errors import ConfigError, NotSimulable, check_int, check_number
 from ..model.attacks import FAMILY_CLASSES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig
+from ..model.controllers import as_stored_ran
 from ..model.network import network_digest
 from ..model.control import user_code
 from ..model.plugins import ControllerImportError, names_only
@@ -156,6 +157,9 @@ class Campaign:
             for table in ("traffic", "v2v"):
                 if isinstance(config.get(table), dict):
                     config = {**config, table: ledger.restored(table, config[table])}
+            controller = config.get("controller")  # the authors' options a Python controller ran with
+            config = {**config, "controller": ([as_stored_ran(t) for t in controller] if isinstance(controller, list)
+                                               else as_stored_ran(controller))} if controller is not None else config
             return cls(
                 config=EpisodeConfig.from_dict(config),
                 attack=attack["family"],

@@ -647,3 +647,33 @@ def test_a_cooperative_campaign_0_19_stored_among_traffic_replays_with_beacons_r
     column = Campaign(config=EpisodeConfig(start="steady", controller=ControllerConfig("cacc")))
     assert "match_radar" not in column.definition()["config"]["v2v"] and column.with_inputs_of("0.19") is column
     assert Campaign.from_definition(column.definition(), samples=100).config == column.config
+
+
+def test_a_users_controller_whose_key_is_named_like_the_authors_options_replays_with_the_value_it_ran(tmp_path, monkeypatch):
+    """Regression (0.20): a definition leaves the authors' code's options out where they hold the paper's value,
+    by name, for every Python controller; a user's class with a key of that name and its own default
+    (control_period_s = 0.5 here, run at 0) was read back with its default: its samples replayed otherwise."""
+    import uuid
+
+    from d4sumo.model.config import ControllerConfig
+    from d4sumo.search.evaluator import Evaluator
+
+    name = f"ctl_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{name}.py").write_text(
+        "from dataclasses import dataclass\n\n\n@dataclass(frozen=True)\nclass P:\n    gain: float = 0.5\n"
+        "    control_period_s: float = 0.5\n\n\nclass Mine:\n    Params = P\n\n"
+        "    def __init__(self, params, *, setpoint_m, target_speed_mps, vehicle, step_s):\n"
+        "        self.p, self.d, self.v0 = params, setpoint_m, target_speed_mps\n\n"
+        "    def observe(self, o):\n        k = self.p.gain + self.p.control_period_s\n"
+        "        a = k * (o.gap_m - self.d) + (o.lead_speed_mps - o.speed_mps) if o.leader else self.v0 - o.speed_mps\n"
+        "        return max(-1.0, min(1.0, a / 5.0))\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    ran = Campaign(config=EpisodeConfig(controller=ControllerConfig(f"{name}:Mine", (("control_period_s", 0.0),)),
+                                        start="steady", duration_s=20.0), samples=2)
+    definition = ran.definition()
+    assert "control_period_s" not in definition["config"]["controller"]  # stored as every release stored it: identity kept
+    read = Campaign.from_definition(json.loads(json.dumps(definition)), 2, imports=True)  # as a replay reads it
+    assert dict(read.config.controller.params)["control_period_s"] == 0.0
+    assert read.definition() == definition
+    x = np.full(ran.family().dimension, 0.5)
+    assert Evaluator(read).simulate(0, x).min_gaps == Evaluator(ran).simulate(0, x).min_gaps
