@@ -174,6 +174,7 @@ TOOLS_REFUSED = [  # regression: each ended in a traceback (or ran on)
     ("check_invariants.py", ["1", "--batch", "100000"], "--batch: got 100000; allowed: a whole number in [0, 64]"),
     ("paper_page.py", ["--runs", "{file}"], "allowed: a folder for the sweeps' databases (this is a file)"),
     ("paper_page.py", ["--runs", "{tmp}/absent/runs"], "allowed: a folder in an existing folder"),
+    ("profile_episode.py", ["--episodes", "0"], "--episodes: got 0; allowed: a whole number of at least 1"),
 ]
 
 
@@ -256,3 +257,28 @@ def test_bench_arch_jobs_stop_with_it_on_ctrl_c_and_sigterm(sig, code):
     while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(Path(f"/proc/{w}").exists() for w in workers)
+
+
+@pytest.mark.sumo
+def test_the_profile_sees_sumos_stepping_and_calls_and_loses_no_time(monkeypatch):
+    """tools/profile_episode.py: the step loop calls SUMO's C functions without a Python frame, which a profiler
+    does not see (its stepping counted nowhere); through the tool's frames every part is seen, and the parts add
+    up to all the time profiled."""
+    import cProfile
+    import pstats
+
+    from d4sumo.engine import calls, sumo
+
+    monkeypatch.setattr(calls, "api_call", calls.api_call)  # restored after: the tool rebinds them
+    monkeypatch.setattr(sumo, "simulation_step", sumo.simulation_step)
+    import profile_episode
+    profile_episode.seen_by_the_profiler()
+    parts, total = profile_episode.profiled(profile_episode.episodes_job(1))
+    assert parts["SUMO stepping"] > 1200 * 1e-6 and parts["libsumo calls"] > 0.0 and parts["control laws"] > 0.0  # 1,200 steps
+    assert parts["step loop and trace"] > 0.0 and "storage" not in parts  # an episode stores nothing
+    profile = cProfile.Profile()
+    profile.enable()
+    profile_episode.episodes_job(1)()
+    profile.disable()
+    every = sum(tottime for _, _, tottime, _, _ in pstats.Stats(profile).stats.values())
+    assert sum(profile_episode.split(profile).values()) == pytest.approx(every, rel=1e-9)
