@@ -1,3 +1,3 @@
 """d4sumo: adversarial driving maneuvers against ACC platoons, found by falsification on SUMO."""
 
-__version__ = "0.20.0"
+__version__ = "0.21.0"

@@ -383,7 +383,7 @@ def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_doc
     tools = {"--nthreads", "--port", "--runs", "--baseline", "--repeats", "--batch", "--db", "--benchmark",
              "--grid", "--osm-files", "--specs", "--held", "--recheck-dt", "--first-seed", "--jobs", "--no-deps",
              "--there-python", "--there-env", "--here-env", "--traffic", "--fmu", "--systems", "--examples", "--only",
-             "--opendrive-output", "--opendrive-files", "--python", "--cooperative", "--collision"}  # dask's, netgenerate's, netconvert's, SUMO's, tools/', pip's
+             "--opendrive-output", "--opendrive-files", "--python", "--cooperative", "--collision", "--figure"}  # dask's, netgenerate's, netconvert's, SUMO's, tools/', pip's
     assert mentioned - known - tools == set()
     main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",
@@ -621,6 +621,28 @@ def test_falsify_names_a_cooperative_campaign_0_19_ran_with_beacons_read_whateve
     assert ("holds this campaign as d4sumo 0.19 or before ran it (cooperative followers reading the beacons whatever "
             "their radar saw)") in now.stderr
     assert now.stderr.rstrip().endswith("To go on with that one: --set v2v.match_radar=false")
+
+
+@pytest.mark.sumo
+def test_falsify_names_a_cooperative_cut_in_0_20_ran_with_the_radar_matched_to_the_beacons_and_goes_on_with_it(tmp_path):
+    """Found by the release fixtures: d4sumo 0.20.0 matched the followers' radar to the beacons' sender in the
+    lane-changing maneuvers too (the review that followed kept it to traffic). Its campaigns replay as they ran
+    (tests/search/test_releases.py); one run with today's d4sumo is another campaign, and falsify says so, with the
+    flag that goes on with 0.20.0's."""
+    import sqlite3
+
+    db = tmp_path / "r.sqlite"
+    flags = ["--start", "steady", "--controller", "cacc", "--maneuver", "cutin", "--duration", "10", "--optimizer", "random",
+             "--samples", "2", "--db", str(db), "--quiet"]
+    assert main(["falsify", *flags, "--set", "v2v.match_in_maneuvers=true"]) == 0  # as 0.20.0 stored it
+    (stored,) = [json.loads(d) for (d,) in sqlite3.connect(db).execute("SELECT definition FROM campaign")]
+    assert stored["config"]["v2v"]["match_radar"] is True and "match_in_maneuvers" not in stored["config"]["v2v"]
+    now = run("falsify", *flags)
+    assert now.returncode == 0, now.stderr
+    assert "holds this campaign as d4sumo 0.20 or before ran it (cooperative followers in a lane-changing maneuver" in now.stderr
+    assert now.stderr.rstrip().endswith("To go on with that one: --set v2v.match_in_maneuvers=true")
+    again = run("falsify", *[a if a != "2" else "3" for a in flags[:-1]], "--set", "v2v.match_in_maneuvers=true")
+    assert again.returncode == 0 and "2 of 3 samples stored already: resuming" in again.stderr, again.stderr
 
 
 @pytest.mark.sumo

@@ -32,7 +32,7 @@ FIRST = {
     "0.13.0": "e01e3cd5b14e25d1e3acad2b8ae6771c5e85102e", "0.14.0": "2c35b89875bbbf33ed3bc429c651cb8b0be2f57b",
     "0.15.0": "3d86346ee205782617d4568d4796d989bbf5e2ab", "0.16.0": "64cdbec81308488e9f56dd9591eaa7b93e42b86e",
     "0.17.0": "5979d9c61e25df0dfdad269722d41ed45480683c", "0.18.0": "4ebab9133cbe82cb49cf7ff5dc6092b09b3c465f",
-    "0.19.0": "37209632f4299a699f48c386f3f1ce907ef47504",
+    "0.19.0": "37209632f4299a699f48c386f3f1ce907ef47504", "0.20.0": "a1980e9e676e3ada94f375d5f2362b4957e506be",
 }
 LAST = {
     "0.2.0": "575b9ab161ce2e25794f19293d01a0304609cf07", "0.3.0": "1a081a1179b81bc50e6ad9c20bb3cafdce0a0d14",
@@ -45,6 +45,7 @@ LAST = {
     "0.15.0": "a7451d78651163edfc8d8c9ce496cd4fb52322f0", "0.16.0": "c58457c6e246ae5d6a00063245041cbc9843e1ad",
     "0.17.0": "cf21cc24106b047c784bd4554172484494ee9dbc", "0.18.0": "4f20e836f1a08f4985342dcb235b8fe4ebb3c67b",
     "0.19.0": "820a899a077175fa326843b1b96f10d65db5509b",  # as it landed (what followed at 0.19.0 was 0.20's work)
+    "0.20.0": "55faf7e64ed5dc46906ca2802b287f527e8448cf",
 }
 RELEASES = {**{v: c for v, c in FIRST.items()}, **{f"{v}-last": c for v, c in LAST.items()}}
 #: the campaigns, as falsify's flags (a road of one's own by its path from the checkout's root, stored so: a test reads it from

@@ -246,6 +246,9 @@ class EpisodeConfig:
                 raise ConfigError("traffic.warmup_s", self.traffic.warmup_s, f"a whole number of steps of {self.step_s:g} s")
             if not is_network_path(self.network) and not self.traffic.junction_collisions:  # one edge, no junction: one
                 fix("traffic", dataclasses.replace(self.traffic, junction_collisions=True))  # configuration, whatever it says
+        if self.v2v is not None and self.v2v.match_in_maneuvers and (self.traffic is not None
+                                                                      or not MANEUVER_CLASSES[self.maneuver].lateral):
+            fix("v2v", dataclasses.replace(self.v2v, match_in_maneuvers=False))  # no maneuver's, or traffic's: one configuration
         if self.v2v is not None and not self.v2v.match_radar and not self.others_cut_in:  # the radar sees the platoon's
             fix("v2v", dataclasses.replace(self.v2v, match_radar=True))  # car ahead all along: one configuration
 
@@ -392,8 +395,9 @@ class EpisodeConfig:
     def others_cut_in(self) -> bool:
         """Whether a car from outside the platoon may come between a follower and the car ahead of it in the
         platoon: a traffic car (`v2v.ChannelParams.match_radar`). (A lane-changing maneuver's cars exchange
-        beacons in the platoon's own topology, the attacker leading it, as before.)"""
-        return self.traffic is not None
+        beacons in the platoon's own topology, the attacker leading it, as before; as d4sumo 0.20.0 had it, they
+        count too: `v2v.ChannelParams.match_in_maneuvers`.)"""
+        return self.traffic is not None or (self.v2v is not None and self.v2v.match_in_maneuvers)
 
     # --- TOML/JSON round trip: its definition (`definition`) ---------------------------------------
 

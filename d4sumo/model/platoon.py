@@ -259,7 +259,7 @@ class Platoon:
         #: whether the cars are the paper's column, pair i - 1 car i and the car ahead (no lane change, no traffic)
         self._one_ahead = not self.maneuver.lateral and config.traffic is None
         #: whether a follower reads the beacons of the car ahead of it in the platoon only while its radar sees it
-        self._match = config.v2v is not None and config.v2v.match_radar and config.traffic is not None
+        self._match = config.v2v is not None and config.v2v.match_radar and config.others_cut_in
         #: the SUMO-driven followers that read beacons, and the step's beacons for SUMO to be given: (follower,
         #: whether it reads every car ahead's, the newest beacon of each car it reads), where one is new
         self._sumo_listening = [(i, f.hears_all) for i, f in enumerate(self.followers, start=1) if f.sumo_driven and f.listens]

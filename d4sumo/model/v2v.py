@@ -39,6 +39,11 @@ class ChannelParams:
     #: (`sensing.Observation.matched`). False: it reads them whatever its radar sees, as d4sumo 0.19
     #: and before had it (`ledger`), for study
     match_radar: bool = True
+    #: in a lane-changing maneuver (cut-in, cut-out, swerve) too, as d4sumo 0.20.0 had it: there the attacker leads
+    #: the platoon's beacons from the next lane, so a follower behind the maneuver's other car fell back from the
+    #: start (crashes without an attack). Never stored as a key: a campaign 0.20.0 ran so holds ``match_radar``
+    #: without traffic (`config.EpisodeConfig.others_cut_in`)
+    match_in_maneuvers: bool = False
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -46,8 +51,9 @@ class ChannelParams:
         fix("latency_s", check_number("v2v.latency_s", self.latency_s, 0.0, 5.0, "seconds"))
         fix("loss", check_number("v2v.loss", self.loss, 0.0, 1.0, "(a probability)"))
         fix("seed", check_int("v2v.seed", self.seed, 0, 2**32 - 1))
-        if not isinstance(self.match_radar, bool):
-            raise ConfigError("v2v.match_radar", self.match_radar, "true or false")
+        for name in ("match_radar", "match_in_maneuvers"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"v2v.{name}", getattr(self, name), "true or false")
 
     @classmethod
     def from_table(cls, table: Any) -> "ChannelParams":
@@ -55,8 +61,9 @@ class ChannelParams:
 
     def to_dict(self) -> dict:
         """As a definition stores it: every key (the channel is part of the system under test); ``match_radar``
-        where it is not what campaigns stored before it was a key hold (`ledger`)."""
-        return ledger.stored("v2v", {f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
+        where it is not what campaigns stored before it was a key hold (`ledger`); ``match_in_maneuvers`` never (the
+        episode's definition says it: `definition.stored`)."""
+        return ledger.stored("v2v", {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "match_in_maneuvers"})
 
     @property
     def label(self) -> str:

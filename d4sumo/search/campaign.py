@@ -28,7 +28,10 @@ from .spec import Specification
 from .store import DefinitionError, Store
 
 #: the versions whose inputs `Campaign.with_inputs_of` plays, newest first: each changed what a campaign's keys do
-INPUTS_CHANGED = ("0.19", "0.18")
+INPUTS_CHANGED = ("0.20", "0.19", "0.18")
+#: what an earlier version did with an input that no key of the ledger holds (the definition says it otherwise:
+#: `EpisodeConfig.others_cut_in`), the value that does it
+THEN = {"v2v.match_in_maneuvers": True}
 
 
 def _flag_value(value) -> str:
@@ -154,6 +157,9 @@ class Campaign:
                 base = {k: v for k, v in config["vehicle"].items() if not isinstance(v, dict)}
                 cars = {k: v for k, v in config["vehicle"].items() if isinstance(v, dict)}
                 config = {**config, "vehicle": {**ledger.restored("vehicle", base), **cars}}
+            if isinstance(config.get("v2v"), dict) and "match_radar" in config["v2v"] and config.get("traffic") is None:
+                # only 0.20.0 stored it without traffic: in its lane-changing maneuvers, which it matched too
+                config = {**config, "v2v": {**config["v2v"], "match_in_maneuvers": True}}
             for table in ("traffic", "v2v"):
                 if isinstance(config.get(table), dict):
                     config = {**config, table: ledger.restored(table, config[table])}
@@ -210,7 +216,7 @@ class Campaign:
         config = self.config
         for key in keys:
             table, _, name = key.rpartition(".")
-            value = ledger.earlier(table)[name]
+            value = THEN[key] if key in THEN else ledger.earlier(table)[name]
             if table == "scenario":
                 config = dataclasses.replace(config, **{name: value})
             elif getattr(config, table, None) is not None:
@@ -226,6 +232,11 @@ class Campaign:
                    if entry.did and entry.table in stored and entry.name in (stored[entry.table] or {})]
         if version == "0.19" and not self.config.rebuild and Path(self.config.network).is_dir():
             changes.insert(0, ("scenario.rebuild", "true", "its folder's network file rebuilt from plain XML"))
+        v2v = self.config.v2v
+        if (version == "0.20" and v2v is not None and v2v.match_radar and not v2v.match_in_maneuvers
+                and self.config.traffic is None and self.config.maneuver_class.lateral):
+            changes.append(("v2v.match_in_maneuvers", "true", "cooperative followers in a lane-changing maneuver falling "
+                            "back where their radar saw another car than the beacons' sender"))
         return changes
 
     def with_options(self, options: dict) -> "Campaign":
