@@ -18,8 +18,8 @@ class ExactBuild(build_ext):
         super().build_extensions()
 
 
-PARTS = ["d4sumo/model/csrc/followers.h", "d4sumo/model/csrc/laws.h", "d4sumo/model/csrc/channel.h",
-         "d4sumo/fmus/switching.h"]
+PARTS = ["d4sumo/model/csrc/followers.h", "d4sumo/model/csrc/convert.h", "d4sumo/model/csrc/laws.h",
+         "d4sumo/model/csrc/channel.h", "d4sumo/fmus/switching.h"]
 
 setup(ext_modules=[Extension("d4sumo.model._followers", ["d4sumo/model/_followers.c"], depends=PARTS,
                              include_dirs=["d4sumo/model/csrc", "d4sumo/fmus"], optional=True)],

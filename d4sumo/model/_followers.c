@@ -14,7 +14,8 @@
  * b < a ? b : a, and max(a, b) is b > a ? b : a; those are the comparisons, NaN included.
  * d4sumo.model.compiled decides which platoons it may play and builds it from their Python objects.
  *
- * csrc/followers.h: the types; csrc/laws.h: the radar, the laws, the actuator; csrc/channel.h: the beacons.
+ * csrc/followers.h: the types; csrc/convert.h: numbers in and out; csrc/laws.h: the radar, the laws, the actuator;
+ * csrc/channel.h: the beacons.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -23,40 +24,31 @@
 
 #include "switching.h" /* the paper's law, as the FMUs run it */
 #include "followers.h"
+#include "convert.h"
 #include "laws.h"
 #include "channel.h"
 
-static int as_double(PyObject *o, double *out, const char *what) { /* a float (np.float64 too) or an int, as is */
-    if (!PyFloat_Check(o) && !(PyLong_Check(o) && !PyBool_Check(o))) {
-        PyErr_Format(PyExc_TypeError, "%s: a float, not %.100s", what, Py_TYPE(o)->tp_name);
+/* platoon.Platoon.advance's attacker without traffic, lights, a motion or the authors' options: its attack's pedal,
+ * or where the attack is NaN its cruise control (control.CruiseControl, afresh at each new cruise window) through
+ * vehicle.acceleration_to_command; its speed at the step's end through its actuator */
+static int attacker_step(Followers *self, long k, PyObject *commands, PyObject *new_speeds) {
+    Follower *a = &self->f[0];
+    if (k < 0 || k >= self->attack_steps) {
+        PyErr_Format(PyExc_IndexError, "step %ld of an attack of %zd steps", k, self->attack_steps);
         return -1;
     }
-    *out = PyFloat_AsDouble(o);
-    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
-}
-
-static int read_floats(PyObject *sequence, double *out, int n, const char *what) {
-    PyObject *fast = PySequence_Fast(sequence, what);
-    if (fast == NULL)
-        return -1;
-    int status = 0;
-    if (PySequence_Fast_GET_SIZE(fast) < n) {
-        PyErr_Format(PyExc_TypeError, "%s: at least %d floats", what, n);
-        status = -1;
+    double u = self->attack_u[k], speed = self->v[0];
+    if (u != u) { /* NaN: no attack here, the attacker cruises like everyone else */
+        if (self->attacking) { /* a new cruise window: the PID starts afresh (no kick, no stale integral) */
+            a->sw.integral = 0.0;
+            a->sw.has_prev = 0;
+            self->attacking = 0;
+        }
+        u = to_command(cruise_acceleration(&a->sw, speed, a->step_s), a->max_accel, a->max_decel);
+    } else {
+        self->attacking = 1;
     }
-    for (int j = 0; j < n && status == 0; j++)
-        status = as_double(PySequence_Fast_GET_ITEM(fast, j), &out[j], what);
-    Py_DECREF(fast);
-    return status;
-}
-
-static int append_float(PyObject *list, double value) {
-    PyObject *item = PyFloat_FromDouble(value);
-    if (item == NULL)
-        return -1;
-    int status = PyList_Append(list, item);
-    Py_DECREF(item);
-    return status;
+    return append_float(commands, u) < 0 || append_float(new_speeds, apply(a, u, speed)) < 0 ? -1 : 0;
 }
 
 /* advance(k, positions, speeds, pairs, commands, new_speeds, modes): step k's beacons, then each follower's
@@ -113,6 +105,8 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
         if (send(self, k) < 0)
             return NULL;
     }
+    if (self->has_attacker && attacker_step(self, k, commands, new_speeds) < 0)
+        return NULL;
     for (int i = 1; i < n; i++) {
         double gap = self->gap[i];
         Follower *f = &self->f[i];
@@ -181,37 +175,58 @@ static void Followers_dealloc(Followers *self) {
     PyMem_Free(self->inbox);
     PyMem_Free(self->flights);
     PyMem_Free(self->f);
+    PyMem_Free(self->attack_u);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
-static int read_tuple(PyObject *tuple, double *out, Py_ssize_t n, const char *what) {
-    if (!PyTuple_Check(tuple) || PyTuple_GET_SIZE(tuple) != n) {
-        PyErr_Format(PyExc_TypeError, "%s: a tuple of %zd numbers", what, n);
+/* the attacker (attack_u, (cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2),
+ * (target_mps, step_s, max_accel, max_decel), its actuator (7)) */
+static int init_attacker(Followers *self, PyObject *attacker) {
+    PyObject *u, *gains, *own, *actuator;
+    if (!PyArg_ParseTuple(attacker, "O!O!O!O!", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
+                          &PyTuple_Type, &actuator))
+        return -1;
+    double g[5], o[4], a[7];
+    if (read_tuple(gains, g, 5, "the attacker's cruise gains") < 0 || read_tuple(own, o, 4, "the attacker") < 0
+        || read_tuple(actuator, a, 7, "the attacker's actuator") < 0)
+        return -1;
+    Py_ssize_t steps = PyList_GET_SIZE(u);
+    self->attack_u = PyMem_Calloc((size_t)steps + 1, sizeof(double));
+    if (self->attack_u == NULL) {
+        PyErr_NoMemory();
         return -1;
     }
-    for (Py_ssize_t j = 0; j < n; j++) {
-        out[j] = PyFloat_AsDouble(PyTuple_GET_ITEM(tuple, j));
-        if (out[j] == -1.0 && PyErr_Occurred())
-            return -1;
-    }
+    if (read_floats(u, self->attack_u, (int)steps, "the attack") < 0)
+        return -1;
+    self->attack_steps = steps;
+    Follower *f = &self->f[0];
+    switching_defaults(&f->sw);
+    double *v = f->sw.v;
+    v[VR_TARGET_SPEED_MPS] = o[0], v[VR_CRUISE_KP] = g[0], v[VR_CRUISE_KI] = g[1], v[VR_CRUISE_KD] = g[2];
+    v[VR_CRUISE_INTEGRAL_CLAMP] = g[3], v[VR_CRUISE_OUTPUT_LIMIT_MPS2] = g[4];
+    f->step_s = o[1], f->max_accel = o[2], f->max_decel = o[3];
+    f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
+    f->accel_mps2 = a[5], f->coast = a[6];
+    self->has_attacker = 1;
     return 0;
 }
 
-/* Followers(channel, lengths, sources, randoms, lie, laws, checked):
+/* Followers(channel, lengths, sources, randoms, lie, laws, checked[, attacker]):
  *   channel  (step_s, every, delay, loss), or None: no beacons (sources empty, no randoms, no lie)
  *   lengths  each car's [m]
  *   sources  each follower's, from v1: its sources in the order the channel draws its links' losses
  *   randoms  each link's generator's random(), in that order (with loss), else []
  *   lie      (falsify, liar, Message, Channel.sent), or None
+ *   attacker None (the Python plays it), or what `init_attacker` reads
  *   laws     each follower's, from v1: (law, whether its mode is recorded, (setpoint_m, target_mps, step_s,
  *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
  *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
  *            speed_noise_mps, delay steps, normal)) */
 static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     (void)kwds;
-    PyObject *channel, *lengths, *sources, *randoms, *lie_, *laws, *checked;
-    if (!PyArg_ParseTuple(args, "OO!O!O!OO!O", &channel, &PyList_Type, &lengths, &PyList_Type, &sources,
-                          &PyList_Type, &randoms, &lie_, &PyList_Type, &laws, &checked))
+    PyObject *channel, *lengths, *sources, *randoms, *lie_, *laws, *checked, *attacker = Py_None;
+    if (!PyArg_ParseTuple(args, "OO!O!O!OO!O|O", &channel, &PyList_Type, &lengths, &PyList_Type, &sources,
+                          &PyList_Type, &randoms, &lie_, &PyList_Type, &laws, &checked, &attacker))
         return -1;
     if (self->last != NULL) {
         PyErr_SetString(PyExc_RuntimeError, "made once");
@@ -343,6 +358,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
             }
         }
     }
+    if (attacker != Py_None && init_attacker(self, attacker) < 0)
+        return -1;
     Py_INCREF(checked);
     Py_XSETREF(self->checked, checked);
     return 0;

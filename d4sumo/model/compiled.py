@@ -7,9 +7,10 @@ It plays the platoons whose every follower runs d4sumo's `switching` (the paper'
 the mitigation, in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
 noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
 Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
-switching law in C is the one the FMUs d4sumo ships run (`fmus/switching.h`). Everything else the Python
+switching law in C is the one the FMUs d4sumo ships run (`fmus/switching.h`). The attacker too, where it only
+plays its attack and cruises (no traffic, no motion, none of the authors' options). Everything else the Python
 plays, as it does everywhere when the extension could not be built (no C compiler at install: the same
-episodes, slower). The attacker and the maneuver's other car are always Python's.
+episodes, slower).
 """
 
 from __future__ import annotations
@@ -38,10 +39,11 @@ if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is c
     del LAWS[ConsensusCACC]
 
 
-def compiled_followers(platoon) -> Callable | None:
+def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
     """``advance(k, positions, speeds, pairs, commands, new_speeds, modes)`` of ``platoon``'s followers in C,
     or None where the Python plays them (see the module). Made before the platoon's first step: it takes
-    the channel's and the radars' generators as they start."""
+    the channel's and the radars' generators as they start. With ``attacker`` (one that plays its attack and
+    cruises, nothing else: `platoon.Platoon`) the attacker is stepped in C too, its command and speed first."""
     channel, config = platoon.channel, platoon.config
     if (Followers is None or not ENABLED or not platoon._one_ahead or len(platoon._python) != config.followers
             or (channel is not None and channel.falsify is not None
@@ -84,10 +86,21 @@ def compiled_followers(platoon) -> Callable | None:
             return None
         laws.append((law, follower.has_mode, own, tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
                      tuple(float(m) for m in mitigation), drive, radar))
+    ours = _attacker(platoon) if attacker else None
     if channel is None:
-        return Followers(None, [0.0] * (config.followers + 1), [()] * config.followers, [], None, laws, checked_command).advance
+        return Followers(None, [0.0] * (config.followers + 1), [()] * config.followers, [], None, laws, checked_command,
+                         ours).advance
     sources = [channel.sources[i] for i in range(1, config.followers + 1)]
     randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
     lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None
     return Followers((channel.step_s, channel.every, channel.delay, float(channel.params.loss)), list(channel.lengths), sources,
-                     randoms, lie, laws, checked_command).advance
+                     randoms, lie, laws, checked_command, ours).advance
+
+
+def _attacker(platoon) -> tuple:
+    """What the C reads of the attacker: its attack, its cruise control's gains, its car, its actuator."""
+    cruise, actuator, vehicle = platoon.attacker_cruise, platoon.attacker_actuator, platoon.attacker_vehicle
+    return (platoon.attack_u, (cruise.kp, cruise.ki, cruise.kd, cruise.clamp, cruise.limit),
+            (cruise.target_mps, cruise.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2),
+            (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
+             actuator.accel_mps2, actuator.coast))

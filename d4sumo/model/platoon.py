@@ -268,7 +268,11 @@ class Platoon:
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         #: the followers, their radars and channel stepped in C where they may be (`compiled`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
-        self._compiled = compiled_followers(self) if followers is None and not lights else None
+        plain = (self._attacker_driver is None and self._attacker_as_run is None and self._motion is None and not self._others
+                 and all(type(u) is float for u in self.attack_u))  # an attacker that only attacks and cruises
+        self._compiled = compiled_followers(self, attacker=plain) if followers is None and not lights else None
+        #: whether the attacker is stepped in C with them (`compiled`): the whole step is then the C's
+        self._attacker_in_c = self._compiled is not None and plain
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
         #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
         self.stops: list | None = None  # (None: nobody sees a light that asks anything of it)
@@ -302,6 +306,11 @@ class Platoon:
         """Commands for step k from the sensed state and the maneuver's ``pairs`` (who follows whom in
         each lane); returns the speed at the step's end of each car in ``commanded`` (SUMO moves its
         own followers)."""
+        if self._attacker_in_c:  # the attacker and the followers, in C
+            commands, new_speeds = [], []
+            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
+            self.commands.append(commands)
+            return new_speeds
         if self._one_ahead or not self._python and self._attacker_driver is None:
             ahead = None  # the column (car i follows car i - 1, at pair i - 1's gap), or nobody Python commands asks
         else:

@@ -98,7 +98,7 @@ def test_the_compiled_followers_command_what_the_python_does_bit_for_bit_whateve
         attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
         lie, told = _liars(rng, config) if config.v2v is not None else (None, None)
         fast = Platoon(config, attack, 40.0, beacons=lie)
-        assert fast._compiled is not None
+        assert fast._compiled is not None and fast._attacker_in_c  # the attacker in C too
         python_only()
         python = Platoon(config, attack, 40.0, beacons=told)
         compiled.ENABLED = True

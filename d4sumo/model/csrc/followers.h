@@ -69,7 +69,11 @@ typedef struct {
     Py_ssize_t head, tail, flights_capacity;
     PyObject *falsify, *message, *sent; /* the lie (None: nobody lies), the Message class, Channel.sent */
     int liar;
-    Follower *f;    /* f[1] .. f[cars - 1] */
+    Follower *f;    /* f[1] .. f[cars - 1]; f[0] the attacker's cruise control and actuator, where it is stepped here */
+    int has_attacker; /* whether the attacker is stepped here too: its attack, and its cruise where the attack is NaN */
+    double *attack_u; /* its pedal at each step (NaN: it cruises) */
+    Py_ssize_t attack_steps;
+    int attacking;  /* whether it attacked at the last step (a new cruise window starts its PID afresh) */
     int with_mode;  /* how many followers have a mode recorded */
     PyObject *checked; /* platoon.checked_command: a command that is not one raises its error */
 } Followers;
