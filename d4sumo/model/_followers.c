@@ -179,12 +179,28 @@ static void Followers_dealloc(Followers *self) {
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
+/* A cruise control's state carried on from a batch (`batch.PlatoonBatch.detach`): (integral, the last error or None,
+ * and a flag: the mode a switching follower is in, or whether the attacker attacked at the last step; then, for a
+ * follower, whether its mode is known) */
+static int cruise_state(PyObject *state, Switching *sw, double *flag, int *known) {
+    PyObject *prev;
+    int mode_known = 0;
+    if (!PyArg_ParseTuple(state, "dOd|p", &sw->integral, &prev, flag, &mode_known))
+        return -1;
+    sw->has_prev = prev != Py_None;
+    if (sw->has_prev && (sw->prev_error = PyFloat_AsDouble(prev)) == -1.0 && PyErr_Occurred())
+        return -1;
+    if (known != NULL)
+        *known = mode_known;
+    return 0;
+}
+
 /* the attacker (attack_u, (cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2),
- * (target_mps, step_s, max_accel, max_decel), its actuator (7)) */
+ * (target_mps, step_s, max_accel, max_decel), its actuator (7)[, its cruise's state: `cruise_state`]) */
 static int init_attacker(Followers *self, PyObject *attacker) {
-    PyObject *u, *gains, *own, *actuator;
-    if (!PyArg_ParseTuple(attacker, "O!O!O!O!", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
-                          &PyTuple_Type, &actuator))
+    PyObject *u, *gains, *own, *actuator, *state = Py_None;
+    if (!PyArg_ParseTuple(attacker, "O!O!O!O!|O", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
+                          &PyTuple_Type, &actuator, &state))
         return -1;
     double g[5], o[4], a[7];
     if (read_tuple(gains, g, 5, "the attacker's cruise gains") < 0 || read_tuple(own, o, 4, "the attacker") < 0
@@ -207,6 +223,10 @@ static int init_attacker(Followers *self, PyObject *attacker) {
     f->step_s = o[1], f->max_accel = o[2], f->max_decel = o[3];
     f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
     f->accel_mps2 = a[5], f->coast = a[6];
+    double attacking = 0.0;
+    if (state != Py_None && cruise_state(state, &f->sw, &attacking, NULL) < 0)
+        return -1;
+    self->attacking = attacking != 0.0;
     self->has_attacker = 1;
     return 0;
 }
@@ -311,9 +331,9 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     for (int i = 1; i < n; i++) {
         Follower *f = &self->f[i];
-        PyObject *own, *gains, *mitigation, *actuator, *radar;
-        if (!PyArg_ParseTuple(PyList_GET_ITEM(laws, i - 1), "ipO!O!dO!O!O", &f->law, &f->has_mode, &PyTuple_Type, &own,
-                              &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar))
+        PyObject *own, *gains, *mitigation, *actuator, *radar, *state = Py_None;
+        if (!PyArg_ParseTuple(PyList_GET_ITEM(laws, i - 1), "ipO!O!dO!O!O|O", &f->law, &f->has_mode, &PyTuple_Type, &own,
+                              &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar, &state))
             return -1;
         int switching = f->law == LAW_SWITCHING || f->law == LAW_TIMEGAP;
         if (f->law < LAW_CACC || f->law > LAW_TIMEGAP || (!switching && !self->channel)) {
@@ -337,6 +357,9 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
                 v[gain[g]] = f->c[g];
             f->sw.time_gap = f->law == LAW_TIMEGAP;
             f->sw.time_gap_s = f->law == LAW_TIMEGAP ? f->c[9] : 0.0;
+            if (state != Py_None && cruise_state(state, &f->sw, &f->sw.v[VR_MODE], &f->sw.mode_known) < 0)
+                return -1;
+            f->mode = v[VR_MODE];
         }
         f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
         f->accel_mps2 = a[5], f->coast = a[6];

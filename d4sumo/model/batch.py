@@ -229,6 +229,7 @@ class PlatoonBatch:
         platoon.commands = self.commands[:k, e].tolist()
         if self.modes is not None:
             platoon.modes = self.modes[:k, e].tolist()
+        platoon.compile()  # in C from here on, where it may be: in the state the arrays left
         return platoon
 
     def episode(self, e: int, steps: int, positions: np.ndarray, speeds: np.ndarray, collisions: tuple[Collision, ...],

@@ -42,7 +42,8 @@ if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is c
 def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
     """``advance(k, positions, speeds, pairs, commands, new_speeds, modes)`` of ``platoon``'s followers in C,
     or None where the Python plays them (see the module). Made before the platoon's first step: it takes
-    the channel's and the radars' generators as they start. With ``attacker`` (one that plays its attack and
+    the channel's and the radars' generators as they start, and the controllers' state as it is (carried on from a
+    batch's arrays: `batch.PlatoonBatch.detach`). With ``attacker`` (one that plays its attack and
     cruises, nothing else: `platoon.Platoon`) the attacker is stepped in C too, its command and speed first."""
     channel, config = platoon.channel, platoon.config
     if (Followers is None or not ENABLED or not platoon._one_ahead or len(platoon._python) != config.followers
@@ -84,8 +85,15 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
         numbers = (*own, *gains, *mitigation, *drive, *(radar[:3] if radar else ()))
         if not all(type(x) is float or type(x) is int for x in numbers):  # a numpy float32 computes otherwise in the Python
             return None
+        if law >= 4:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
+            state = (float(controller.cruise.integral), controller.cruise.prev_error, float(controller.mode),
+                     bool(controller._mode_known))
+            if state[1] is not None and type(state[1]) is not float:
+                return None
+        else:
+            state = None
         laws.append((law, follower.has_mode, own, tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
-                     tuple(float(m) for m in mitigation), drive, radar))
+                     tuple(float(m) for m in mitigation), drive, radar, *([state] if state is not None else [])))
     ours = _attacker(platoon) if attacker else None
     if channel is None:
         return Followers(None, [0.0] * (config.followers + 1), [()] * config.followers, [], None, laws, checked_command,
@@ -103,4 +111,5 @@ def _attacker(platoon) -> tuple:
     return (platoon.attack_u, (cruise.kp, cruise.ki, cruise.kd, cruise.clamp, cruise.limit),
             (cruise.target_mps, cruise.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2),
             (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
-             actuator.accel_mps2, actuator.coast))
+             actuator.accel_mps2, actuator.coast),
+            (float(cruise.integral), cruise.prev_error, float(platoon._attacking)))  # its state: as it starts, or carried on

@@ -268,11 +268,13 @@ class Platoon:
         self._with_mode = [f.controller for f in self.followers if f.has_mode]
         #: the followers, their radars and channel stepped in C where they may be (`compiled`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
-        plain = (self._attacker_driver is None and self._attacker_as_run is None and self._motion is None and not self._others
-                 and all(type(u) is float for u in self.attack_u))  # an attacker that only attacks and cruises
-        self._compiled = compiled_followers(self, attacker=plain) if followers is None and not lights else None
-        #: whether the attacker is stepped in C with them (`compiled`): the whole step is then the C's
-        self._attacker_in_c = self._compiled is not None and plain
+        self._attacking = False  # whether the attacker attacked at the last step (a new cruise window starts its PID afresh)
+        #: an attacker that only attacks and cruises, which the C may step
+        self._plain = (self._attacker_driver is None and self._attacker_as_run is None and self._motion is None
+                       and not self._others and all(type(u) is float for u in self.attack_u))
+        self._compiled, self._attacker_in_c = None, False
+        if followers is None and not lights:
+            self.compile()
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
         #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
         self.stops: list | None = None  # (None: nobody sees a light that asks anything of it)
@@ -285,10 +287,17 @@ class Platoon:
             obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
             self._drivers = {i: SignalDriver(config.vehicle_of(i), dt) for i in obeying}
             self._python = [(i, self._obeying(i, command), apply, inbox) for i, command, apply, inbox in self._python]
-        self._attacking = False
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
         self.pairs: list[list[Pair]] = []  # per sample, lane-changing maneuvers only: who followed whom
+
+    def compile(self) -> None:
+        """Its followers (and its attacker) stepped in C where they may be (`compiled`), from the state they are in: as
+        the Python below, bit for bit. Made before its first step, or where a batch's arrays hand it on
+        (`batch.PlatoonBatch.detach`), once its controllers carry the state the arrays left."""
+        self._compiled = compiled_followers(self, attacker=self._plain)
+        #: whether the attacker is stepped in C with them: the whole step is then the C's
+        self._attacker_in_c = self._compiled is not None and self._plain
 
     def _obeying(self, i: int, command):
         """Follower ``i``'s command, which its driver holds below what the signal ahead allows (`signals`)."""
