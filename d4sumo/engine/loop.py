@@ -28,8 +28,11 @@ from ..model.platoon import Platoon, collisions_at
 from ..model.trace import Episode, rows_array
 
 #: episodes go on one at a time once this few are left: the arrays' fixed cost per step then exceeds
-#: what they save (measured with tools/bench_batch.py)
+#: what they save (measured with tools/bench_batch.py) ...
 DETACH_AT = 4
+#: ... and this few where each goes on in C (`model.compiled`: the paper's controller, an attacker that only
+#: attacks and cruises), cheaper alone than in Python (0.21, bench_batch: random +5 %, ce +14 % over 4)
+DETACH_AT_IN_C = 12
 
 
 class _Column:
@@ -293,14 +296,20 @@ class _Arrays:
 
 def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *,
          on_episode: Callable[[int, "Episode | Exception"], None] | None = None,
-         detach_at: int = DETACH_AT, detach_at_step: int | None = None) -> list["Episode | Exception"]:
+         detach_at: int | None = None, detach_at_step: int | None = None) -> list["Episode | Exception"]:
     """Play one episode per plan in ``world`` (its platoons inserted, t = 0), each with its own
     configuration (all of one `batch.batch_key`); every result is the episode, or the exception a
     user's follower controller raised in it. ``on_episode(e, result)`` hears of each as it ends.
-    ``detach_at``: the arrays command while more than this many are left (0: to the end);
+    ``detach_at``: the arrays command while more than this many are left (0: to the end; None: `DETACH_AT`, or
+    `DETACH_AT_IN_C` where the episodes alone would step in C);
     ``detach_at_step``: from this step on, every episode goes on alone (tests of the array laws)."""
     episodes = _Episodes(world, configs, on_episode)
     config, m = configs[0], len(plans)
+    if detach_at is None:
+        detach_at = DETACH_AT
+        if (m > DETACH_AT and config.batch_arrays and all(p.motion is None for p in plans)  # would they go on in C? (asked
+                and all(c.cls in ("switching", "timegap") for c in config.controllers)):  # of d4sumo's laws: nobody's code runs)
+            detach_at = DETACH_AT_IN_C if Platoon(config, plans[0].u, world.attacker_max_speed_mps)._attacker_in_c else DETACH_AT
     changes: dict[int, list[tuple[int, int]]] = {}  # step -> (episode, the lane its attacker changes to)
     for e, plan in enumerate(plans):
         for k, lane in lane_changes(plan, episodes.maneuver):
