@@ -1,7 +1,8 @@
 """Each law that has more than one form, checked form against form over its whole input space, mechanically:
 the paper's switching controller and its time-gap variant (`control.SwitchingController`, `TimeGapController`,
 their arrays `arrays.SwitchingArray` and their C in `fmus/switching.h`, which the compiled followers and the
-FMUs both run), with the rules they go through (acceleration to pedal, the actuator). Pure code, no SUMO.
+FMUs both run), with the rules they go through (acceleration to pedal, the actuator); and the cooperative laws'
+one decision, the mitigation's switch, against their C. Pure code, no SUMO.
 
 Random draws alone would rarely land on the switch's thresholds, where a rounding would change the mode; so
 every step draws each input from the thresholds themselves, a few units in the last place either side,
@@ -95,3 +96,46 @@ def test_the_switching_laws_are_the_same_float_in_python_in_arrays_and_in_c_over
             assert new_speeds == [v] and drive_arrays.apply(u_arrays, np.array([[speed]]))[0, 0] == v
             thresholds_met.update(i for i, g in enumerate(gaps) if g == gap)
     assert len(thresholds_met) == 7  # every threshold was met exactly, not only near
+
+
+@pytest.mark.parametrize("law", ["cacc", "ploeg", "consensus"])
+def test_the_mitigations_switch_is_the_same_in_python_and_in_c_at_its_threshold(law, monkeypatch):
+    """The cooperative laws' one decision (`cacc.Fallback.check`: the beacon's speed of the car ahead against the
+    radar's, within ``fallback_mps``) met exactly and a few ulps either side, every step, in a platoon whose radar
+    reads a step late while the beacons arrive at once: the disagreement is each car's change of speed, drawn at
+    the threshold. Every command, mode and speed the same float in Python and in C."""
+    from d4sumo.model.config import ControllerConfig, EpisodeConfig
+    from d4sumo.model.maneuvers import maneuver_of
+    from d4sumo.model.platoon import Platoon
+    from d4sumo.model.sensing import RadarParams
+
+    rng = np.random.default_rng(["cacc", "ploeg", "consensus"].index(law))
+    met = 0
+    for _ in range(8):
+        threshold = float(rng.uniform(0.3, 2.0))
+        params = (("fallback_mps", threshold), ("fallback_headway_s", float(rng.uniform(0.8, 1.5))))
+        config = EpisodeConfig(followers=int(rng.integers(1, 5)), controller=ControllerConfig(law, params), start="steady",
+                               setpoint_m=float(rng.uniform(3.0, 10.0)), radar=RadarParams(latency_s=0.05),
+                               v2v={"beacon_interval_s": 0.05})
+        attack = np.full(config.steps, np.nan)
+        fast = Platoon(config, attack, 40.0)
+        assert fast._compiled is not None
+        monkeypatch.setattr(compiled, "ENABLED", False)
+        python = Platoon(config, attack, 40.0)
+        monkeypatch.setattr(compiled, "ENABLED", True)
+        n = config.followers + 1
+        pairs_at = maneuver_of(config).pairs
+        x = list(np.cumsum(rng.uniform(8.0, 20.0, n))[::-1] + 100.0)
+        v = [25.0] * n
+        for k in range(300):
+            # each car's change of speed: the threshold exactly, a few ulps off it, or anything
+            for i in range(n):
+                step = _near(threshold, rng) if rng.random() < 0.7 else float(rng.uniform(0.0, 3.0))
+                v[i] = max(0.0, v[i] + (step if rng.random() < 0.5 else -step))
+                met += step == threshold
+            x = [xi + vi * 0.05 for xi, vi in zip(x, v)]
+            pairs = pairs_at(x)
+            assert fast.advance(k, x, list(v), pairs) == python.advance(k, x, list(v), pairs), (law, k)
+        assert fast.commands == python.commands and fast.modes == python.modes
+        assert any(1.0 in row for row in python.modes) and any(0.0 in row for row in python.modes)  # both sides met
+    assert met > 100
