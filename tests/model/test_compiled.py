@@ -235,3 +235,24 @@ def test_the_extension_refuses_what_it_cannot_play_exactly_and_is_collected_in_a
     del lie
     gc.collect()
     assert freed == [True]
+
+
+def test_an_attacker_whose_top_speed_is_a_float32_is_the_pythons(python_only):
+    """Found by review: a numpy float32 attacker_max_speed_mps (the Python API) made the Python's clamped actuator
+    compute in float32, the C in double: such an attacker stays the Python's, its commands and speeds the same."""
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"), start="steady")
+    attack = np.r_[np.full(20, np.nan), np.ones(config.steps - 20)]
+    assert Platoon(config, attack, 26.0)._attacker_in_c
+    fast = Platoon(config, attack, np.float32(26.0))
+    assert fast._compiled is not None and not fast._attacker_in_c
+    python_only()
+    python = Platoon(config, attack, np.float32(26.0))
+    compiled.ENABLED = True
+    pairs_at = maneuver_of(config).pairs
+    x, v = [100.0, 88.0, 76.0], [25.0, 25.0, 25.0]
+    for k in range(200):
+        new = fast.advance(k, x, v, pairs_at(x))
+        assert [float(s) for s in new] == [float(s) for s in python.advance(k, x, v, pairs_at(x))]
+        v = [float(s) for s in new]
+        x = [xi + vi * config.step_s for xi, vi in zip(x, v)]
+    assert v[0] == pytest.approx(26.0)  # it rode its top speed
