@@ -637,12 +637,8 @@ def test_falsify_names_a_cooperative_cut_in_0_20_ran_with_the_radar_matched_to_t
     assert main(["falsify", *flags, "--set", "v2v.match_in_maneuvers=true"]) == 0  # as 0.20.0 stored it
     (stored,) = [json.loads(d) for (d,) in sqlite3.connect(db).execute("SELECT definition FROM campaign")]
     assert stored["config"]["v2v"]["match_radar"] is True and "match_in_maneuvers" not in stored["config"]["v2v"]
-    now = run("falsify", *flags)
-    assert now.returncode == 0, now.stderr
-    assert "holds this campaign as d4sumo 0.20 or before ran it (cooperative followers in a lane-changing maneuver" in now.stderr
-    assert now.stderr.rstrip().endswith("To go on with that one: --set v2v.match_in_maneuvers=true")
-    again = run("falsify", *[a if a != "2" else "3" for a in flags[:-1]], "--set", "v2v.match_in_maneuvers=true")
-    assert again.returncode == 0 and "2 of 3 samples stored already: resuming" in again.stderr, again.stderr
+    _names_the_earlier_campaign_and_goes_on_with_it(flags, "v2v.match_in_maneuvers=true", "holds this campaign as d4sumo 0.20 or "
+                                                    "before ran it (cooperative followers in a lane-changing maneuver")
 
 
 @pytest.mark.sumo
@@ -653,11 +649,18 @@ def test_falsify_names_a_campaign_on_a_road_of_ones_own_an_earlier_version_ran_t
     flags = ["--network", road, "--start", "steady", "--duration", "10", "--optimizer", "random", "--samples", "2",
              "--db", str(tmp_path / "r.sqlite"), "--quiet"]
     assert main(["falsify", *flags, "--set", "scenario.signals=ignore"]) == 0  # as 0.18 stored it
+    _names_the_earlier_campaign_and_goes_on_with_it(flags, "scenario.signals=ignore", "holds this campaign as d4sumo 0.18 "
+                                                    "or before ran it (the platoon driving through red lights)")
+
+
+def _names_the_earlier_campaign_and_goes_on_with_it(flags: list[str], then: str, said: str) -> None:
+    """falsify with ``flags`` (2 samples, --quiet last) on a database holding the campaign as an earlier version ran it
+    (``--set then``): it says so (``said``) with the flag that goes on with it, and with that flag resumes it."""
     now = run("falsify", *flags)
     assert now.returncode == 0, now.stderr
-    assert "holds this campaign as d4sumo 0.18 or before ran it (the platoon driving through red lights)" in now.stderr
-    assert now.stderr.rstrip().endswith("To go on with that one: --set scenario.signals=ignore")
-    again = run("falsify", *[a if a != "2" else "3" for a in flags[:-1]], "--set", "scenario.signals=ignore")
+    assert said in now.stderr
+    assert now.stderr.rstrip().endswith(f"To go on with that one: --set {then}")
+    again = run("falsify", *[a if a != "2" else "3" for a in flags[:-1]], "--set", then)
     assert again.returncode == 0 and "2 of 3 samples stored already: resuming" in again.stderr, again.stderr
 
 
