@@ -86,6 +86,24 @@ LEDGER = (
     Added("search.auto.learn_points", "0.20", 128, "the GP's kernel learned from 128 scores"),
 )
 
+
+
+@dataclass(frozen=True)
+class Was:
+    """A key whose default changed after version ``until``: the campaigns ``until`` and before ran by default
+    stored ``value`` (the key holds it, so nothing is restored; only finding such a campaign again needs it)."""
+
+    key: str  # "table.name"
+    until: str
+    value: Any
+
+
+DEFAULTS_CHANGED = (
+    # 0.7 released auto with the inducing points and the kernel's learning at 256, its last commit at 128
+    Was("search.auto.inducing", "0.7", 256),
+    Was("search.auto.learn_points", "0.7", 256),
+)
+
 _BY_TABLE: dict[str, dict[str, Added]] = {}
 for _entry in LEDGER:
     _BY_TABLE.setdefault(_entry.table, {})[_entry.name] = _entry
@@ -110,6 +128,19 @@ def restored(table: str, held: dict[str, Any]) -> dict[str, Any]:
 def added_after(version: str) -> list[Added]:
     """The keys added after ``version`` (one of `RELEASES`), in the ledger's order."""
     return [entry for entry in LEDGER if newer(entry.since, version)]
+
+
+def as_ran(table: str) -> tuple[dict[str, Any], ...]:
+    """How the campaigns each earlier release stored ran ``table``'s keys added after it and those whose default
+    it had otherwise, newest release first, each distinct set once: the values that give back what it did."""
+    sets: list[dict[str, Any]] = []
+    for version in reversed(RELEASES):
+        then = {entry.name: entry.earlier for entry in added_after(version) if entry.table == table}
+        then.update({was.key.rpartition(".")[2]: was.value for was in DEFAULTS_CHANGED
+                     if was.key.rpartition(".")[0] == table and not newer(version, was.until)})
+        if then and then not in sets:
+            sets.append(then)
+    return tuple(sets)
 
 
 def newer(version: str, than: str) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import pytest
 
@@ -50,3 +51,18 @@ def test_every_default_campaign_of_today_holds_no_key_at_its_earlier_value():
                     definition.get(entry.table))
             if isinstance(held, dict) and entry.name in held:
                 assert held[entry.name] != entry.earlier, entry.key
+
+
+def test_as_ran_gives_each_releases_values_newest_first_with_the_defaults_it_had_otherwise():
+    assert ledger.as_ran("search.ce") == ({"noise_fraction": 0.0},)
+    sets = ledger.as_ran("search.auto")
+    assert sets[0] == {"learn_points": 128} and sets[1] == {"per_signal": 0, "learn_points": 128}
+    assert sets[-1] == {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0, "learn_points": 256,
+                        "inducing": 256}  # 0.7's, which ran 256 of each by default
+    assert len(sets) == len({json.dumps(s, sort_keys=True) for s in sets})
+    assert ledger.as_ran("scenario")[-1]["signals"] == "ignore" and ledger.as_ran("nothing") == ()
+
+
+@pytest.mark.parametrize("was", ledger.DEFAULTS_CHANGED, ids=lambda w: w.key)
+def test_each_changed_default_names_a_release_and_a_key_of_the_ledgers_tables(was):
+    assert was.until in ledger.RELEASES and was.key.count(".") >= 1

@@ -613,11 +613,12 @@ def test_a_sweep_begun_where_the_numerics_differ_resumes_and_says_so_once(tmp_pa
     {"bo": "inducing = 0"},  # 0.5-0.6
     {"bo": "inducing = 0", "ce": "noise_fraction = 0.0"},  # 0.4
     {"bo": "gp_version = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.3
-    {"bo": "gp_version = 1\nbatch_size = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.2
-    {"auto": "per_signal = 0"},  # 0.10
+    {"bo": "batch_size = 1\ngp_version = 1\ninducing = 0", "ce": "noise_fraction = 0.0"},  # 0.2
+    {"auto": "per_signal = 0"},  # 0.10.1
+    {"auto": "patience = 0\nper_signal = 0"},  # 0.10.0
     {"auto": "suffix = 0.0\npatience = 0\nper_signal = 0"},  # 0.9
     {"auto": "stall = 0\nsuffix = 0.0\npatience = 0\nper_signal = 0"},  # 0.8
-    {"auto": "version = 1"},  # 0.7
+    {"auto": "version = 1\nlearn_points = 256\ninducing = 256"},  # 0.7.0
 ])
 def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(tmp_path, earlier):
     """A sweep database an earlier d4sumo wrote has another grid (bo's, ce's and auto's options then), and

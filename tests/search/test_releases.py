@@ -79,3 +79,24 @@ def test_each_sample_a_release_stored_replays_bit_for_bit(db, tmp_path, monkeypa
     the checkout's root (examples/roads/three_edges), as the releases ran it."""
     monkeypatch.chdir(ROOT)
     assert _replays(db, tmp_path) == []
+
+
+@pytest.mark.parametrize("db", DATABASES, ids=lambda p: p.name[:-len(".sqlite")])
+def test_each_campaign_a_release_ran_by_its_optimisers_defaults_is_found_by_one_set_of_the_earlier_options(db, tmp_path):
+    """`optimizers.EARLIER_OPTIONS`, derived from the ledger, names the options that give back each release's
+    campaigns run with its defaults: the campaign with today's defaults, those options set, has the stored key
+    (regression: the hand-written list had no set for 0.10.0's auto, which stored suffix and not patience, nor
+    for 0.7.0's, which ran 256 inducing points)."""
+    from d4sumo.search.optimizers import EARLIER_OPTIONS, resolve_options
+
+    campaigns, _ = _campaigns(db, tmp_path)
+    found = 0
+    for row in campaigns:
+        campaign = Campaign.from_definition(row.definition, samples=row.budget)
+        if campaign.optimizer not in EARLIER_OPTIONS:
+            continue
+        today = campaign.replace(optimizer_options=tuple(resolve_options(campaign.optimizer, {}).items()))
+        keys = {campaign_key(today.with_options(e).definition()) for e in ({}, *EARLIER_OPTIONS[campaign.optimizer])}
+        assert row.key in keys, (db.name, row.id, campaign.optimizer)
+        found += 1
+    assert found >= 2

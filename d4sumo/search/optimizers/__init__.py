@@ -65,25 +65,29 @@ _FACTORIES: dict[str, Callable[..., Optimizer]] = {
 }
 
 
-#: options added after campaigns were stored, each with the value those campaigns ran with: a campaign's
-#: definition leaves such an option out at that value, and a stored definition without it gets it back,
-#: so stored campaigns keep their identity and replay as they ran (bo proposed one point per score, then
-#: ran scikit-optimize's GP; ce added no noise; auto explored uniformly, then made piece moves through
-#: stalls, then explored from the design on without suffix moves, then cut held inputs across signals)
-OPTIONS_SINCE: dict[str, dict[str, float]] = {name: ledger.earlier(f"search.{name}") for name in ("bo", "ce", "auto")}
+def _as_earlier_versions_ran(name: str) -> tuple[dict[str, float], ...]:
+    """The ledger's sets of ``name``'s options as each earlier release ran them, newest first, each distinct set
+    once, each without the options that setting changes nothing (at today's default, or implied by the others:
+    auto's version 1 has no stalls)."""
+    sets: list[dict[str, float]] = []
+    for then in ledger.as_ran(f"search.{name}"):
+        changed = dict(then)
+        for key in then:
+            others = {k: v for k, v in changed.items() if k != key}
+            if _FACTORIES[name].resolve_together(check_options(name, _FACTORIES[name].OPTIONS, others))[key] == then[key]:
+                changed = others
+        if changed and changed not in sets:
+            sets.append(changed)
+    return tuple(sets)
 
 
-#: how an optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals
-#: (bo in 0.6 and before: the exact GP however many scores; in 0.3: scikit-optimize's GP; in 0.2 also one
-#: point per score; ce in 0.4 and before: no noise; auto in 0.10: held sampling across signals, in 0.9:
-#: also exploring from the design on, no suffix moves, in 0.8: also piece moves through stalls, in 0.7:
-#: uniform exploration)
-EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {"bo": ({"inducing": 0}, {"gp_version": 1, "inducing": 0},
-                                                                   {"gp_version": 1, "batch_size": 1, "inducing": 0}),
-                                                            "ce": ({"noise_fraction": 0.0},),
-                                                            "auto": ({"per_signal": 0}, {"suffix": 0.0, "patience": 0, "per_signal": 0},
-                                                                     {"stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0},
-                                                                     {"version": 1})}
+#: how each optimiser ran in earlier d4sumo versions, newest first: the options that give back its proposals,
+#: from the ledger (bo in 0.7 and before: the exact GP however many scores; in 0.3: scikit-optimize's GP; in
+#: 0.2 also one point per score; ce in 0.4 and before: no noise; auto in 0.10.1: held sampling across signals;
+#: in 0.10 also exploring from the design on; in 0.9 also no suffix moves; in 0.8 also no piece moves through
+#: stalls; in 0.7 uniform exploration)
+EARLIER_OPTIONS: dict[str, tuple[dict[str, float], ...]] = {
+    name: sets for name in _FACTORIES if (sets := _as_earlier_versions_ran(name))}
 
 
 #: the optimiser a campaign runs when none is named, and the one earlier d4sumo versions ran instead
@@ -97,7 +101,7 @@ def as_set_flags(name: str, options: dict) -> str:
 
 
 def stored_options(name: str, options: dict) -> dict:
-    """The options as a campaign's definition holds them (see OPTIONS_SINCE)."""
+    """The options as a campaign's definition holds them (without the options added later at the value earlier campaigns ran with)."""
     return ledger.stored(f"search.{name}", options)
 
 
@@ -116,5 +120,5 @@ def make_optimizer(name: str, lower, upper, *, budget: int, rng: np.random.Gener
     return _FACTORIES[name](np.asarray(lower, float), np.asarray(upper, float), budget, rng, signals=signals, **(options or {}))
 
 
-__all__ = ["OPTIMIZERS", "DEFAULT_OPTIMIZER", "EARLIER_DEFAULT_OPTIMIZER", "OPTIONS_SINCE", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
+__all__ = ["OPTIMIZERS", "DEFAULT_OPTIMIZER", "EARLIER_DEFAULT_OPTIMIZER", "EARLIER_OPTIONS", "INDEPENDENT_BATCH", "Optimizer", "BayesianOptimization", "BucketCrossEntropy",
            "CMAES", "CrossEntropy", "Halton", "Portfolio", "RandomSearch", "TrustRegionBO", "as_set_flags", "make_optimizer", "resolve_options", "stored_options"]
