@@ -1,5 +1,5 @@
 """The one part of the build pyproject.toml cannot say without setuptools' experimental table: the C
-extension that steps a platoon's followers (d4sumo.model.compiled), its switching law the one the FMUs
+extension that steps a platoon's followers (d4sumo.model.controllers.compiled), its switching law the one the FMUs
 d4sumo ships run (d4sumo/fmus/switching.h). Built without
 floating-point contraction or fast math, so each operation rounds as the Python's does; optional, so an
 install without a C compiler goes on and the Python plays those platoons."""
@@ -18,9 +18,9 @@ class ExactBuild(build_ext):
         super().build_extensions()
 
 
-PARTS = ["d4sumo/model/csrc/followers.h", "d4sumo/model/csrc/convert.h", "d4sumo/model/csrc/laws.h",
-         "d4sumo/model/csrc/channel.h", "d4sumo/fmus/switching.h"]
+PARTS = ["d4sumo/model/controllers/csrc/followers.h", "d4sumo/model/controllers/csrc/convert.h", "d4sumo/model/controllers/csrc/laws.h",
+         "d4sumo/model/controllers/csrc/channel.h", "d4sumo/fmus/switching.h"]
 
-setup(ext_modules=[Extension("d4sumo.model._followers", ["d4sumo/model/_followers.c"], depends=PARTS,
-                             include_dirs=["d4sumo/model/csrc", "d4sumo/fmus"], optional=True)],
+setup(ext_modules=[Extension("d4sumo.model.controllers._followers", ["d4sumo/model/controllers/_followers.c"], depends=PARTS,
+                             include_dirs=["d4sumo/model/controllers/csrc", "d4sumo/fmus"], optional=True)],
       cmdclass={"build_ext": ExactBuild})

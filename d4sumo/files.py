@@ -1,10 +1,13 @@
-"""Output files written whole: each is written beside its target as a hidden part named with the
-writer's process id (``.NAME.PID.part``), then renamed in. A part that a killed writer left behind
-(``kill -9`` leaves it no way out) is removed by the next writer of the same target."""
+"""Files: a file's content hash, read once a version of it (`file_sha256`), and output files written whole:
+each is written beside its target as a hidden part named with the writer's process id (``.NAME.PID.part``),
+then renamed in. A part that a killed writer left behind (``kill -9`` leaves it no way out) is removed by the
+next writer of the same target."""
 
 from __future__ import annotations
 
+import functools
 import glob
+import hashlib
 import os
 import shutil
 from pathlib import Path
@@ -38,3 +41,18 @@ def _alive(pid: int) -> bool:
     except PermissionError:  # another user's process
         return True
     return True
+
+
+def file_sha256(path: Path) -> str:
+    """The file's content hash, read once a version of it (an FMU of megabytes is named every episode)."""
+    stat = os.stat(path)
+    return _sha256(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=64)
+def _sha256(path: str, mtime_ns: int, size: int) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -34,14 +34,14 @@ import numpy as np
 
 from . import sumocfg
 from .errors import ConfigError, is_number
-from .model.attacks import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
+from .model.attacks.pedals import ATTACK_OPTIONS, FAMILIES, AttackFamily, make_attack, resolve_attack_options
 from .model.config import EpisodeConfig, VehicleParams
 from .model.definition import TABLES
 from .tomlfiles import read_toml
-from .model.sensing import RadarParams
-from .model.traffic import TrafficParams
-from .model.v2v import ChannelParams
-from .model.messages import MESSAGE_KEYS, attack_box
+from .model.world.sensing import RadarParams
+from .model.world.traffic import TrafficParams
+from .model.world.v2v import ChannelParams
+from .model.attacks.messages import MESSAGE_KEYS, attack_box
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options

@@ -26,7 +26,7 @@ from typing import Any, Mapping
 from xml.etree import ElementTree as ET
 
 from .errors import ConfigError
-from .model.network import SUMO_OPTION_GROUPS_PASSED as GROUPS, SUMO_OPTIONS_PASSED as PASSED, passed_option
+from .model.world.network import SUMO_OPTION_GROUPS_PASSED as GROUPS, SUMO_OPTIONS_PASSED as PASSED, passed_option
 
 log = logging.getLogger(__name__)
 

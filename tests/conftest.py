@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from d4sumo.model.attacks import make_attack
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.model.config import EpisodeConfig
 
 #: Knots found by search that make v3 hit v2 from rest at the default setpoint (attacker untouched).
@@ -154,7 +154,7 @@ def knots_signal(values, config: EpisodeConfig) -> np.ndarray:
 
 def random_plans(config: EpisodeConfig, count: int, seed: int = 0, family: str = "knots"):
     """Attack plans drawn uniformly from the campaign's box (a lane change time too, for a lateral maneuver)."""
-    from d4sumo.model.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
 
     box = maneuver_of(config).family(make_attack(family))
     rng = np.random.default_rng(seed)

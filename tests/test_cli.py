@@ -497,7 +497,7 @@ pathlib.Path("imported.marker").write_text("myctl ran")
 
 from dataclasses import dataclass
 
-from d4sumo.model.control import SwitchingController, SwitchingParams
+from d4sumo.model.controllers.control import SwitchingController, SwitchingParams
 
 
 class Gentle(SwitchingController):
@@ -783,7 +783,7 @@ def test_a_campaigns_best_parameters_name_what_the_pedals_do_not_set():
 
 def test_the_controller_flag_names_every_registered_controller(capsys):
     """Found by review: the IDM, registered from its own file, was missing from --controller's help."""
-    from d4sumo.model.control import registered_controllers, resolve_controller
+    from d4sumo.model.controllers.control import registered_controllers, resolve_controller
 
     assert main(["simulate", "--help"]) == 0
     said = " ".join(capsys.readouterr().out.split())

@@ -9,8 +9,8 @@ import pytest
 
 from d4sumo.errors import ConfigError
 from d4sumo.fmus import SOURCES, VARIABLES, build_switching_fmu
-from d4sumo.model.control import SwitchingParams
-from d4sumo.model.vehicle import VehicleParams
+from d4sumo.model.controllers.control import SwitchingParams
+from d4sumo.model.world.vehicle import VehicleParams
 
 
 def test_the_variables_are_the_value_references_of_the_c_law_and_their_starts_are_d4sumo_defaults():

@@ -9,9 +9,9 @@ import pytest
 
 from d4sumo import ledger
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.traffic import TrafficParams
-from d4sumo.model.v2v import ChannelParams
-from d4sumo.model.vehicle import VehicleParams
+from d4sumo.model.world.traffic import TrafficParams
+from d4sumo.model.world.v2v import ChannelParams
+from d4sumo.model.world.vehicle import VehicleParams
 from d4sumo.search.optimizers import OPTIMIZERS, resolve_options
 
 TABLES = {"scenario": EpisodeConfig, "vehicle": VehicleParams, "traffic": TrafficParams, "v2v": ChannelParams}

@@ -49,8 +49,8 @@ def test_the_wheel_ships_every_scenario_variant(wheel):
     modules = {str(p.relative_to(ROOT)) for p in (ROOT / "d4sumo").rglob("*.py")}
     assert len(modules) > 30 and modules <= set(names)  # every module of every subpackage
     assert not any(n.startswith("tests/") for n in names)
-    # the followers stepped in C (d4sumo.model.compiled), built for this platform
-    assert [n for n in names if n.startswith("d4sumo/model/_followers.") and n.endswith(".so")], names
+    # the followers stepped in C (d4sumo.model.controllers.compiled), built for this platform
+    assert [n for n in names if n.startswith("d4sumo/model/controllers/_followers.") and n.endswith(".so")], names
 
 
 @pytest.mark.sumo
@@ -70,7 +70,7 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     run = lambda *code: subprocess.run([str(python), *code], cwd=work, capture_output=True, text=True, env=env, timeout=300)
     # these four side by side: none reads what another writes
     where, listed, episode, built = side_by_side([
-        lambda: run("-c", "import d4sumo.sumo_scenarios as s, d4sumo.model._followers as c; print(s.__file__, c.__file__)"),
+        lambda: run("-c", "import d4sumo.sumo_scenarios as s, d4sumo.model.controllers._followers as c; print(s.__file__, c.__file__)"),
         lambda: run("-m", "d4sumo.cli", "scenarios"),
         lambda: run("-m", "d4sumo.cli", "simulate", "--knots=-1,1,1,-1,1,-1,-1,1,-1", "--json"),
         lambda: run("-m", "d4sumo.cli", "build-fmu", "--fmi", "3", "--out", "acc.fmu"),  # its C sources ship in the wheel
@@ -116,7 +116,7 @@ def test_the_source_distribution_holds_every_file_the_extension_is_built_from(tm
     (archive,) = (tmp_path / "dist").glob("d4sumo-*.tar.gz")
     names = {n.split("/", 1)[1] for n in tarfile.open(archive).getnames() if "/" in n}
     setup = (ROOT / "setup.py").read_text()
-    needed = {"d4sumo/model/_followers.c", *(part for part in names if part.startswith("d4sumo/model/csrc/"))}
-    assert {"d4sumo/model/csrc/followers.h", "d4sumo/model/csrc/laws.h", "d4sumo/model/csrc/channel.h",
+    needed = {"d4sumo/model/controllers/_followers.c", *(part for part in names if part.startswith("d4sumo/model/controllers/csrc/"))}
+    assert {"d4sumo/model/controllers/csrc/followers.h", "d4sumo/model/controllers/csrc/laws.h", "d4sumo/model/controllers/csrc/channel.h",
             "d4sumo/fmus/switching.h"} <= names and needed <= names
     assert all(f'"{part}"' in setup for part in needed if part.endswith(".h"))  # each a dependency of the build

@@ -639,12 +639,12 @@ def test_a_database_of_a_sweep_an_earlier_version_ran_says_how_to_go_on_with_it(
 class KillsItsWorkerAt9m:
     """The paper's controller, except that at a setpoint of 9 m it kills the worker process it runs in."""
 
-    from d4sumo.model.control import SwitchingParams as Params
+    from d4sumo.model.controllers.control import SwitchingParams as Params
 
     def __init__(self, params, *, setpoint_m, **kwargs):
         import multiprocessing
 
-        from d4sumo.model.control import SwitchingController
+        from d4sumo.model.controllers.control import SwitchingController
 
         self.inner = SwitchingController(params, setpoint_m=setpoint_m, **kwargs)
         self.kill = setpoint_m == 9.0 and multiprocessing.parent_process() is not None

@@ -17,7 +17,7 @@ import os
 import statistics
 import time
 
-from d4sumo.model.batch import DEFAULT_BATCH
+from d4sumo.model.stepping.batch import DEFAULT_BATCH
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign

@@ -12,7 +12,7 @@ With --fmu, the paper's controller also as the FMUs d4sumo ships (FMI 2.0 and 3.
 ratio of their episodes to those of d4sumo's own controller, as it plays (in C where it is built; with
 --python, the Python) (the target: at most 2).
 
-Where a platoon's followers are stepped in C (d4sumo.model.compiled: the paper's controller and the
+Where a platoon's followers are stepped in C (d4sumo.model.controllers.compiled: the paper's controller and the
 cooperative ones), --python times the Python that stands for them instead.
 
 Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems switching sumo:ACC] [--fmu] [--python]
@@ -66,7 +66,7 @@ def main() -> None:
     parser.add_argument("--python", action="store_true", help="followers stepped by the Python, not in C")
     args = parser.parse_args()
     if args.python:
-        from d4sumo.model import compiled
+        from d4sumo.model.controllers import compiled
 
         compiled.ENABLED = False
     parser.check_counts({"--repeats": (args.repeats, 1), "--followers": (args.followers, 1)})

@@ -22,7 +22,7 @@ from pathlib import Path
 from d4sumo.inputs import with_overrides
 from d4sumo.engine.scenarios import MAX_COPIES
 from d4sumo.errors import refusal
-from d4sumo.model.batch import DEFAULT_BATCH
+from d4sumo.model.stepping.batch import DEFAULT_BATCH
 from d4sumo.tomlfiles import read_toml, toml_value
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep

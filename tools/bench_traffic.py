@@ -88,7 +88,7 @@ CORRIDOR_KNOTS = [-0.7805306719866065, -0.5935169118252068, -0.43238702211173785
 
 def corridor_case():
     """SUMO's corridor example along its main route among its own demand: (label, config, road, attack)."""
-    from d4sumo.model.attacks import attack_signal, make_attack
+    from d4sumo.model.attacks.pedals import attack_signal, make_attack
     from d4sumo.sumohome import sumo_home
 
     game = Path(sumo_home()) / "tools" / "game" / "corridor"

@@ -61,14 +61,14 @@ from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.engine.warmup import traffic_state
 from d4sumo.errors import ConfigError
 from d4sumo.inputs import campaign_of
-from d4sumo.model.attacks import FAMILIES
-from d4sumo.model.batch import batch_key
-from d4sumo.model.bodies import Body, body_gap_m
+from d4sumo.model.attacks.pedals import FAMILIES
+from d4sumo.model.stepping.batch import batch_key
+from d4sumo.model.world.bodies import Body, body_gap_m
 from d4sumo.model.config import START_MODES, ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import attack_plan, maneuver_of
-from d4sumo.model.lanes import CAR_WIDTH_M, lane_pairs, occupied_lanes
-from d4sumo.model.messages import MESSAGE_ATTACKS, MESSAGE_FIELDS
-from d4sumo.model.sensing import RadarParams
+from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
+from d4sumo.model.world.lanes import CAR_WIDTH_M, lane_pairs, occupied_lanes
+from d4sumo.model.attacks.messages import MESSAGE_ATTACKS, MESSAGE_FIELDS
+from d4sumo.model.world.sensing import RadarParams
 from d4sumo.search.campaign import Campaign, open_store
 from d4sumo.search.runner import Evaluator
 from d4sumo.search.spec import psi_robustness

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from d4sumo.engine.simulation import simulate
-from d4sumo.model import compiled
+from d4sumo.model.controllers import compiled
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign

@@ -12,7 +12,7 @@ from typing import Any
 from ..engine.scenarios import MAX_COPIES
 from ..errors import ConfigError
 from ..tomlfiles import toml_value
-from ..model.maneuvers import MANEUVERS
+from ..model.attacks.maneuvers import MANEUVERS
 
 EXIT_USAGE = 2
 #: a replay that does not reproduce its stored sample: a failed check, as a test runner's exit 1
@@ -146,7 +146,7 @@ def note_unused_flags(args: argparse.Namespace, config, family, formula: str | N
 def note_inert_parameters(family, config) -> None:
     """Parameters of the attack that change nothing in this episode (past its end): said, as the search
     still spends its samples over them."""
-    from ..model.maneuvers import inert_parameters
+    from ..model.attacks.maneuvers import inert_parameters
 
     inert = inert_parameters(family, config)
     if inert:

@@ -9,9 +9,9 @@ import sys
 from .. import __version__
 from ..errors import ConfigError, check_number
 from ..model.config import EpisodeConfig
-from ..model.messages import lie_label
-from ..model.sensing import RadarParams
-from ..model.traffic import TrafficParams
+from ..model.attacks.messages import lie_label
+from ..model.world.sensing import RadarParams
+from ..model.world.traffic import TrafficParams
 from .common import EXIT_DIFFERS, check_display, check_output_file, document, note_unused_flags
 
 
@@ -134,7 +134,7 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
 
     from ..engine.layout import route_lanes
     from ..engine.networks import opendrive_network
-    from ..model.maneuvers import lane_changes, maneuver_of
+    from ..model.attacks.maneuvers import lane_changes, maneuver_of
     from ..results.openscenario import read_motion
     from ..search.runner import Evaluator
     from ..search.store import campaign_key
@@ -188,13 +188,13 @@ def _version(text: str) -> tuple[int, ...]:
 
 def episode_plan(family, params, config: EpisodeConfig):
     """The attacker's command at every step's start (NaN, cruise, before the attack or with none) and its lane change."""
-    from ..model.maneuvers import attack_plan
+    from ..model.attacks.maneuvers import attack_plan
 
     return attack_plan(family, params, config)
 
 
 def episode_summary(config, family, params, plan, episode, robustness, d_safe, fcd) -> dict:
-    from ..model.maneuvers import lane_changes, maneuver_of
+    from ..model.attacks.maneuvers import lane_changes, maneuver_of
 
     played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
     return {

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from .. import __version__
-from ..model.attacks import FAMILIES
-from ..model.batch import DEFAULT_BATCH
+from ..model.attacks.pedals import FAMILIES
+from ..model.stepping.batch import DEFAULT_BATCH
 from ..model.config import MANEUVERS, START_MODES
 from ..search.optimizers import OPTIMIZERS
 from .campaigns import cmd_falsify, cmd_sweep

@@ -11,8 +11,8 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import AttackPlan, initial_state
-from ..model.trace import Episode
+from ..model.attacks.maneuvers import AttackPlan, initial_state
+from ..model.stepping.trace import Episode
 from .loop import DETACH_AT, play
 
 
@@ -69,7 +69,7 @@ def integrate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], attacks_u: 
     """`integrate` for many attacks at once (of one configuration, or of one each), commanded by the
     batch's arrays to the end (``detach_at`` 0) or, from step ``detach_at_step`` on, each episode alone:
     for physics tests of the array laws against the scalar ones."""
-    from ..model.batch import episode_configs
+    from ..model.stepping.batch import episode_configs
 
     attacks_u = np.asarray(attacks_u, dtype=float)
     configs = episode_configs(config, attacks_u.shape[0])

@@ -19,9 +19,9 @@ from xml.sax.saxutils import escape as xml_escape
 from ..cache import default_cache_dir
 from ..errors import ConfigError, SumoError
 from ..model.config import EpisodeConfig
-from ..model.network import files_digest
-from ..model.platoon import SumoFollower, followers_of
-from ..model.traffic import demand_files_xml, type_elements
+from ..model.world.network import files_digest
+from ..model.stepping.platoon import SumoFollower, followers_of
+from ..model.world.traffic import demand_files_xml, type_elements
 from ..sumohome import sumo_binary, sumo_home
 from .scenarios import Road
 

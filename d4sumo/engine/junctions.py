@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import math
 
-from ..model.bodies import Body, body_gap_m, struck_by
-from ..model.maneuvers import Pair
+from ..model.world.bodies import Body, body_gap_m, struck_by
+from ..model.attacks.maneuvers import Pair
 from .calls import api_call, route_junctions
 
 #: how far before and after a junction's stretch of the route a car's body is looked at [m]

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 
 from ..errors import ConfigError
-from ..model.vehicle import VEHICLE_CLASSES
+from ..model.world.vehicle import VEHICLE_CLASSES
 
 #: the version of a road's description: a cached one of another is described again
 LAYOUT = 3

@@ -10,7 +10,7 @@ is the model's (`model.signals`).
 
 from __future__ import annotations
 
-from ..model.signals import Stop
+from ..model.world.signals import Stop
 from .calls import route_junctions
 
 #: how far ahead of a car a signal is seen [m]: more than stopping from 45 m/s comfortably takes

@@ -21,11 +21,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..errors import WarmupCollision
-from ..model.batch import PlatoonBatch, collided
+from ..model.stepping.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import AttackPlan, lane_changes, maneuver_of
-from ..model.platoon import Platoon, collisions_at
-from ..model.trace import Episode, rows_array
+from ..model.attacks.maneuvers import AttackPlan, lane_changes, maneuver_of
+from ..model.stepping.platoon import Platoon, collisions_at
+from ..model.stepping.trace import Episode, rows_array
 
 #: episodes go on one at a time once this few are left: the arrays' fixed cost per step then exceeds
 #: what they save (measured with tools/bench_batch.py) ...

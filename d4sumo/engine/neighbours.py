@@ -5,8 +5,8 @@ lane-changing attacker, in each lane it covers. The pairs the step loop scores, 
 from __future__ import annotations
 
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import Pair
-from ..model.lanes import FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
+from ..model.attacks.maneuvers import Pair
+from ..model.world.lanes import FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
 from .calls import vehicle_call
 from .scenarios import Road
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..cache import default_cache_dir
 from ..errors import ConfigError
-from ..model.network import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files, network_digest, network_files
+from ..model.world.network import NETWORK_FILE_SUFFIXES, SCENARIOS_DIR, folder_files, network_digest, network_files
 from .netconvert import plain_xml
 
 log = logging.getLogger(__name__)

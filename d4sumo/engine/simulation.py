@@ -20,11 +20,11 @@ import numpy as np
 
 from ..errors import ConfigError, SumoError
 from ..files import part_of, remove_stale_parts
-from ..model.batch import episode_configs
+from ..model.stepping.batch import episode_configs
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import REAR_START_M, AttackPlan, check_road_lanes, maneuver_of
-from ..model.platoon import followers_of, longest_duration_s, road_needed_m
-from ..model.trace import Episode
+from ..model.attacks.maneuvers import REAR_START_M, AttackPlan, check_road_lanes, maneuver_of
+from ..model.stepping.platoon import followers_of, longest_duration_s, road_needed_m
+from ..model.stepping.trace import Episode
 from .loop import DETACH_AT, play
 from .scenarios import MAX_COPIES, Road, batch_road, config_road
 from .command import check_additional, check_options, followers_file, sumo_command, traffic_files

@@ -19,15 +19,16 @@ import numpy as np
 
 from ..errors import SumoError
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import maneuver_of
-from ..model.lanes import CAR_WIDTH_M, occupied_lanes
-from ..model.carfollowing import beacon_parameters, vehicle_data
-from ..model.platoon import followers_of
-from ..model.vehicle import VehicleParams
+from ..model.attacks.maneuvers import maneuver_of
+from ..model.world.lanes import CAR_WIDTH_M, occupied_lanes
+from ..model.controllers.carfollowing import beacon_parameters, vehicle_data
+from ..model.stepping.platoon import followers_of
+from ..model.world.vehicle import VehicleParams
 from ..sumohome import sumo_binary
 from .calls import simulation_step, vehicle_call
-from .command import (ATTACKER_VTYPE_ID, LANE_CHANGE_MODE_OFF, LANE_CHANGE_MODE_SUMO, ROUTE_ID, SPEED_MODE_PYTHON, VTYPE_ID,
-                      follower_types, sumo_command)
+from .command import (
+    ATTACKER_VTYPE_ID, LANE_CHANGE_MODE_OFF, LANE_CHANGE_MODE_SUMO, ROUTE_ID, SPEED_MODE_PYTHON, VTYPE_ID,
+    follower_types, sumo_command)
 from .junctions import JunctionCrossings
 from .lights import RouteLights, route_signals, signal_tracks
 from .neighbours import _LateralTrafficSense, _TrafficSense

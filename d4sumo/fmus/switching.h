@@ -1,5 +1,5 @@
-/* The paper's switching ACC (d4sumo.model.control.SwitchingController, its printed form), in C for the
- * FMUs d4sumo ships (fmi2.c, fmi3.c) and for the followers d4sumo steps in C (d4sumo/model/_followers.c),
+/* The paper's switching ACC (d4sumo.model.controllers.control.SwitchingController, its printed form), in C for the
+ * FMUs d4sumo ships (fmi2.c, fmi3.c) and for the followers d4sumo steps in C (d4sumo/model/controllers/_followers.c),
  * which also run its time-gap variant (control.TimeGapController: the desired gap s0 + h v; the FMUs keep
  * the printed law, h unused). Every operation is the Python's, in the same order, in IEEE doubles: its
  * commands equal the Python controller's. */

@@ -15,17 +15,17 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from ..errors import ConfigError, check_int, check_number
-from . import carfollowing
-from .control import SwitchingParams
+from .controllers import carfollowing
+from .controllers.control import SwitchingParams
 from . import definition
-from .controllers import ControllerConfig, listens as _listens
+from .controllers.table import ControllerConfig, listens as _listens
 from .definition import TABLES
-from .network import builds_network, files_digest, is_network_path, network_digest, sumo_options
-from .sensing import RadarParams
-from .traffic import TrafficParams
-from .v2v import ChannelParams
-from .vehicle import VehicleParams, car_tables
-from .maneuvers import MANEUVERS as MANEUVER_CLASSES, REAR_START_M, SWERVE_KNOTS, SWERVE_LANES
+from .world.network import builds_network, files_digest, is_network_path, network_digest, sumo_options
+from .world.sensing import RadarParams
+from .world.traffic import TrafficParams
+from .world.v2v import ChannelParams
+from .world.vehicle import VehicleParams, car_tables
+from .attacks.maneuvers import MANEUVERS as MANEUVER_CLASSES, REAR_START_M, SWERVE_KNOTS, SWERVE_LANES
 
 #: rest: all cars at 0 m/s, attack from t = 0 (the paper's transient attack); steady: all cars at the
 #: target speed with setpoint gaps, attack from t = 0 (an exact equilibrium of the paper's controller);

@@ -10,13 +10,13 @@ from typing import Any, Mapping
 
 from .. import ledger
 from ..errors import ConfigError, check_keys
-from .controllers import ControllerConfig
-from .maneuvers import MANEUVERS as MANEUVER_CLASSES
-from .network import is_network_path
-from .sensing import RadarParams
-from .traffic import TrafficParams
-from .v2v import ChannelParams
-from .vehicle import VehicleParams
+from .controllers.table import ControllerConfig
+from .attacks.maneuvers import MANEUVERS as MANEUVER_CLASSES
+from .world.network import is_network_path
+from .world.sensing import RadarParams
+from .world.traffic import TrafficParams
+from .world.v2v import ChannelParams
+from .world.vehicle import VehicleParams
 
 #: the fields of EpisodeConfig that are tables of their own, not [scenario] keys
 TABLES = ("vehicle", "vehicles", "controller", "radar", "traffic", "v2v")

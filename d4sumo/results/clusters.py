@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..model.attacks import FAMILY_CLASSES, make_attack
+from ..model.attacks.pedals import FAMILY_CLASSES, make_attack
 from .analysis import group, run_label, runs
 from .records import Record
 

@@ -37,10 +37,10 @@ import numpy as np
 
 from ..engine.netconvert import opendrive_output
 from ..errors import ConfigError
-from ..model.fmu import SIGNALS, is_fmu
-from ..model.lanes import CAR_WIDTH_M
-from ..model.trace import Collision
-from ..model.traffic import is_traffic
+from ..model.controllers.fmu import SIGNALS, is_fmu
+from ..model.world.lanes import CAR_WIDTH_M
+from ..model.stepping.trace import Collision
+from ..model.world.traffic import is_traffic
 from ..search.store import campaign_key
 from .analysis import TRAFFIC_MEETS_M
 from .records import Record

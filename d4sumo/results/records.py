@@ -13,8 +13,8 @@ from typing import Any, Sequence
 from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.definition import IDENTITY_KEYS, TABLES
-from ..model.plugins import names_only
-from ..model.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
+from ..model.controllers.plugins import names_only
+from ..model.attacks.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
 #: Every other key a campaign stores (network, route, duration, step, warm-up, followers, the maneuver and

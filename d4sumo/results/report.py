@@ -21,8 +21,9 @@ from ..errors import ConfigError, NotSimulable
 from ..files import part_of, remove_stale_parts
 from ..search.store import collision_dict
 from . import figures, paper, timespace
-from .analysis import (Table, attack_label, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes,
-                       table_by_speed, table_crash_kinds, table_success_statistics, table_systems)
+from .analysis import (
+    Table, attack_label, count_noun, has_traffic, most_severe, scenario_labels, table_attacker_crashes, table_by_speed,
+    table_crash_kinds, table_success_statistics, table_systems)
 from .baseline import table_without_attack
 from .clusters import cluster_knots, richest_conditions
 from .records import Record, load_records

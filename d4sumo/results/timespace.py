@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..model.traffic import is_traffic
+from ..model.world.traffic import is_traffic
 from .figures import LABEL_FONT_PT, SPEED_CMAP, _figure, _save, check_figure_path, wrap_title
 
 #: traffic cars: lighter than the platoon, whose speeds the colours tell

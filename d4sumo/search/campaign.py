@@ -16,13 +16,13 @@ from typing import Any
 
 from .. import ledger
 from ..errors import ConfigError, NotSimulable, check_int, check_number
-from ..model.attacks import FAMILY_CLASSES, AttackFamily, make_attack, resolve_attack_options
+from ..model.attacks.pedals import FAMILY_CLASSES, AttackFamily, make_attack, resolve_attack_options
 from ..model.config import EpisodeConfig
-from ..model.controllers import as_stored_ran
-from ..model.network import network_digest
-from ..model.control import user_code
-from ..model.plugins import ControllerImportError, names_only
-from ..model.messages import MESSAGE_KEYS, attack_box, lie_label
+from ..model.controllers.table import as_stored_ran
+from ..model.world.network import network_digest
+from ..model.controllers.control import user_code
+from ..model.controllers.plugins import ControllerImportError, names_only
+from ..model.attacks.messages import MESSAGE_KEYS, attack_box, lie_label
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options, stored_options
 from .spec import Specification
 from .store import DefinitionError, Store

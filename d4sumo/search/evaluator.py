@@ -17,10 +17,10 @@ from ..engine.networks import keep_road
 from ..engine.scenarios import NetworkSource, Road, batch_road, build_road, network_source
 from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
-from ..model.batch import batch_key
+from ..model.stepping.batch import batch_key
 from ..model.config import EpisodeConfig
-from ..model.maneuvers import AttackPlan, attack_plan
-from ..model.trace import Episode
+from ..model.attacks.maneuvers import AttackPlan, attack_plan
+from ..model.stepping.trace import Episode
 from .campaign import Campaign, SampleResult
 
 log = logging.getLogger(__name__)

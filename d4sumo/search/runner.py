@@ -12,7 +12,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..engine.scenarios import MAX_COPIES
-from ..model.batch import DEFAULT_BATCH
+from ..model.stepping.batch import DEFAULT_BATCH
 from .campaign import Campaign, CampaignSummary, SampleResult
 from .evaluator import Evaluator, Job, play_together
 from .optimizers import make_optimizer

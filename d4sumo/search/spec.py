@@ -23,8 +23,8 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConfigError
-from ..model.maneuvers import MANEUVERS
-from ..model.trace import Trace
+from ..model.attacks.maneuvers import MANEUVERS
+from ..model.stepping.trace import Trace
 
 
 def paper_formula(followers: int, d_safe_m: float = 0.0) -> str:

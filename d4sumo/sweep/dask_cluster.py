@@ -12,7 +12,8 @@ import traceback
 
 from ..errors import ConfigError, D4sumoError
 from ..search.runner import CampaignRunner
-from .tasks import Play, _accept_gang, _Active, _after_failure, _evaluator, _gangs, _share, _task, play_chunks, run_chunks
+from .tasks import (
+    Play, _accept_gang, _Active, _after_failure, _evaluator, _gangs, _share, _task, play_chunks, run_chunks)
 from .workers import quiet_resource_tracker
 
 log = logging.getLogger(__name__)

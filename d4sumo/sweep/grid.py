@@ -16,7 +16,7 @@ from ..engine.simulation import check_episode, check_traffic
 from ..errors import ConfigError
 from ..inputs import campaign_of, check_document, with_overrides
 from ..tomlfiles import read_toml
-from ..model.maneuvers import MANEUVERS
+from ..model.attacks.maneuvers import MANEUVERS
 from ..search.campaign import Campaign
 from ..search.optimizers import DEFAULT_OPTIMIZER, EARLIER_DEFAULT_OPTIMIZER
 from ..search.store import campaign_key

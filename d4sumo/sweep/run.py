@@ -16,8 +16,8 @@ from typing import Callable
 
 from ..engine.scenarios import NetworkSource, network_source
 from ..errors import ConfigError
-from ..model.batch import DEFAULT_BATCH
-from ..model.fmu import shipment
+from ..model.stepping.batch import DEFAULT_BATCH
+from ..model.controllers.fmu import shipment
 from ..search.campaign import SampleResult, open_store
 from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import numerics_note, stored_results

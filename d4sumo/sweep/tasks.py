@@ -12,8 +12,8 @@ import numpy as np
 
 from ..engine.scenarios import NetworkSource
 from ..errors import D4sumoError
-from ..model.batch import DEFAULT_BATCH, batch_key
-from ..model.fmu import receive
+from ..model.stepping.batch import DEFAULT_BATCH, batch_key
+from ..model.controllers.fmu import receive
 from ..search.campaign import Campaign, SampleResult
 from ..search.evaluator import campaign_road
 from ..search.runner import CampaignRunner, Evaluator, play_pending, step_together

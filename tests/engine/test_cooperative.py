@@ -10,9 +10,9 @@ import pytest
 from conftest import assert_same_episode
 
 from d4sumo.engine.simulation import simulate, simulate_batch
-from d4sumo.model.attacks import make_attack
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import attack_plan
+from d4sumo.model.attacks.maneuvers import attack_plan
 
 pytestmark = pytest.mark.sumo
 
@@ -54,9 +54,9 @@ def test_in_sumo_the_compiled_followers_play_the_python_episode_bit_for_bit(cls,
     attacks (a batch of them too; the paper's controller alone, which batches play over arrays), crashes
     included; ``imperfect``: a noisy, late radar of limited range, and for the cooperative laws a late and
     lossy channel, the mitigation, and the attacker's lies about its speed."""
-    from d4sumo.model import compiled as in_c
-    from d4sumo.model.messages import attack_box
-    from d4sumo.model.sensing import RadarParams
+    from d4sumo.model.controllers import compiled as in_c
+    from d4sumo.model.attacks.messages import attack_box
+    from d4sumo.model.world.sensing import RadarParams
 
     paper = cls in ("switching", "timegap")
     headway = {"cacc": (), "switching": (), "timegap": (("time_gap_s", 0.3),)}.get(cls, (("h_s", 0.1),))  # closely spaced behind an attacker that brakes harder
@@ -123,7 +123,7 @@ def test_the_python_cacc_agrees_with_plexe_in_sumo_fed_the_same_beacons(cls, ple
 def test_an_attacker_that_lies_about_its_speed_is_rammed_by_the_cacc_that_believes_it():
     """The attacker slows gently (its pedal at -0.1) and, from 5 s on, tells the platoon it drives 5 m/s
     faster: v1's CACC runs into it. The trace keeps what it said beside what was true."""
-    from d4sumo.model.messages import attack_box
+    from d4sumo.model.attacks.messages import attack_box
 
     config = EpisodeConfig(controller=ControllerConfig("cacc"), start="steady", setpoint_m=5.0, duration_s=40.0)
     box = attack_box(config, make_attack("knots"), "offset", "speed")
@@ -145,7 +145,7 @@ def test_an_insider_that_lies_to_the_car_behind_it_changes_that_car_alone(cls):
     """v2 drives as its controller says and claims an acceleration 3 m/s^2 below its own from 2 s on: only
     v3 reads v2's beacons (as the car ahead's), so the attacker, v1 and v2 drive exactly as with the
     truth told, and v3 does not. The trace keeps what v2 said."""
-    from d4sumo.model.messages import attack_box
+    from d4sumo.model.attacks.messages import attack_box
 
     config = EpisodeConfig(controller=ControllerConfig(cls), start="steady", setpoint_m=5.0, duration_s=20.0)
     box = attack_box(config, make_attack("knots"), "offset", "accel", sender=2)
@@ -176,7 +176,7 @@ def test_the_mitigation_never_distrusts_honest_beacons_in_the_paper_scenarios(cl
 def test_the_mitigation_saves_v1_from_the_lie_and_the_followers_behind_it_crash_instead():
     """v1 checks the attacker's beacons against its radar and falls back to ACC; v2 and v3 check the honest
     beacons of the car ahead, keep believing the leader's lie about its speed, and v2 runs into v1."""
-    from d4sumo.model.messages import attack_box
+    from d4sumo.model.attacks.messages import attack_box
 
     config = EpisodeConfig(controller=ControllerConfig("cacc", (("fallback_mps", 1.0),)), start="steady", setpoint_m=5.0,
                            duration_s=40.0)

@@ -12,8 +12,8 @@ from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.scenarios import config_road
 from d4sumo.engine.simulation import simulate
-from d4sumo.model.attacks import attack_signal, make_attack
-from d4sumo.model.bodies import Body, body_gap_m
+from d4sumo.model.attacks.pedals import attack_signal, make_attack
+from d4sumo.model.world.bodies import Body, body_gap_m
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.search.spec import Specification, default_formula
 

@@ -155,9 +155,9 @@ def test_a_batch_on_a_network_as_given_plays_its_episodes_one_at_a_time_each_as_
     import numpy as np
 
     from d4sumo.engine.simulation import simulate, simulate_batch
-    from d4sumo.model.attacks import make_attack
+    from d4sumo.model.attacks.pedals import make_attack
     from d4sumo.model.config import EpisodeConfig
-    from d4sumo.model.maneuvers import attack_plan
+    from d4sumo.model.attacks.maneuvers import attack_plan
     from d4sumo.sumohome import sumo_home
 
     net = Path(sumo_home()) / "tools" / "game" / "corridor" / "corridor.net.xml"

@@ -15,10 +15,10 @@ from d4sumo.engine.ballistic import integrate
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import check_road, simulate, simulate_batch
 from d4sumo.errors import ConfigError
-from d4sumo.model.attacks import make_attack
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.control import SwitchingController, register_controller
-from d4sumo.model.maneuvers import AttackPlan, attack_plan, maneuver_of
+from d4sumo.model.controllers.control import SwitchingController, register_controller
+from d4sumo.model.attacks.maneuvers import AttackPlan, attack_plan, maneuver_of
 from d4sumo.results import timespace
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
@@ -437,8 +437,8 @@ def test_an_episode_in_a_batch_is_bit_for_bit_the_episode_played_alone(road, nam
     from conftest import assert_same_episode, random_plans
 
     from d4sumo.engine.simulation import simulate_batch
-    from d4sumo.model.carfollowing import SHARE_SUMO
-    from d4sumo.model.platoon import followers_of
+    from d4sumo.model.controllers.carfollowing import SHARE_SUMO
+    from d4sumo.model.stepping.platoon import followers_of
 
     config = BATCH_CONFIGS[name]
     register_controller("test_simulation:FlakyController", FlakyController)
@@ -783,7 +783,7 @@ def test_a_road_that_closes_the_platoons_lane_to_a_cars_class_is_refused(tmp_pat
 def test_an_episode_written_to_fcd_is_the_episode_played_without(tmp_path):
     """SUMO's output precision reached a Krauss follower's answer to a cut-in: with the FCD's 6 decimals it
     drove 5 mm apart from the campaign's episode, so a replay was another episode. Found by check_invariants."""
-    from d4sumo.model.vehicle import VehicleParams
+    from d4sumo.model.world.vehicle import VehicleParams
 
     config = EpisodeConfig(network=str(ROADS / "three_edges"), setpoint_m=8.43871715046162, start="steady",
                            vehicle=VehicleParams(max_decel_mps2=8.792978395245848, actuator_lag_s=0.0),

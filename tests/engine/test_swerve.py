@@ -8,10 +8,10 @@ import pytest
 from conftest import assert_same_episode, random_plans
 
 from d4sumo.engine.simulation import simulate, simulate_batch
-from d4sumo.model.attacks import make_attack
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.maneuvers import attack_plan, maneuver_of
-from d4sumo.model.lanes import occupied_lanes
+from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
+from d4sumo.model.world.lanes import occupied_lanes
 
 pytestmark = pytest.mark.sumo
 

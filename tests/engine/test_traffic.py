@@ -16,7 +16,7 @@ from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.engine.sumo import open_world
 from d4sumo.errors import ConfigError
 from d4sumo.model.config import EpisodeConfig
-from d4sumo.model.traffic import is_traffic
+from d4sumo.model.world.traffic import is_traffic
 
 pytestmark = pytest.mark.sumo
 
@@ -179,10 +179,10 @@ def test_no_traffic_car_is_in_the_platoon_places_when_it_joins_not_even_one_ente
 def test_a_swerving_attacker_among_traffic_senses_and_is_sensed_in_every_lane_it_covers_as_sumo_fcd_shows(tmp_path):
     """Who follows whom from SUMO's FCD alone (each car's lanes from its lateral coordinate, the nearest
     cars in each lane, traffic included) is what the followers and the attacker sensed, every sample."""
-    from d4sumo.model.attacks import make_attack
+    from d4sumo.model.attacks.pedals import make_attack
     from d4sumo.model.config import ControllerConfig
-    from d4sumo.model.maneuvers import attack_plan, maneuver_of
-    from d4sumo.model.lanes import lane_pairs, occupied_lanes
+    from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.world.lanes import lane_pairs, occupied_lanes
 
     config = EpisodeConfig(network="highway_3lane_120kmh", maneuver="swerve", start="steady", speed_mps=28.0,
                            controller=ControllerConfig("timegap"), duration_s=40.0, traffic={"vehicles_per_hour": 1200})

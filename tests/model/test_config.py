@@ -66,7 +66,7 @@ def test_a_step_is_checked_only_against_the_times_the_episode_reads():
 # --- a platoon of different vehicles: [vehicle.vI] ------------------------------------------------
 
 def test_a_cars_own_vehicle_table_lays_over_vehicle_and_round_trips():
-    from d4sumo.model.vehicle import VehicleParams
+    from d4sumo.model.world.vehicle import VehicleParams
 
     c = EpisodeConfig(vehicle=VehicleParams(max_decel_mps2=7.0),
                       vehicles={"v2": {"length_m": 12.0, "max_decel_mps2": 5.0, "vclass": "truck"}})
@@ -116,7 +116,7 @@ def test_the_collision_gap_is_stored_only_where_set_and_checked():
 
 
 def test_a_pair_within_the_collision_gap_has_collided():
-    from d4sumo.model.platoon import collisions_at
+    from d4sumo.model.stepping.platoon import collisions_at
 
     pairs = [(0, 1, 0.04), (1, 2, 0.3)]
     assert collisions_at(1.0, pairs, [20.0, 15.46, 10.0], [5.0, 6.0, 6.0], ("v0", "v1", "v2")) == ()
@@ -152,7 +152,7 @@ def test_what_the_platoon_does_at_red_lights_is_checked_and_stored_only_on_a_roa
 
 
 def test_where_the_platoon_joins_its_route_moves_every_car_and_is_stored_only_where_set():
-    from d4sumo.model.maneuvers import maneuver_of
+    from d4sumo.model.attacks.maneuvers import maneuver_of
 
     here, there = EpisodeConfig(), EpisodeConfig(join_m=510.0)
     moved = [b.position_m - a.position_m for a, b in zip(maneuver_of(here).cars(), maneuver_of(there).cars())]

@@ -8,8 +8,8 @@ import itertools
 import pytest
 
 from d4sumo.model.config import EpisodeConfig
-from d4sumo.results.analysis import (count_noun, most_severe, success_grid, table_attacker_crashes, table_by_speed,
-                                     table_success_statistics)
+from d4sumo.results.analysis import (
+    count_noun, most_severe, success_grid, table_attacker_crashes, table_by_speed, table_success_statistics)
 from d4sumo.results.records import Record, load_records
 
 

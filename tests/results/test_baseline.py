@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from d4sumo.model.trace import Collision
+from d4sumo.model.stepping.trace import Collision
 from d4sumo.results.baseline import baseline_text, campaign_baseline
 
 

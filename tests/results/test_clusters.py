@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from d4sumo.model.attacks import make_attack
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.results.clusters import cluster_knots, elbow, relevant_knots, richest_conditions
 from d4sumo.results.records import Record, load_records
 

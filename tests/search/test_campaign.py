@@ -222,10 +222,10 @@ def test_bad_campaigns_name_the_field(changes, field):
 class Raising:
     """A user's follower controller with a bug: it raises on a gap below 3 m."""
 
-    from d4sumo.model.control import SwitchingParams as Params
+    from d4sumo.model.controllers.control import SwitchingParams as Params
 
     def __init__(self, params, **kwargs):
-        from d4sumo.model.control import SwitchingController
+        from d4sumo.model.controllers.control import SwitchingController
 
         self.inner = SwitchingController(params, **kwargs)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d4sumo.errors import ConfigError
-from d4sumo.model.trace import Trace
+from d4sumo.model.stepping.trace import Trace
 from d4sumo.search.spec import paper_formula, psi_robustness
 
 
@@ -134,7 +134,7 @@ def test_rtamt_agrees_with_numpy_on_sumo_traces(road):
 
 
 def test_a_window_restarts_the_clock_and_an_episode_that_ended_before_it_is_scored_at_its_collision():
-    from d4sumo.model.trace import Trace
+    from d4sumo.model.stepping.trace import Trace
     from d4sumo.search.spec import Specification
 
     times = np.arange(6) * 0.05

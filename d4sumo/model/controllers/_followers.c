@@ -1,0 +1,428 @@
+/* A platoon's followers, one step at a time, out of the interpreter: each follower's radar (range, noise,
+ * latency), the V2V channel (beacon interval, latency, loss, a liar's beacons), the paper's switching ACC
+ * (its printed form) and its time-gap variant, Rajamani's CACC (PATH), Ploeg's CACC and the consensus controller, the mitigation, and
+ * each car's actuator.
+ *
+ * The reference is the Python of d4sumo.model (sensing.Radar.observe, v2v.Channel.send,
+ * control.SwitchingController.command, cacc.PathCACC/PloegCACC/ConsensusCACC.observe, cacc.Fallback.check,
+ * vehicle.acceleration_to_command, vehicle.Actuator.apply): these files do each operation in the same order
+ * on the same doubles, so every command, mode and speed is the same, bit for bit (built without
+ * floating-point contraction; tests/model/controllers/test_compiled.py compares them over random states, radars,
+ * channels and lies). The switching law is the one the FMUs d4sumo ships run (fmus/switching.h), written
+ * once in C. What draws random numbers (a radar's noise, a link's losses) or lies (the message attack) is
+ * the Python's own objects, called from here in the order the Python calls them. Python's min(a, b) is
+ * b < a ? b : a, and max(a, b) is b > a ? b : a; those are the comparisons, NaN included.
+ * d4sumo.model.controllers.compiled decides which platoons it may play and builds it from their Python objects.
+ *
+ * csrc/followers.h: the types; csrc/convert.h: numbers in and out; csrc/laws.h: the radar, the laws, the actuator;
+ * csrc/channel.h: the beacons.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#include "switching.h" /* the paper's law, as the FMUs run it */
+#include "followers.h"
+#include "convert.h"
+#include "laws.h"
+#include "channel.h"
+
+/* platoon.Platoon.advance's attacker without traffic, lights, a motion or the authors' options: its attack's pedal,
+ * or where the attack is NaN its cruise control (control.CruiseControl, afresh at each new cruise window) through
+ * vehicle.acceleration_to_command; its speed at the step's end through its actuator */
+static int attacker_step(Followers *self, long k, PyObject *commands, PyObject *new_speeds) {
+    Follower *a = &self->f[0];
+    if (k < 0 || k >= self->attack_steps) {
+        PyErr_Format(PyExc_IndexError, "step %ld of an attack of %zd steps", k, self->attack_steps);
+        return -1;
+    }
+    double u = self->attack_u[k], speed = self->v[0];
+    if (u != u) { /* NaN: no attack here, the attacker cruises like everyone else */
+        if (self->attacking) { /* a new cruise window: the PID starts afresh (no kick, no stale integral) */
+            a->sw.integral = 0.0;
+            a->sw.has_prev = 0;
+            self->attacking = 0;
+        }
+        u = to_command(cruise_acceleration(&a->sw, speed, a->step_s), a->max_accel, a->max_decel);
+    } else {
+        self->attacking = 1;
+    }
+    return append_float(commands, u) < 0 || append_float(new_speeds, apply(a, u, speed)) < 0 ? -1 : 0;
+}
+
+/* advance(k, positions, speeds, pairs, commands, new_speeds, modes): step k's beacons, then each follower's
+ * command and its speed at the step's end, appended to commands and new_speeds (Platoon.advance's lists),
+ * and the modes of the followers that run the mitigation, appended to modes as one list. */
+static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "advance(k, positions, speeds, pairs, commands, new_speeds, modes)");
+        return NULL;
+    }
+    if (self->last == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Followers was not made (its __init__)");
+        return NULL;
+    }
+    long k = PyLong_AsLong(args[0]);
+    if (k == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *commands = args[4], *new_speeds = args[5], *modes = args[6];
+    int n = self->cars;
+    if (read_floats(args[1], self->x, n, "positions") < 0 || read_floats(args[2], self->v, n, "speeds") < 0)
+        return NULL;
+    if (!PyList_Check(commands) || !PyList_Check(new_speeds) || !PyList_Check(modes)) {
+        PyErr_SetString(PyExc_TypeError, "commands, new_speeds and modes: lists");
+        return NULL;
+    }
+    PyObject *pairs = PySequence_Fast(args[3], "pairs: a sequence of (leader, follower, gap)");
+    if (pairs == NULL)
+        return NULL;
+    int status = PySequence_Fast_GET_SIZE(pairs) < n - 1 ? -1 : 0; /* each follower's gap, read before any Python runs */
+    if (status < 0)
+        PyErr_SetString(PyExc_TypeError, "pairs: one for every follower");
+    for (int i = 1; i < n && status == 0; i++) {
+        PyObject *pair = PySequence_Fast(PySequence_Fast_GET_ITEM(pairs, i - 1), "pairs: (leader, follower, gap)");
+        if (pair == NULL || PySequence_Fast_GET_SIZE(pair) != 3) {
+            if (pair != NULL)
+                PyErr_SetString(PyExc_TypeError, "pairs: (leader, follower, gap)");
+            status = -1;
+        } else {
+            status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &self->gap[i], "a pair's gap");
+        }
+        Py_XDECREF(pair);
+    }
+    Py_DECREF(pairs);
+    if (status < 0)
+        return NULL;
+    double now = 0.0;
+    if (self->channel) { /* Platoon._accelerations (0 at the first step), then the step's beacons */
+        const double *last = self->has_last ? self->last : self->v;
+        for (int j = 0; j < n; j++)
+            self->acc[j] = (self->v[j] - last[j]) / self->step_s;
+        memcpy(self->last, self->v, n * sizeof(double));
+        self->has_last = 1;
+        now = k * self->step_s;
+        if (send(self, k) < 0)
+            return NULL;
+    }
+    if (self->has_attacker && attacker_step(self, k, commands, new_speeds) < 0)
+        return NULL;
+    for (int i = 1; i < n; i++) {
+        double gap = self->gap[i];
+        Follower *f = &self->f[i];
+        Reading r = {gap, self->v[i - 1], gap < FREE_ROAD_GAP_M};
+        if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
+            return NULL;
+        double c = command(self, i, r, now);
+        if (!(c >= -1.0 && c <= 1.0)) { /* not a command (NaN): its error, as the Python says it */
+            if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
+                return NULL;
+        }
+        if (append_float(commands, c) < 0 || append_float(new_speeds, apply(f, c, self->v[i])) < 0)
+            return NULL;
+    }
+    if (self->with_mode) {
+        PyObject *row = PyList_New(0);
+        if (row == NULL)
+            return NULL;
+        for (int i = 1; i < n; i++) {
+            if (self->f[i].has_mode && append_float(row, self->f[i].mode) < 0) {
+                Py_DECREF(row);
+                return NULL;
+            }
+        }
+        int status = PyList_Append(modes, row);
+        Py_DECREF(row);
+        if (status < 0)
+            return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+/* It holds Python objects (the lie, the generators' draws, Channel.sent): the cycle collector sees them. */
+static int Followers_traverse(Followers *self, visitproc visit, void *arg) {
+    Py_VISIT(self->falsify);
+    Py_VISIT(self->message);
+    Py_VISIT(self->sent);
+    Py_VISIT(self->checked);
+    for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
+        Py_VISIT(self->random[j]);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        Py_VISIT(self->f[i].normal);
+    return 0;
+}
+
+static int Followers_clear(Followers *self) {
+    Py_CLEAR(self->falsify);
+    Py_CLEAR(self->message);
+    Py_CLEAR(self->sent);
+    Py_CLEAR(self->checked);
+    for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
+        Py_CLEAR(self->random[j]);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        Py_CLEAR(self->f[i].normal);
+    return 0;
+}
+
+static void Followers_dealloc(Followers *self) {
+    PyObject_GC_UnTrack(self);
+    Followers_clear(self);
+    for (int i = 1; self->f != NULL && i < self->cars; i++)
+        PyMem_Free(self->f[i].readings);
+    PyMem_Free(self->random);
+    PyMem_Free(self->last);
+    PyMem_Free(self->sources);
+    PyMem_Free(self->inbox);
+    PyMem_Free(self->flights);
+    PyMem_Free(self->f);
+    PyMem_Free(self->attack_u);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* A cruise control's state carried on from a batch (`batch.PlatoonBatch.detach`): (integral, the last error or None,
+ * and a flag: the mode a switching follower is in, or whether the attacker attacked at the last step; then, for a
+ * follower, whether its mode is known) */
+static int cruise_state(PyObject *state, Switching *sw, double *flag, int *known) {
+    PyObject *prev;
+    int mode_known = 0;
+    if (!PyArg_ParseTuple(state, "dOd|p", &sw->integral, &prev, flag, &mode_known))
+        return -1;
+    sw->has_prev = prev != Py_None;
+    if (sw->has_prev && (sw->prev_error = PyFloat_AsDouble(prev)) == -1.0 && PyErr_Occurred())
+        return -1;
+    if (known != NULL)
+        *known = mode_known;
+    return 0;
+}
+
+/* the attacker (attack_u, (cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2),
+ * (target_mps, step_s, max_accel, max_decel), its actuator (7)[, its cruise's state: `cruise_state`]) */
+static int init_attacker(Followers *self, PyObject *attacker) {
+    PyObject *u, *gains, *own, *actuator, *state = Py_None;
+    if (!PyArg_ParseTuple(attacker, "O!O!O!O!|O", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
+                          &PyTuple_Type, &actuator, &state))
+        return -1;
+    double g[5], o[4], a[7];
+    if (read_tuple(gains, g, 5, "the attacker's cruise gains") < 0 || read_tuple(own, o, 4, "the attacker") < 0
+        || read_tuple(actuator, a, 7, "the attacker's actuator") < 0)
+        return -1;
+    Py_ssize_t steps = PyList_GET_SIZE(u);
+    self->attack_u = PyMem_Calloc((size_t)steps + 1, sizeof(double));
+    if (self->attack_u == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    if (read_floats(u, self->attack_u, (int)steps, "the attack") < 0)
+        return -1;
+    self->attack_steps = steps;
+    Follower *f = &self->f[0];
+    switching_defaults(&f->sw);
+    double *v = f->sw.v;
+    v[VR_TARGET_SPEED_MPS] = o[0], v[VR_CRUISE_KP] = g[0], v[VR_CRUISE_KI] = g[1], v[VR_CRUISE_KD] = g[2];
+    v[VR_CRUISE_INTEGRAL_CLAMP] = g[3], v[VR_CRUISE_OUTPUT_LIMIT_MPS2] = g[4];
+    f->step_s = o[1], f->max_accel = o[2], f->max_decel = o[3];
+    f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
+    f->accel_mps2 = a[5], f->coast = a[6];
+    double attacking = 0.0;
+    if (state != Py_None && cruise_state(state, &f->sw, &attacking, NULL) < 0)
+        return -1;
+    self->attacking = attacking != 0.0;
+    self->has_attacker = 1;
+    return 0;
+}
+
+/* Followers(channel, lengths, sources, randoms, lie, laws, checked[, attacker]):
+ *   channel  (step_s, every, delay, loss), or None: no beacons (sources empty, no randoms, no lie)
+ *   lengths  each car's [m]
+ *   sources  each follower's, from v1: its sources in the order the channel draws its links' losses
+ *   randoms  each link's generator's random(), in that order (with loss), else []
+ *   lie      (falsify, liar, Message, Channel.sent), or None
+ *   attacker None (the Python plays it), or what `init_attacker` reads
+ *   laws     each follower's, from v1: (law, whether its mode is recorded, (setpoint_m, target_mps, step_s,
+ *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
+ *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
+ *            speed_noise_mps, delay steps, normal)) */
+static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
+    (void)kwds;
+    PyObject *channel, *lengths, *sources, *randoms, *lie_, *laws, *checked, *attacker = Py_None;
+    if (!PyArg_ParseTuple(args, "OO!O!O!OO!O|O", &channel, &PyList_Type, &lengths, &PyList_Type, &sources,
+                          &PyList_Type, &randoms, &lie_, &PyList_Type, &laws, &checked, &attacker))
+        return -1;
+    if (self->last != NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "made once");
+        return -1;
+    }
+    int n = (int)PyList_GET_SIZE(lengths);
+    self->channel = channel != Py_None;
+    if (!self->channel)
+        self->step_s = 1.0, self->every = 1, self->delay = 0, self->loss = 0.0;
+    else if (!PyTuple_Check(channel) || !PyArg_ParseTuple(channel, "dlld", &self->step_s, &self->every, &self->delay, &self->loss)) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_TypeError, "channel: (step_s, every, delay, loss) or None");
+        return -1;
+    }
+    if (n < 2 || PyList_GET_SIZE(laws) != n - 1 || PyList_GET_SIZE(sources) != n - 1 || self->every < 1 || self->delay < 0) {
+        PyErr_SetString(PyExc_ValueError, "a length for every car, sources and a law for every follower, every >= 1, delay >= 0");
+        return -1;
+    }
+    self->cars = n;
+    self->direct = self->delay == 0 && self->loss == 0.0;
+    self->last = PyMem_Calloc(6 * (size_t)n, sizeof(double));
+    self->sources = PyMem_Calloc(2 * (size_t)n * n + 3 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now */
+    self->inbox = PyMem_Calloc((size_t)n * (n + 1), sizeof(Beacon));
+    self->f = PyMem_Calloc((size_t)n, sizeof(Follower));
+    self->flights_capacity = 4 * (Py_ssize_t)n * n;
+    self->flights = PyMem_Calloc((size_t)self->flights_capacity, sizeof(Flight));
+    Py_ssize_t links = PyList_GET_SIZE(randoms);
+    self->random = PyMem_Calloc((size_t)links + 1, sizeof(PyObject *));
+    if (self->last == NULL || self->sources == NULL || self->inbox == NULL || self->f == NULL || self->flights == NULL
+        || self->random == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    double *d = self->last;
+    self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n, self->gap = d + 5 * n;
+    self->n_sources = self->sources + n * n, self->is_sender = self->n_sources + n, self->heard = self->is_sender + n;
+    self->sent_now = self->heard + n * n;
+    self->step_beacons = self->inbox + n * n;
+    if (read_floats(lengths, self->length, n, "lengths") < 0)
+        return -1;
+    Py_ssize_t drawn = 0;
+    for (int i = 1; i < n; i++) {
+        PyObject *own = PyList_GET_ITEM(sources, i - 1);
+        if (!PyTuple_Check(own) || PyTuple_GET_SIZE(own) > i) {
+            PyErr_SetString(PyExc_TypeError, "sources: a tuple of cars ahead for every follower");
+            return -1;
+        }
+        self->n_sources[i] = (int)PyTuple_GET_SIZE(own);
+        for (int j = 0; j < self->n_sources[i]; j++) {
+            long s = PyLong_AsLong(PyTuple_GET_ITEM(own, j));
+            if (s < 0 || s >= i) {
+                if (!PyErr_Occurred())
+                    PyErr_SetString(PyExc_ValueError, "a source is a car ahead");
+                return -1;
+            }
+            self->sources[i * n + j] = (int)s;
+            self->is_sender[s] = 1;
+        }
+        drawn += self->n_sources[i];
+    }
+    if (!self->direct && self->loss != 0.0 && links != drawn) {
+        PyErr_SetString(PyExc_ValueError, "a generator for every link");
+        return -1;
+    }
+    for (Py_ssize_t j = 0; j < links; j++) {
+        self->random[j] = PyList_GET_ITEM(randoms, j);
+        Py_INCREF(self->random[j]);
+    }
+    self->links = links;
+    if (lie_ == Py_None) {
+        Py_INCREF(Py_None);
+        self->falsify = Py_None;
+    } else if (!PyArg_ParseTuple(lie_, "OiOO!", &self->falsify, &self->liar, &self->message, &PyList_Type, &self->sent)) {
+        self->falsify = NULL, self->message = NULL, self->sent = NULL;
+        return -1;
+    } else {
+        Py_INCREF(self->falsify), Py_INCREF(self->message), Py_INCREF(self->sent);
+        if (self->liar < 0 || self->liar >= n || !self->is_sender[self->liar]) {
+            PyErr_SetString(PyExc_ValueError, "the liar is a car somebody hears");
+            return -1;
+        }
+    }
+    for (int i = 1; i < n; i++) {
+        Follower *f = &self->f[i];
+        PyObject *own, *gains, *mitigation, *actuator, *radar, *state = Py_None;
+        if (!PyArg_ParseTuple(PyList_GET_ITEM(laws, i - 1), "ipO!O!dO!O!O|O", &f->law, &f->has_mode, &PyTuple_Type, &own,
+                              &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar, &state))
+            return -1;
+        int switching = f->law == LAW_SWITCHING || f->law == LAW_TIMEGAP;
+        if (f->law < LAW_CACC || f->law > LAW_TIMEGAP || (!switching && !self->channel)) {
+            PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
+            return -1;
+        }
+        double o[5], m[2], a[7];
+        if (read_tuple(own, o, 5, "the controller") < 0 || read_tuple(gains, f->c, switching ? 9 + (f->law == LAW_TIMEGAP) : 5, "its gains") < 0
+            || read_tuple(mitigation, m, 2, "its mitigation") < 0 || read_tuple(actuator, a, 7, "its actuator") < 0)
+            return -1;
+        f->setpoint_m = o[0], f->target_mps = o[1], f->step_s = o[2], f->max_accel = o[3], f->max_decel = o[4];
+        f->fallback_mps = m[0], f->fallback_headway_s = m[1], f->mode = 0.0;
+        self->with_mode += f->has_mode;
+        if (switching) { /* its FMU's variables: the scenario's, the car's, the gains (and the time gap) */
+            double *v = f->sw.v;
+            switching_defaults(&f->sw);
+            v[VR_SETPOINT_M] = o[0], v[VR_TARGET_SPEED_MPS] = o[1], v[VR_MAX_ACCEL_MPS2] = o[3], v[VR_MAX_DECEL_MPS2] = o[4];
+            const int gain[9] = {VR_CRUISE_KP, VR_CRUISE_KI, VR_CRUISE_KD, VR_CRUISE_INTEGRAL_CLAMP, VR_CRUISE_OUTPUT_LIMIT_MPS2,
+                                 VR_ACC_KP, VR_ACC_KV, VR_EPS_X_M, VR_EPS_V_MPS};
+            for (int g = 0; g < 9; g++)
+                v[gain[g]] = f->c[g];
+            f->sw.time_gap = f->law == LAW_TIMEGAP;
+            f->sw.time_gap_s = f->law == LAW_TIMEGAP ? f->c[9] : 0.0;
+            if (state != Py_None && cruise_state(state, &f->sw, &f->sw.v[VR_MODE], &f->sw.mode_known) < 0)
+                return -1;
+            f->mode = v[VR_MODE];
+        }
+        f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
+        f->accel_mps2 = a[5], f->coast = a[6];
+        f->perfect = radar == Py_None;
+        if (!f->perfect) {
+            long delay;
+            if (!PyArg_ParseTuple(radar, "dddlO", &f->range_m, &f->gap_noise_m, &f->speed_noise_mps, &delay, &f->normal))
+                return -1;
+            Py_INCREF(f->normal);
+            if (delay < 0 || delay > 100000) {
+                PyErr_Format(PyExc_ValueError, "a radar's latency of %ld steps", delay);
+                return -1;
+            }
+            f->capacity = (int)delay + 1;
+            f->readings = PyMem_Calloc((size_t)f->capacity, sizeof(Reading));
+            if (f->readings == NULL) {
+                PyErr_NoMemory();
+                return -1;
+            }
+        }
+    }
+    if (attacker != Py_None && init_attacker(self, attacker) < 0)
+        return -1;
+    Py_INCREF(checked);
+    Py_XSETREF(self->checked, checked);
+    return 0;
+}
+
+static PyMethodDef Followers_methods[] = {
+    {"advance", (PyCFunction)(void (*)(void))Followers_advance, METH_FASTCALL,
+     "advance(k, positions, speeds, pairs, commands, new_speeds, modes): step k of the followers"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject FollowersType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "d4sumo.model.controllers._followers.Followers",
+    .tp_doc = "A platoon's followers and its channel, stepped in C (see d4sumo.model.controllers.compiled)",
+    .tp_basicsize = sizeof(Followers),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_traverse = (traverseproc)Followers_traverse,
+    .tp_clear = (inquiry)Followers_clear,
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Followers_init,
+    .tp_dealloc = (destructor)Followers_dealloc,
+    .tp_methods = Followers_methods,
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_followers", "A platoon's followers, stepped in C.", -1, NULL, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__followers(void) {
+    if (PyType_Ready(&FollowersType) < 0)
+        return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL)
+        return NULL;
+    Py_INCREF(&FollowersType);
+    if (PyModule_AddObject(m, "Followers", (PyObject *)&FollowersType) < 0) {
+        Py_DECREF(&FollowersType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,115 @@
+"""A platoon's followers stepped in C (the `_followers` extension, built when d4sumo is installed): the
+same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for bit, at a fraction of its
+cost (docs/v2v.md, docs/benchmarks.md).
+
+It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
+`timegap`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
+the mitigation, in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
+noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
+Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
+switching law in C is the one the FMUs d4sumo ships run (`fmus/switching.h`). The attacker too, where it only
+plays its attack and cruises (no traffic, no motion, none of the authors' options). Everything else the Python
+plays, as it does everywhere when the extension could not be built (no C compiler at install: the same
+episodes, slower).
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable
+
+from .commands import checked_command  # the Python's error for a command that is not one
+from .cacc import ConsensusCACC, PathCACC, PloegCACC
+from .control import SwitchingController, TimeGapController
+from ..attacks.messages import BeaconFalsifier
+from ..world.sensing import Radar
+from ..world.v2v import Message
+
+try:
+    from ._followers import Followers
+except ImportError:  # not built: the Python plays every platoon
+    Followers = None
+
+#: whether the platoons it may play are stepped in C (tests turn it off to compare with the Python)
+ENABLED = True
+
+#: each controller's law, as the extension numbers them
+LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4, TimeGapController: 5}
+if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is compensated from Python 3.12 on
+    del LAWS[ConsensusCACC]
+
+
+def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
+    """``advance(k, positions, speeds, pairs, commands, new_speeds, modes)`` of ``platoon``'s followers in C,
+    or None where the Python plays them (see the module). Made before the platoon's first step: it takes
+    the channel's and the radars' generators as they start, and the controllers' state as it is (carried on from a
+    batch's arrays: `batch.PlatoonBatch.detach`). With ``attacker`` (one that plays its attack and
+    cruises, nothing else: `platoon.Platoon`) the attacker is stepped in C too, its command and speed first."""
+    channel, config = platoon.channel, platoon.config
+    if (Followers is None or not ENABLED or not platoon._one_ahead or len(platoon._python) != config.followers
+            or (channel is not None and channel.falsify is not None
+                and (type(channel.falsify) is not BeaconFalsifier  # d4sumo's lies: none renames its sender
+                     or channel.liar not in channel.senders))):
+        return None
+    laws = []
+    for i, follower in enumerate(platoon.followers, start=1):
+        controller = follower.controller
+        law = LAWS.get(type(controller))
+        if law is None or (law < 4 and channel is None):
+            return None
+        if law >= 4:  # the paper's controller as printed, or its time-gap variant (the authors' code's options are the Python's)
+            if controller._as_run:
+                return None
+            p = controller.params
+            gains = (p.cruise_kp, p.cruise_ki, p.cruise_kd, p.cruise_integral_clamp, p.cruise_output_limit_mps2,
+                     p.acc_kp, p.acc_kv, p.eps_x_m, p.eps_v_mps) + ((controller.time_gap_s,) if law == 5 else ())
+        elif law == 1:  # PATH's coefficients, as its constructor derived them
+            gains = (controller.a1, controller.a2, controller.a3, controller.a4, controller.a5)
+        elif law == 2:
+            p = controller.params
+            gains = (p.h_s, p.kp, p.kd, 0.0, 0.0)
+        else:
+            p = controller.params
+            gains = (p.b, p.k_leader_v1, p.k_leader, p.k_front, p.h_s)
+        fallback = getattr(controller, "fallback", None)
+        mitigation = (fallback.threshold, fallback.headway) if fallback is not None else (0.0, 0.0)
+        radar = None
+        if config.radar is not None and not config.radar.perfect:  # its own, as the Python's starts: the same draws
+            r = Radar(config.radar, config.step_s, i)
+            radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
+        vehicle, actuator = controller.vehicle, follower.actuator
+        step_s = controller.cruise.step_s if law >= 4 else controller.step_s  # the step its cruise PID integrates over
+        own = (controller.setpoint_m, controller.target_speed_mps, step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+        drive = (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
+                 actuator.accel_mps2, actuator.coast)
+        numbers = (*own, *gains, *mitigation, *drive, *(radar[:3] if radar else ()))
+        if not all(type(x) is float or type(x) is int for x in numbers):  # a numpy float32 computes otherwise in the Python
+            return None
+        if law >= 4:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
+            state = (float(controller.cruise.integral), controller.cruise.prev_error, float(controller.mode),
+                     bool(controller._mode_known))
+            if state[1] is not None and type(state[1]) is not float:
+                return None
+        else:
+            state = None
+        laws.append((law, follower.has_mode, own, tuple(float(g) for g in gains), float(getattr(controller, "u", 0.0)),
+                     tuple(float(m) for m in mitigation), drive, radar, *([state] if state is not None else [])))
+    ours = _attacker(platoon) if attacker else None
+    if channel is None:
+        return Followers(None, [0.0] * (config.followers + 1), [()] * config.followers, [], None, laws, checked_command,
+                         ours).advance
+    sources = [channel.sources[i] for i in range(1, config.followers + 1)]
+    randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
+    lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None
+    return Followers((channel.step_s, channel.every, channel.delay, float(channel.params.loss)), list(channel.lengths), sources,
+                     randoms, lie, laws, checked_command, ours).advance
+
+
+def _attacker(platoon) -> tuple:
+    """What the C reads of the attacker: its attack, its cruise control's gains, its car, its actuator."""
+    cruise, actuator, vehicle = platoon.attacker_cruise, platoon.attacker_actuator, platoon.attacker_vehicle
+    return (platoon.attack_u, (cruise.kp, cruise.ki, cruise.kd, cruise.clamp, cruise.limit),
+            (cruise.target_mps, cruise.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2),
+            (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
+             actuator.accel_mps2, actuator.coast),
+            (float(cruise.integral), cruise.prev_error, float(platoon._attacking)))  # its state: as it starts, or carried on
