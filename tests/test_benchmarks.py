@@ -175,6 +175,8 @@ TOOLS_REFUSED = [  # regression: each ended in a traceback (or ran on)
     ("paper_page.py", ["--runs", "{file}"], "allowed: a folder for the sweeps' databases (this is a file)"),
     ("paper_page.py", ["--runs", "{tmp}/absent/runs"], "allowed: a folder in an existing folder"),
     ("profile_episode.py", ["--episodes", "0"], "--episodes: got 0; allowed: a whole number of at least 1"),
+    ("bench_client.py", ["--workers", "10", "0"], "--workers: got 0; allowed: a whole number in [1, 100000]"),
+    ("bench_client.py", ["--episode-ms", "0"], "--episode-ms: got 0.0; allowed: a time in (0, 10000] ms"),
 ]
 
 
@@ -282,3 +284,26 @@ def test_the_profile_sees_sumos_stepping_and_calls_and_loses_no_time(monkeypatch
     profile.disable()
     every = sum(tottime for _, _, tottime, _, _ in pstats.Stats(profile).stats.values())
     assert sum(profile_episode.split(profile).values()) == pytest.approx(every, rel=1e-9)
+
+
+def test_bench_client_drives_the_real_client_with_simulated_workers_to_the_same_samples_whatever_their_number(tmp_path):
+    """tools/bench_client.py: d4sumo's sweep client, whole, against simulated workers. Every sample is played and
+    stored once, the samples do not depend on how many workers played them (the optimisers are on the client), and
+    more workers take less simulated time, each at most fully used."""
+    import bench_client
+    from d4sumo.search.store import Store
+    from d4sumo.sweep import Sweep
+
+    sweep = Sweep.load(bench_client.sweep_file(tmp_path, 6, 30, "random"))
+    one = bench_client.run_simulated(sweep, tmp_path, 1, 0.001)
+    many = bench_client.run_simulated(sweep, tmp_path, 6, 0.001)
+
+    def samples(db):
+        with Store(db, create=False) as store:
+            return sorted((c.key, s.index, s.params, s.robustness, s.outcome) for c in store.campaigns()
+                          for s in store.samples(c.id))
+
+    assert one["episodes"] == many["episodes"] == 180
+    assert samples(one["db"]) == samples(many["db"]) and len(samples(one["db"])) == 180
+    assert 0.5 < one["utilisation"] <= 1 and 0 < many["utilisation"] <= 1
+    assert many["wall_s"] < one["wall_s"] / 2

@@ -887,3 +887,28 @@ def test_a_sweep_d4sumo_0_18_ran_on_a_road_of_ones_own_is_told_the_keys_that_go_
     said = capsys.readouterr().err
     assert said.count("\n") == 1 and "It was run by d4sumo 0.18 or before (the platoon driving through red lights)" in said
     assert '`signals = "ignore"` in [scenario]' in said
+
+
+def test_a_sweeps_client_writes_the_samples_of_a_moment_together_and_what_is_left_when_it_stops(tmp_path):
+    """The client's writes (`run._Writes`): the results of every campaign that came in within FLUSH_S in one
+    transaction; what is left written when the sweep ends or fails; and a transaction is all or none."""
+    from d4sumo.search.campaign import Campaign
+    from d4sumo.sweep.run import _Writes
+
+    with Store(tmp_path / "w.sqlite") as store:
+        a, b = (store.open_campaign(Campaign(seed=seed).definition(), 10, None) for seed in (1, 2))
+        row = (0, (0.5,), -1.0, "no_crash", None, None, 0.01, None)
+        with pytest.raises(RuntimeError):
+            with _Writes(store) as writes:
+                writes.add(a, [row])
+                writes.add(b, [row, (1, *row[1:])])
+                assert store.samples() == []  # within FLUSH_S of the start: not written yet
+                raise RuntimeError("the sweep failed")
+        assert sorted((s.campaign_id, s.index) for s in store.samples()) == [(a, 0), (b, 0), (b, 1)]
+        writes = _Writes(store)
+        writes.last -= _Writes.FLUSH_S  # a moment has passed: the next result writes everything
+        writes.add(a, [(1, *row[1:])])
+        assert len(store.samples(a)) == 2
+        with pytest.raises(StoreError, match="already has sample 0"):
+            store.add_samples_of([(a, [(2, *row[1:])]), (b, [row])])  # b's sample 0 is stored: neither goes in
+        assert len(store.samples(a)) == 2

@@ -325,21 +325,30 @@ class Store:
     def add_samples(self, campaign_id: int, samples: list[tuple]) -> list[int]:
         """Store samples (index, params, robustness, outcome, collision, min_gaps, wall_s, error) of one
         campaign in one transaction: all or none; returns their row ids."""
-        ids = []
+        return self.add_samples_of([(campaign_id, samples)])[0]
+
+    @_guarded
+    def add_samples_of(self, campaigns: list[tuple[int, list[tuple]]]) -> list[list[int]]:
+        """Store the samples of several campaigns (campaign id, its samples as `add_samples` takes them) in one
+        transaction: all or none (a sweep's client writes what its workers returned over a moment at once, one
+        disk sync for them all); each campaign's row ids."""
+        ids: list[list[int]] = []
         with self._transaction():
-            for index, params, robustness, outcome, collision, min_gaps, wall_s, error in samples:
-                c = collision or {}
-                try:
-                    cur = self.db.execute(
-                        "INSERT INTO sample (campaign_id, idx, params, robustness, outcome, pair, time_s, position_m, "
-                        "speed_diff_kmh, min_gaps, wall_s, error) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (campaign_id, index, json.dumps([float(v) for v in params]), robustness, outcome, c.get("pair"),
-                         c.get("time_s"), c.get("position_m"), c.get("speed_diff_kmh"),
-                         json.dumps(min_gaps) if min_gaps is not None else None, wall_s, error),
-                    )
-                except sqlite3.IntegrityError:
-                    raise StoreError(f"{self.path}: campaign {campaign_id} already has sample {index}") from None
-                ids.append(int(cur.lastrowid))
+            for campaign_id, samples in campaigns:
+                ids.append([])
+                for index, params, robustness, outcome, collision, min_gaps, wall_s, error in samples:
+                    c = collision or {}
+                    try:
+                        cur = self.db.execute(
+                            "INSERT INTO sample (campaign_id, idx, params, robustness, outcome, pair, time_s, position_m, "
+                            "speed_diff_kmh, min_gaps, wall_s, error) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            (campaign_id, index, json.dumps([float(v) for v in params]), robustness, outcome, c.get("pair"),
+                             c.get("time_s"), c.get("position_m"), c.get("speed_diff_kmh"),
+                             json.dumps(min_gaps) if min_gaps is not None else None, wall_s, error),
+                        )
+                    except sqlite3.IntegrityError:
+                        raise StoreError(f"{self.path}: campaign {campaign_id} already has sample {index}") from None
+                    ids[-1].append(int(cur.lastrowid))
         return ids
 
     _SAMPLE_COLUMNS = ("SELECT s.id, s.campaign_id, s.idx, s.params, s.robustness, s.outcome, s.pair, s.time_s, s.position_m, "

@@ -90,7 +90,27 @@ def _scheduler_lost(record: logging.LogRecord) -> bool:
     return "communicate with scheduler" not in record.getMessage()
 
 
-def _run_dask(todo: list[_Active], store_results, client) -> None:
+class DaskCluster:
+    """A cluster as a sweep's client uses it: ``submit(function, *args, pure=False)`` a task, ``nthreads()`` (worker ->
+    threads) and ``as_completed()`` (the tasks as they finish, more added as they are submitted). This one is a
+    Dask client's; tools/bench_client.py has one of simulated workers."""
+
+    def __init__(self, client):
+        self.client = client
+
+    def submit(self, function, *args, pure: bool = False):
+        return self.client.submit(function, *args, pure=pure)
+
+    def nthreads(self) -> dict:
+        return self.client.nthreads()
+
+    def as_completed(self):
+        from distributed import as_completed
+
+        return as_completed()
+
+
+def _run_dask(todo: list[_Active], store_results, cluster: DaskCluster) -> None:
     """The sweep with each campaign's optimiser stepped on the workers, its state carried from task to task."""
     def task(gang: list[_Active]):
         return run_chunks, (_task(gang),), None
@@ -98,10 +118,10 @@ def _run_dask(todo: list[_Active], store_results, client) -> None:
     def accept(gang: list[_Active], _, result) -> list[_Active]:
         return _accept_gang(gang, result, store_results)
 
-    _schedule(todo, client, task, accept)
+    _schedule(todo, cluster, task, accept)
 
 
-def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) -> None:
+def _run_dask_proposing(todo: list[_Active], store_results, cluster: DaskCluster, where: str) -> None:
     """The sweep with every campaign's optimiser on the client and only episodes on the workers: each
     campaign asks and is told on one machine, so its samples are, bit for bit, the ones it gives alone
     on the client's, whatever mix of CPUs and libraries the workers have. A task plays the next batch
@@ -128,26 +148,24 @@ def _run_dask_proposing(todo: list[_Active], store_results, client, where: str) 
             a.failures = 0
         return [a for a in gang if runners[id(a)].done < a.campaign.samples]
 
-    _schedule(todo, client, task, accept)
+    _schedule(todo, cluster, task, accept)
 
 
-def _schedule(todo: list[_Active], client, task, accept) -> None:
-    """Gangs of campaigns on the cluster, a task at a time each, one more in flight than it has threads.
-    ``task(gang)``: the function, its arguments and what ``accept(gang, that, result)`` needs to take the
-    result, which gives the gang's campaigns not complete yet."""
-    from distributed import as_completed
-
-    queue = _gangs(todo, max(1, sum(client.nthreads().values())))
+def _schedule(todo: list[_Active], cluster: DaskCluster, task, accept) -> None:
+    """Gangs of campaigns on the cluster (a `DaskCluster`), a task at a time each, one more in flight than it
+    has threads. ``task(gang)``: the function, its arguments and what ``accept(gang, that, result)`` needs to
+    take the result, which gives the gang's campaigns not complete yet."""
+    queue = _gangs(todo, max(1, sum(cluster.nthreads().values())))
     running: dict = {}
-    futures = as_completed()
+    futures = cluster.as_completed()
 
     def slots() -> int:
-        return max(1, sum(client.nthreads().values())) + 1
+        return max(1, sum(cluster.nthreads().values())) + 1
 
     def submit(gang: list[_Active]) -> None:
         function, args, context = task(gang)
         # pure=False: the same task sent again after a failure is run again, not looked up
-        future = client.submit(function, *args, pure=False)
+        future = cluster.submit(function, *args, pure=False)
         running[future] = gang, context
         futures.add(future)
 

@@ -22,7 +22,7 @@ from ..search.campaign import SampleResult, open_store
 from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import numerics_note, stored_results
 from ..search.store import Store, StoreError
-from .dask_cluster import _dask_client, _run_dask, _run_dask_proposing, check_dask_address
+from .dask_cluster import DaskCluster, _dask_client, _run_dask, _run_dask_proposing, check_dask_address
 from .grid import Sweep
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
 from .workers import kill_pool, new_pool, usable_cores
@@ -135,6 +135,7 @@ def run_sweep(
     progress: Callable[[int, int, int], None] | None = None,
     batch: int = DEFAULT_BATCH,
     dask_proposals: str = "client",
+    cluster=None,
 ) -> SweepResult:
     """Run every campaign of the sweep not yet complete in ``db_path``. ``progress(done, total, successes)``
     is called as samples are stored. ``dask_address``: a scheduler's address, or "local" for a local
@@ -142,7 +143,8 @@ def run_sweep(
     side in one SUMO (1: one at a time); the results do not depend on it. ``dask_proposals``: where a
     Dask sweep's optimisers run: on the ``client`` (the samples are the ones each campaign gives alone
     on the client's machine, whatever machines the workers are) or on the ``workers`` (the client's work
-    spread, but a campaign proposes with the numerics of whichever worker steps it)."""
+    spread, but a campaign proposes with the numerics of whichever worker steps it). ``cluster``: a cluster
+    made already, in place of Dask's (`dask_cluster.DaskCluster`: tools/bench_client.py's simulated workers)."""
     sweep.check()
     if dask_proposals not in DASK_PROPOSALS:
         raise ConfigError("--dask-proposals", dask_proposals, f"one of {', '.join(DASK_PROPOSALS)}")
@@ -153,7 +155,8 @@ def run_sweep(
     sources: dict[str, NetworkSource] = {}
     with contextlib.ExitStack() as stack:
         # the cluster first: an unreachable scheduler leaves no database behind
-        client = stack.enter_context(_dask_client(dask_address, dask_timeout_s, workers)) if dask_address else None
+        if cluster is None and dask_address:
+            cluster = DaskCluster(stack.enter_context(_dask_client(dask_address, dask_timeout_s, workers)))
         store = stack.enter_context(open_store(db_path))
         claim(store, sweep)
         todo: list[_Active] = []
@@ -165,20 +168,21 @@ def run_sweep(
                 if key not in sources:
                     sources[key] = network_source(c.config.network, route=() if c.config.whole_network else c.config.route,
                                                   given=c.config.network_given)
-                fmus = shipment(c.config) if client is not None else ()  # local workers see the client's files
+                fmus = shipment(c.config) if cluster is not None else ()  # local workers see the client's files
                 todo.append(_Active(c, cid, sources[key], tuple(stored), done=len(stored), batch=batch, fmus=fmus))
         total = sweep.samples
         counts = list(store.sweep_counts(sweep.name))
 
         said = [False]  # a campaign begun where the numerics differ: said once a sweep
+        writes = stack.enter_context(_Writes(store))
 
         def store_results(active: _Active, results: list[SampleResult]) -> None:
             if active.numerics_differ_at is not None and not said[0] and results:
                 said[0] = True
                 log.warning("%s (other campaigns resumed so are not named)",
                             numerics_note(f"{store.path}: campaign {active.campaign_id}", active.numerics_differ_at))
-            store.add_samples(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
-                                                    r.wall_s, r.error) for r in results])
+            writes.add(active.campaign_id, [(r.index, r.params, r.robustness, r.outcome, r.collision, r.min_gaps,
+                                             r.wall_s, r.error) for r in results])
             active.done += len(results)
             counts[0] += len(results)
             counts[1] += sum(r.outcome == "success" for r in results)
@@ -189,15 +193,44 @@ def run_sweep(
             progress(min(counts[0], total), total, counts[1])
         if todo:
             log.info("sweep %s: %d of %d campaigns to run", sweep.name, len(todo), len(sweep.campaigns))
-            if client is not None and dask_proposals == "client":
-                _run_dask_proposing(todo, store_results, client, str(store.path))
-            elif client is not None:
-                _run_dask(todo, store_results, client)
+            if cluster is not None and dask_proposals == "client":
+                _run_dask_proposing(todo, store_results, cluster, str(store.path))
+            elif cluster is not None:
+                _run_dask(todo, store_results, cluster)
             elif workers == 1:
                 _run_inline(todo, store_results)
             else:
                 _run_local(todo, store_results, workers)
     return SweepResult(len(sweep.campaigns), counts[0], counts[1], time.perf_counter() - t0)
+
+
+class _Writes:
+    """The samples a sweep's client stores, written together at most every FLUSH_S seconds (one transaction,
+    one disk sync, for every campaign whose results came in meanwhile) and whatever is left when the sweep
+    ends, is stopped or fails. A kill -9 loses at most the last FLUSH_S seconds of results, which the next
+    run plays again, the same samples."""
+
+    FLUSH_S = 0.5
+
+    def __init__(self, store):
+        self.store, self.pending, self.last = store, [], time.monotonic()
+
+    def add(self, campaign_id: int, samples: list[tuple]) -> None:
+        self.pending.append((campaign_id, samples))
+        if time.monotonic() - self.last >= self.FLUSH_S:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.pending:
+            pending, self.pending = self.pending, []
+            self.store.add_samples_of(pending)
+        self.last = time.monotonic()
+
+    def __enter__(self) -> "_Writes":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.flush()
 
 
 def _run_inline(todo: list[_Active], store_results) -> None:
