@@ -5,7 +5,8 @@ Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --batch 1 64
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --workers 2 --baseline   # against d4sumo 0.2's engine
        python tools/bench_sweep.py examples/sweeps/paper_*.toml --set search.bo.batch_size=5   # a fixed value changed
-Prints the wall time per (workers, batch), samples per second, and the speed-up over the first;
+Prints the wall time per (workers, batch), samples per second, the peak resident memory of a worker and of
+the client so far, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither). ``--baseline`` first
 runs the sweeps as d4sumo 0.2 did (one episode per SUMO, BO one point per score on scikit-optimize's GP,
 ce without noise: `--batch 1 --set search.bo.gp_version=1 --set search.bo.batch_size=1 --set
@@ -15,6 +16,7 @@ search.ce.noise_fraction=0`) with the largest worker count, and prints the speed
 
 from __future__ import annotations
 
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -41,6 +43,13 @@ def load(path: str, overrides: dict) -> Sweep:
     doc = read_toml(path, "SWEEP")
     head = {k: doc.pop(k) for k in ("name", "grid") if k in doc}
     return Sweep.from_dict({**head, **with_overrides(doc, overrides)}, default_name=Path(path).stem)
+
+
+def peak_rss() -> str:
+    """The largest resident memory so far of a worker process (those that ended) and of this one (the client, and
+    the worker itself with one worker): Linux gives KiB."""
+    workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    return f"peak resident memory: a worker {workers:.0f} MiB, this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB"
 
 
 def main() -> None:
@@ -79,8 +88,8 @@ def main() -> None:
             signatures.append(signature(db))
         times[run] = time.perf_counter() - t0
         label = "as d4sumo 0.2 (batch 1, scikit-optimize's GP, ce without noise)" if b == "0.2" else f"batch {b:>2}"
-        print(f"  {n} worker(s), {label}: {times[run]:6.1f} s  ({samples / times[run]:.0f} samples/s, {successes} successes)",
-              flush=True)
+        print(f"  {n} worker(s), {label}: {times[run]:6.1f} s  ({samples / times[run]:.0f} samples/s, {successes} successes; "
+              f"{peak_rss()})", flush=True)
         return signatures
 
     with tempfile.TemporaryDirectory() as tmp:
