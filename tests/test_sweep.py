@@ -912,3 +912,63 @@ def test_a_sweeps_client_writes_the_samples_of_a_moment_together_and_what_is_lef
         with pytest.raises(StoreError, match="already has sample 0"):
             store.add_samples_of([(a, [(2, *row[1:])]), (b, [row])])  # b's sample 0 is stored: neither goes in
         assert len(store.samples(a)) == 2
+
+
+@pytest.mark.sumo
+def test_a_sweep_in_parts_on_several_clients_stores_what_it_stores_whole_and_a_part_keeps_its_own_database(tmp_path, capsys):
+    """`sweep --part K/N`: N clients share a sweep, each its own database; together they hold the samples the
+    whole sweep holds, and `report` reads them together. A part's database is refused to another part, and to
+    the whole sweep, unchanged; a part that is no part of this grid is one line."""
+    from d4sumo.search.store import Store
+
+    path = write(tmp_path, TINY)
+    run = ["sweep", str(path), "--workers", "1", "--quiet"]
+    assert main([*run, "--db", str(tmp_path / "whole.sqlite")]) == 0
+    for k in (1, 2):
+        assert main([*run, "--db", str(tmp_path / f"part{k}.sqlite"), "--part", f"{k}/2"]) == 0
+    assert "sweep tiny (part 2 of 2): 2 campaigns, 12 samples" in capsys.readouterr().out
+
+    def samples(*dbs):
+        rows = []
+        for db in dbs:
+            with Store(tmp_path / db, create=False) as store:
+                rows += [(c.key, s.index, s.params, s.robustness, s.outcome) for c in store.campaigns() for s in store.samples(c.id)]
+        return sorted(rows)
+
+    assert samples("part1.sqlite", "part2.sqlite") == samples("whole.sqlite") and len(samples("whole.sqlite")) == 24
+    assert not set(samples("part1.sqlite")) & set(samples("part2.sqlite"))
+    before = (tmp_path / "part1.sqlite").read_bytes()
+    assert main([*run, "--db", str(tmp_path / "part1.sqlite"), "--part", "2/2"]) == 2
+    err = capsys.readouterr().err
+    assert "holds sweep 'tiny' (part 1 of 2)" in err and "not 'tiny' (part 2 of 2)" in err and err.count("\n") == 1
+    assert main([*run, "--db", str(tmp_path / "part1.sqlite")]) == 2
+    assert "holds sweep 'tiny' (part 1 of 2)" in capsys.readouterr().err
+    assert (tmp_path / "part1.sqlite").read_bytes() == before
+    assert main(["report", str(tmp_path / "part1.sqlite"), str(tmp_path / "part2.sqlite"), "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    assert (tmp_path / "r" / "index.html").is_file()
+    for bad in ("0/2", "3/2", "1/5", "a/b", "1-2", "2"):
+        assert main([*run, "--db", str(tmp_path / "bad.sqlite"), "--part", bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--part" in err and "K/N with 1 <= K <= N <= 4" in err
+    assert not (tmp_path / "bad.sqlite").exists()
+
+
+def test_a_dask_sweep_asks_the_scheduler_for_its_threads_at_most_once_a_second(monkeypatch):
+    """Each ask is a round trip to the scheduler (0.35 ms on a local cluster); the client asked twice a task,
+    which at a thousand workers took a third of its time (tools/bench_client.py)."""
+    from d4sumo.sweep import dask_cluster
+
+    class Cluster:
+        asks = 0
+
+        def nthreads(self):
+            Cluster.asks += 1
+            return {"a": 1, "b": 2}
+
+    clock = [100.0]
+    monkeypatch.setattr(dask_cluster.time, "monotonic", lambda: clock[0])
+    threads = dask_cluster._threads(Cluster())
+    assert [threads() for _ in range(50)] == [3] * 50 and Cluster.asks == 1
+    clock[0] += 1.0
+    assert threads() == 3 and Cluster.asks == 2

@@ -222,6 +222,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
               "local workers run on this machine", file=sys.stderr)
     check_batch(args.batch)
     sweep = Sweep.load(args.sweep)
+    if args.part is not None:
+        sweep = sweep.part_of(args.part)
     bar = None  # made at the first progress report: an error before it stays one line
 
     def progress(done: int, total: int, successes: int) -> None:
@@ -249,7 +251,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise
     if bar is not None:
         bar.close()
-    print(f"sweep {sweep.name}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
+    part = f" (part {sweep.part[0]} of {sweep.part[1]})" if sweep.part else ""
+    print(f"sweep {sweep.name}{part}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
           f"in {result.wall_s:.1f} s -> {args.db}")
     print(f"  report: d4sumo report {args.db} --out report/")
     return 0

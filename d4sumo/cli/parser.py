@@ -148,6 +148,9 @@ def _add_sweep(sub) -> None:
                    help="where a Dask sweep's optimisers run: on this client, so that every campaign's samples are "
                         "the ones it gives alone here whatever machines the workers are, or spread over the workers, "
                         "each proposing with its own numerics [client]")
+    p.add_argument("--part", metavar="K/N",
+                   help="run part K of N of the grid (every N-th campaign from the K-th), for N clients that share a "
+                        "sweep, each with its own --db; `d4sumo report` reads their databases together")
     _add_batch_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import re
 import signal
 import threading
+import time
 import traceback
 
 from ..errors import ConfigError, D4sumoError
@@ -151,16 +153,31 @@ def _run_dask_proposing(todo: list[_Active], store_results, cluster: DaskCluster
     _schedule(todo, cluster, task, accept)
 
 
+def _threads(cluster: DaskCluster, every_s: float = 1.0):
+    """The cluster's thread count, asked of its scheduler at most every ``every_s`` (workers join and leave
+    rarely, and each ask is a round trip: 0.35 ms on a local cluster, asked twice a task)."""
+    asked = [-math.inf, 1]
+
+    def threads() -> int:
+        now = time.monotonic()
+        if now - asked[0] >= every_s:
+            asked[:] = [now, max(1, sum(cluster.nthreads().values()))]
+        return asked[1]
+
+    return threads
+
+
 def _schedule(todo: list[_Active], cluster: DaskCluster, task, accept) -> None:
     """Gangs of campaigns on the cluster (a `DaskCluster`), a task at a time each, one more in flight than it
     has threads. ``task(gang)``: the function, its arguments and what ``accept(gang, that, result)`` needs to
     take the result, which gives the gang's campaigns not complete yet."""
-    queue = _gangs(todo, max(1, sum(cluster.nthreads().values())))
+    threads = _threads(cluster)
+    queue = _gangs(todo, threads())
     running: dict = {}
     futures = cluster.as_completed()
 
     def slots() -> int:
-        return max(1, sum(cluster.nthreads().values())) + 1
+        return threads() + 1
 
     def submit(gang: list[_Active]) -> None:
         function, args, context = task(gang)

@@ -46,6 +46,23 @@ def _unused_settings_only(a: dict, b: dict, campaign: Campaign) -> bool:
 class Sweep:
     name: str
     campaigns: tuple[Campaign, ...]
+    part: tuple[int, int] | None = None  # (k, n): part k of n (`part_of`)
+
+    def part_of(self, text: str) -> "Sweep":
+        """Part ``K/N`` of the sweep (1 <= K <= N <= its campaigns): every N-th campaign of the grid from the
+        K-th on, for one of N clients that share it, each with its own database (`d4sumo report` reads them
+        together). A part's grid is its own: its database is refused to another part."""
+        k, slash, n = text.partition("/") if isinstance(text, str) else ("", "", "")
+        if not (slash and k.strip().isdigit() and n.strip().isdigit() and 1 <= int(k) <= int(n) <= len(self.campaigns)):
+            raise ConfigError("--part", text, f"K/N with 1 <= K <= N <= {len(self.campaigns)} (the sweep's campaigns), "
+                                              "e.g. 2/4")
+        k, n = int(k), int(n)
+        return dataclasses.replace(self, campaigns=self.campaigns[k - 1::n], part=(k, n))
+
+    @property
+    def label(self) -> str:
+        """The sweep's name, and its part where it is one: as the lines about a database name it."""
+        return repr(self.name) + (f" (part {self.part[0]} of {self.part[1]})" if self.part else "")
 
     @property
     def samples(self) -> int:

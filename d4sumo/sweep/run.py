@@ -92,7 +92,7 @@ def _earlier_hint(sweep: Sweep, theirs: dict) -> str | None:
 def claim(store: Store, sweep: Sweep) -> None:
     """Mark the database as this sweep's, refusing one written by anything else."""
     meta = store.meta()
-    mine = {"name": sweep.name, "fingerprint": sweep.fingerprint()}
+    mine = {"name": sweep.name, "fingerprint": sweep.fingerprint(), **({"part": list(sweep.part)} if sweep.part else {})}
     if "sweep" in meta:
         try:
             theirs = json.loads(meta["sweep"])
@@ -101,8 +101,10 @@ def claim(store: Store, sweep: Sweep) -> None:
             raise StoreError(f"{store.path}: damaged results database (its sweep record {meta['sweep']!r})") from None
         if theirs != mine:
             hint = _earlier_hint(sweep, theirs) or "Use another --db, or the sweep file that wrote it"
+            part = theirs.get("part")
+            held = repr(theirs["name"]) + (f" (part {part[0]} of {part[1]})" if isinstance(part, list) and len(part) == 2 else "")
             raise StoreError(
-                f"{store.path}: holds sweep {theirs['name']!r} (grid {theirs['fingerprint']}), not {sweep.name!r} "
+                f"{store.path}: holds sweep {held} (grid {theirs['fingerprint']}), not {sweep.label} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"
             )
     else:
