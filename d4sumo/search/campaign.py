@@ -24,7 +24,7 @@ from ..model.controllers.control import user_code
 from ..model.controllers.plugins import ControllerImportError, names_only
 from ..model.attacks.messages import MESSAGE_KEYS, attack_box, lie_label
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options, stored_options
-from .spec import Specification
+from .spec import Specification, parsed
 from .store import DefinitionError, Store
 
 #: the versions whose inputs `Campaign.with_inputs_of` plays, newest first: each changed what a campaign's keys do
@@ -103,9 +103,9 @@ class Campaign:
     def specification(self) -> Specification:
         c = self.config
         start = c.attack_start_step if self.score_from_attack_start else 0
-        return Specification(followers=c.followers, step_s=c.step_s, formula=self.formula, d_safe_m=self.d_safe_m,
-                             duration_s=c.total_s - start * c.step_s, start_step=start, maneuver=c.maneuver,
-                             traffic=c.traffic is not None)
+        return parsed(followers=c.followers, step_s=c.step_s, formula=self.formula, d_safe_m=self.d_safe_m,
+                      duration_s=c.total_s - start * c.step_s, start_step=start, maneuver=c.maneuver,
+                      traffic=c.traffic is not None)
 
     def definition(self) -> dict[str, Any]:
         """What identifies the campaign in the database (the budget is not part of it)."""

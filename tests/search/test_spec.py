@@ -148,3 +148,44 @@ def test_a_window_restarts_the_clock_and_an_episode_that_ended_before_it_is_scor
     crashed = Trace(times[:2], {"gap_0": np.array([5.0, 5.0]), "gap_1": np.array([1.0, -0.2]), "gap_2": np.array([7.0, 7.0])}, 3)
     assert crashed.window(2) is crashed  # at least two samples (rtamt needs them)
     assert spec.robustness(crashed) == pytest.approx(0.2)  # it ended (v1-v2 collided) before the window: scored there
+
+
+def test_campaigns_of_one_formula_share_one_parsed_specification_which_scores_as_a_fresh_one_from_any_thread():
+    """Each parse held half a megabyte of rtamt's trees, once per campaign: the paper's nonparametric grid (156
+    campaigns, one formula) held 71 MiB of them in every worker. `spec.parsed` parses once; its robustness is a
+    fresh specification's, from several threads at once too (a Dask worker of several threads)."""
+    import threading
+
+    from d4sumo.model.config import EpisodeConfig
+    from d4sumo.search.campaign import Campaign
+
+    a = Campaign(config=EpisodeConfig(setpoint_m=5.0), seed=1).specification()
+    b = Campaign(config=EpisodeConfig(setpoint_m=9.0, speed_mps=30.0), optimizer="ce").specification()
+    assert a is b
+    assert Campaign(config=EpisodeConfig(followers=4)).specification() is not a
+    config = EpisodeConfig()
+    fresh = Specification(followers=config.followers, step_s=config.step_s, duration_s=config.total_s)
+    rng = np.random.default_rng(3)
+    steps = config.steps + 1
+    traces = [Trace(np.arange(steps) * config.step_s,
+                    {n: rng.uniform(-2, 20, steps) for n in trace_signals(config.followers)}, config.followers)
+              for _ in range(40)]
+    expected = [fresh.robustness(t) for t in traces]
+    got: dict[int, list[float]] = {}
+
+    def score(k: int) -> None:
+        got[k] = [a.robustness(t) for t in traces]
+
+    import sys
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # the threads' evaluations interleave as finely as Python lets them
+    try:
+        threads = [threading.Thread(target=score, args=(k,)) for k in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert all(got[k] == expected for k in range(4)) and len(set(expected)) > 10
