@@ -211,6 +211,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..sweep import Sweep, check_dask_address, run_sweep
+    from ..sweep.grid import part_text
 
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise ConfigError("--workers", args.workers, "a whole number in [1, 1024]")
@@ -251,8 +252,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise
     if bar is not None:
         bar.close()
-    part = f" (part {sweep.part[0]} of {sweep.part[1]})" if sweep.part else ""
-    print(f"sweep {sweep.name}{part}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
+    print(f"sweep {sweep.name}{part_text(sweep.part)}: {result.campaigns} campaigns, {result.samples} samples, {result.successes} successes "
           f"in {result.wall_s:.1f} s -> {args.db}")
     print(f"  report: d4sumo report {args.db} --out report/")
     return 0

@@ -42,6 +42,11 @@ def _unused_settings_only(a: dict, b: dict, campaign: Campaign) -> bool:
     return bool(differ) and all(k in settings and k.removeprefix("scenario.") not in used for k in differ)
 
 
+def part_text(part) -> str:
+    """`` (part K of N)`` for a sweep's part (k, n), as a sweep or a database's record holds it; "" for none."""
+    return f" (part {part[0]} of {part[1]})" if part else ""
+
+
 @dataclass(frozen=True)
 class Sweep:
     name: str
@@ -62,7 +67,7 @@ class Sweep:
     @property
     def label(self) -> str:
         """The sweep's name, and its part where it is one: as the lines about a database name it."""
-        return repr(self.name) + (f" (part {self.part[0]} of {self.part[1]})" if self.part else "")
+        return repr(self.name) + part_text(self.part)
 
     @property
     def samples(self) -> int:

@@ -23,7 +23,7 @@ from ..search.optimizers import EARLIER_DEFAULT_OPTIMIZER, EARLIER_OPTIONS
 from ..search.runner import numerics_note, stored_results
 from ..search.store import Store, StoreError
 from .dask_cluster import DaskCluster, _dask_client, _run_dask, _run_dask_proposing, check_dask_address
-from .grid import Sweep
+from .grid import Sweep, part_text
 from .tasks import _accept_gang, _Active, _after_failure, _gangs, _share, _task, run_chunks
 from .workers import kill_pool, new_pool, usable_cores
 
@@ -102,7 +102,7 @@ def claim(store: Store, sweep: Sweep) -> None:
         if theirs != mine:
             hint = _earlier_hint(sweep, theirs) or "Use another --db, or the sweep file that wrote it"
             part = theirs.get("part")
-            held = repr(theirs["name"]) + (f" (part {part[0]} of {part[1]})" if isinstance(part, list) and len(part) == 2 else "")
+            held = repr(theirs["name"]) + part_text(part if isinstance(part, list) and len(part) == 2 else None)
             raise StoreError(
                 f"{store.path}: holds sweep {held} (grid {theirs['fingerprint']}), not {sweep.label} "
                 f"(grid {mine['fingerprint']}); nothing was changed. {hint}"

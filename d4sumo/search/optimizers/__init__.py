@@ -101,7 +101,8 @@ def as_set_flags(name: str, options: dict) -> str:
 
 
 def stored_options(name: str, options: dict) -> dict:
-    """The options as a campaign's definition holds them (without the options added later at the value earlier campaigns ran with)."""
+    """The options as a campaign's definition holds them: without the options added later where they hold the
+    value earlier campaigns ran with (`ledger`)."""
     return ledger.stored(f"search.{name}", options)
 
 
