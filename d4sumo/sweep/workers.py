@@ -63,6 +63,9 @@ def kill_pool(pool: ProcessPoolExecutor) -> None:
             p.kill()
     for p in processes:
         p.join(timeout=5)
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None:  # gone, its wake-up pipe closed, before Python's exit wakes it: CPython 3.11 races there
+        manager.join(timeout=5)  # (a closed pipe written to: "Exception ignored ... Bad file descriptor" at exit)
 
 
 def _worker_init(parent_pid: int) -> None:
