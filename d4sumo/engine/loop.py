@@ -344,6 +344,9 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
             break
     for e in sorted(live):
         episodes.end(e, config.steps, ())
+    # The arrays and the episodes hold each other: left so, a batch's traces would wait for Python's cycle
+    # collector, and a sweep worker would hold 15 MiB more a batch until it ran (tests/engine/test_simulation.py)
+    episodes.arrays = None
     return episodes.results
 
 
