@@ -176,6 +176,7 @@ TOOLS_REFUSED = [  # regression: each ended in a traceback (or ran on)
     ("paper_page.py", ["--runs", "{tmp}/absent/runs"], "allowed: a folder in an existing folder"),
     ("profile_episode.py", ["--episodes", "0"], "--episodes: got 0; allowed: a whole number of at least 1"),
     ("bench_client.py", ["--workers", "10", "0"], "--workers: got 0; allowed: a whole number in [1, 100000]"),
+    ("bench_client.py", ["--workers", "10", "4", "--clients", "5"], "--clients: got 5; allowed: a whole number in [1, 4]"),
     ("bench_client.py", ["--episode-ms", "0"], "--episode-ms: got 0.0; allowed: a time in (0, 10000] ms"),
 ]
 
@@ -307,3 +308,6 @@ def test_bench_client_drives_the_real_client_with_simulated_workers_to_the_same_
     assert samples(one["db"]) == samples(many["db"]) and len(samples(one["db"])) == 180
     assert 0.5 < one["utilisation"] <= 1 and 0 < many["utilisation"] <= 1
     assert many["wall_s"] < one["wall_s"] / 2
+    parts = bench_client.run_parts(sweep, tmp_path, 6, 3, 0.001)  # --clients 3: sweep --part K/3, two workers each
+    assert len(parts["dbs"]) == 3 and parts["episodes"] == 180 and 0 < parts["utilisation"] <= 1
+    assert sorted(s for db in parts["dbs"] for s in samples(db)) == samples(one["db"])

@@ -900,6 +900,7 @@ def test_a_sweeps_client_writes_the_samples_of_a_moment_together_and_what_is_lef
         row = (0, (0.5,), -1.0, "no_crash", None, None, 0.01, None)
         with pytest.raises(RuntimeError):
             with _Writes(store) as writes:
+                writes.last += 3600  # no moment passes in this block, however slow the machine
                 writes.add(a, [row])
                 writes.add(b, [row, (1, *row[1:])])
                 assert store.samples() == []  # within FLUSH_S of the start: not written yet

@@ -20,7 +20,11 @@ real time is the workers', and the client only stores and sends.
 
 Usage: python tools/bench_client.py [--workers 1 10 100 1000] [--episode-ms 1] [--campaigns 2000]
                                     [--samples 300] [--optimizer random] [--proposals client workers]
-                                    [--dask 1 2 4]
+                                    [--dask 1 2 4] [--clients N]
+
+With ``--clients N`` the sweep is shared by N clients (`sweep --part K/N`), each with its share of the workers
+and its own database, as on machines of their own: each part is simulated in turn, and the sweep's episodes per
+second and utilisation are those of all the workers together.
 """
 
 from __future__ import annotations
@@ -263,6 +267,20 @@ def run_simulated(sweep: Sweep, folder: Path, workers: int, episode_s: float, pr
             "proposals_s": split.proposals_s, "storage_s": split.storage_s, "client_s": cluster.client_busy_s, "real_s": real_s}
 
 
+def run_parts(sweep: Sweep, folder: Path, workers: int, clients: int, episode_s: float, proposals: str = "client") -> dict:
+    """``clients`` clients, each running its part of the sweep (`sweep --part K/N`) into its own database with
+    its share of the workers, on machines of their own: each simulated in turn, their figures added up (the
+    sweep's wall time the slowest part's)."""
+    shares = [workers // clients + (k < workers % clients) for k in range(clients)]
+    parts = [run_simulated(sweep.part_of(f"{k + 1}/{clients}"), folder, n, episode_s, proposals)
+             for k, n in enumerate(shares) if n]
+    wall_s = max(r["wall_s"] for r in parts)
+    busy_s = sum(r["utilisation"] * r["workers"] * r["wall_s"] for r in parts)
+    total = {key: sum(r[key] for r in parts) for key in ("episodes", "proposals_s", "storage_s", "client_s")}
+    return {**total, "workers": workers, "dbs": [r["db"] for r in parts], "wall_s": wall_s, "utilisation": busy_s / (workers * wall_s),
+            "client": max(r["client"] for r in parts)}
+
+
 def run_real(sweep: Sweep, folder: Path, workers: int, episode_s: float, proposals: str = "client") -> dict:
     from d4sumo.sweep.dask_cluster import _dask_client
 
@@ -285,6 +303,8 @@ def main() -> None:
     parser.add_argument("--optimizer", default="random")
     parser.add_argument("--proposals", nargs="+", choices=DASK_PROPOSALS, default=["client"],
                         help="where the optimisers run (sweep --dask-proposals)")
+    parser.add_argument("--clients", type=int, default=1,
+                        help="clients sharing the sweep (sweep --part K/N), each with its share of the workers")
     parser.add_argument("--dask", type=int, nargs="*", default=[1, 2, 4], help="local Dask workers, real (none: skip)")
     parser.add_argument("--dask-campaigns", type=int, default=64)
     parser.add_argument("--utilisation", type=float, default=0.9)
@@ -293,6 +313,7 @@ def main() -> None:
                          "--dask-campaigns": (args.dask_campaigns, 1)})
     for n in (*args.workers, *args.dask):
         parser.check_counts({"--workers": (n, 1, 100_000)})
+    parser.check_counts({"--clients": (args.clients, 1, min(args.campaigns, *args.workers))})  # each a campaign, a worker
     if not 0 < args.episode_ms <= 10_000:
         parser.error(refusal("--episode-ms", args.episode_ms, "a time in (0, 10000] ms"))
     if not 0 < args.utilisation <= 1:
@@ -308,7 +329,11 @@ def main() -> None:
                   f"episodes of {args.episode_ms:g} ms, simulated workers")
             print(f"{'workers':>8} {'episodes/s':>11} {'utilisation':>11} {'client busy':>11} {'proposals':>9} "
                   f"{'storage':>8} {'rest':>6} {'client us/episode':>17}")
-            rows = [run_simulated(sweep, folder, n, episode_s, proposals) for n in args.workers]
+            if args.clients > 1:
+                print(f"{args.clients} clients, each its part of the sweep (sweep --part K/N) with its share of the workers; "
+                      "client busy: the busiest's")
+            rows = [run_simulated(sweep, folder, n, episode_s, proposals) if args.clients == 1
+                    else run_parts(sweep, folder, n, args.clients, episode_s, proposals) for n in args.workers]
             for r in rows:
                 rest = r["client_s"] - r["proposals_s"] - r["storage_s"]
                 print(f"{r['workers']:>8} {r['episodes'] / r['wall_s']:>11.0f} {r['utilisation']:>11.2f} {r['client']:>11.2f} "
@@ -318,7 +343,8 @@ def main() -> None:
             last = rows[-1]
             parts = {"proposals": last["proposals_s"], "storage": last["storage_s"],
                      "tasks and results": last["client_s"] - last["proposals_s"] - last["storage_s"]}
-            print(f"one client feeds about {int(args.utilisation * episode_s / per_episode_s)} workers at "
+            print(f"{'one client' if args.clients == 1 else f'each of {args.clients} clients'} feeds about "
+                  f"{int(args.utilisation * episode_s / per_episode_s)} workers at "
                   f"{args.utilisation:.0%} utilisation with {args.episode_ms:g} ms episodes (its {1e6 * per_episode_s:.1f} us "
                   f"per episode); at {last['workers']} workers most of its time went to {max(parts, key=parts.get)}")
             if real is not None:
