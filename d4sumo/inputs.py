@@ -42,6 +42,7 @@ from .model.world.sensing import RadarParams
 from .model.world.traffic import TrafficParams
 from .model.world.v2v import ChannelParams
 from .model.attacks.messages import MESSAGE_KEYS, attack_box
+from .search import situation
 from .search.campaign import Campaign
 from .presets import PRESETS, apply_preset
 from .search.optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options
@@ -242,7 +243,8 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
     doc = apply_preset(link_collision_distance(doc), campaign=True)  # what the document sets wins over a preset
     if "params" in doc.get("attack", {}):
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
-    config = episode_config(doc)
+    scenario, ranges = situation.split(doc.get("scenario", {}) if isinstance(doc.get("scenario"), Mapping) else {})
+    config = episode_config({**doc, "scenario": scenario} if ranges else doc)
     family = _family(doc, tuple(f for f in FAMILIES if f != "constant"))
     optimizer = _get(doc, "search.optimizer", DEFAULT_OPTIMIZER)
     if not isinstance(optimizer, str) or optimizer not in OPTIMIZERS:
@@ -264,6 +266,7 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         message=doc.get("attack", {}).get("message", ""),
         message_field=doc.get("attack", {}).get("message_field", "accel"),
         message_sender=doc.get("attack", {}).get("message_sender", 0),
+        situation=ranges,
     )
 
 

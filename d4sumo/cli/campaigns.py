@@ -138,8 +138,8 @@ def _falsify_result(args: argparse.Namespace, campaign, evaluator, summary, coun
 
         nearest = nearest_traffic((s.min_gaps for s in summary.samples), campaign.config.vehicle_ids)
     without = None
-    if campaign.config.traffic is not None and not campaign.config.traffic.per_sample:  # one traffic: one episode tells
-        from ..results.baseline import campaign_baseline
+    if campaign.config.traffic is not None and not campaign.config.traffic.per_sample and not campaign.situation:
+        from ..results.baseline import campaign_baseline  # one traffic, one situation: one episode tells
 
         without = campaign_baseline(evaluator.without_attack, False, ((s.index, s.outcome, (s.collision or {}).get("time_s"))
                                                                       for s in summary.samples), step_s=campaign.config.step_s)

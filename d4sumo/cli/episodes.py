@@ -103,7 +103,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return EXIT_DIFFERS
     episode = evaluator.simulate(row.index, row.params, fcd_path=fcd, gui=args.gui)
     rho = evaluator.spec.robustness(episode.trace)
-    summary = episode_summary(campaign.config, evaluator.family, row.params, plan, episode, rho, campaign.d_safe_m, fcd)
+    summary = episode_summary(evaluator.config_for(row.params), evaluator.family, row.params, plan, episode, rho,
+                              campaign.d_safe_m, fcd)
     # the whole verdict, compared exactly: what was stored is what this episode gives
     replayed = {"robustness": rho, "outcome": episode.outcome,
                 "collision": episode.first_collision_record(),
@@ -197,10 +198,16 @@ def episode_summary(config, family, params, plan, episode, robustness, d_safe, f
     from ..model.attacks.maneuvers import lane_changes, maneuver_of
 
     played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
+    situation = {}
+    if hasattr(family, "situation_values"):  # a situation searched with the attack: the configuration holds its values
+        situation = {p.name: float(v) for p, v in zip(family.parameters[len(family.attack.parameters):],
+                                                      family.situation_values(params))}
+        family, params = family.attack, family.attack_params(params)
     return {
         "d4sumo": __version__,
         "config": config.to_dict(),
         "attack": None if family is None else {**family.describe(), "values": [float(v) for v in params]},
+        **({"situation": situation} if situation else {}),
         # the attacker's lane changes as played: when each began [s], the lane (0 the platoon's, 1 to its left)
         "lane_changes": [{"time_s": k * config.step_s, "lane": lane}
                          for k, lane in lane_changes(plan, maneuver_of(config)) if k < played],

@@ -105,9 +105,9 @@ def table_without_attack(records, evaluator_of, progress: Callable[[], None] | N
             except NotSimulable:  # its controller cannot be had here: counted as not played
                 unplayed += len(members)
                 continue
-            config = evaluator.campaign.config
-            total.add(campaign_baseline(evaluator.without_attack, config.traffic.per_sample,
-                                        ((r.index, r.outcome, r.time_s) for r in members), progress, config.step_s))
+            without_attack, per_sample = evaluator.without_attack_of({r.index: r.params for r in members})
+            total.add(campaign_baseline(without_attack, per_sample, ((r.index, r.outcome, r.time_s) for r in members),
+                                        progress, evaluator.campaign.config.step_s))
         kinds = ", ".join(f"{total.kinds[k]} {k}" for k in CRASH_KINDS if total.kinds[k]) or "-"
         rows.append((run_label(key), str(len(rs) - unplayed), str(total.played), str(total.crashed), kinds,
                      f"{total.traffics['success']} of {total.crashes['success']}",

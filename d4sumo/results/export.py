@@ -39,11 +39,13 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
     """Write the samples (of one campaign, or all) to ``out``; returns how many."""
     campaigns = {c.id: Campaign.from_definition(c.definition, where=f"{store.path}: campaign {c.id}")
                  for c in store.campaigns()}
-    names = {cid: c.family().names for cid, c in campaigns.items()}
+    families = {cid: c.family() for cid, c in campaigns.items()}
+    names = {cid: family.names for cid, family in families.items()}
     systems = {cid: system_label(c.config.to_dict()) for cid, c in campaigns.items()}
     scenarios = {cid: c.config.to_dict()["scenario"] for cid, c in campaigns.items()}
     own = sorted({k for sc in scenarios.values() for k in sc} - set(SCENARIO) - set(IDENTITY_KEYS), key=_SCENARIO_KEYS.index)
-    columns = list(dict.fromkeys(n for cid in campaigns for n in names[cid]))
+    searched = {key for c in campaigns.values() for key, _, _ in c.situation}  # each sample's own, in the scenario's columns
+    columns = list(dict.fromkeys(n for cid in campaigns for n in names[cid] if n not in searched))
     pairs = sorted({p for s in store.iter_samples(campaign_id) for p in s.min_gaps}, key=pair_order)
     writer = csv.writer(out)
     writer.writerow(["sample_id", "campaign_id", "index", *SCENARIO, *own, *RESULT]
@@ -52,8 +54,9 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
     for s in store.iter_samples(campaign_id):
         c = campaigns[s.campaign_id]
         cfg = c.config
-        scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id]}
         params = dict(zip(names[s.campaign_id], s.params))
+        scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id],
+                    **{key: params[key] for key, _, _ in c.situation if key in params}}
         writer.writerow([s.id, s.campaign_id, s.index, *(_cell(scenario.get(k, "")) for k in (*SCENARIO, *own)),
                          systems[s.campaign_id], c.attack, c.lie, c.optimizer, c.seed, s.robustness, s.outcome, s.pair, s.time_s,
                          s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]

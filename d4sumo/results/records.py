@@ -6,6 +6,7 @@ ran under, read through the one reader of stored campaigns (`search.campaign`). 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -63,6 +64,10 @@ class Record:
     #: the campaign's message attack in a few words (`messages.lie_label`: "a lie (offset on its speed)"), or
     #: "": the pedals alone; campaigns with and without a lie are never pooled
     lie: str = ""
+    #: where its campaign searches its situation (`search.situation`): the values this sample played, exactly;
+    #: its setpoint_m and speed_mps are then the cell of the range it fell in (`situation_cell`), so that the
+    #: report's tables and maps group samples of nearby situations
+    situation: tuple[tuple[str, float], ...] = ()
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -127,19 +132,47 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                     outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
                     speed_diff_kmh=s.speed_diff_kmh, index=s.index,
                     swerve_change_steps=_swerve_change_steps(families[s.campaign_id], s.params, c.config),
-                    **settings[s.campaign_id],
+                    **(settings[s.campaign_id] if not c.situation else
+                       {**settings[s.campaign_id], **_situation_of(c, families[s.campaign_id], s.params)}),
                 ))
     if not records:
         raise ConfigError("DB", ", ".join(map(str, paths)), "databases holding at least one sample")
     return records
 
 
+#: how many cells the report splits a searched key's range into (at most: each cell a round width)
+CELLS = 10
+
+
+def situation_cell(low: float, high: float, value: float) -> float:
+    """The low end of the cell of [low, high] that ``value`` falls in: the range split in cells of a round width
+    (1, 2 or 5 times a power of ten) into at most `CELLS`, from a multiple of that width."""
+    raw = (high - low) / CELLS
+    width = next(m * 10.0 ** math.floor(math.log10(raw)) for m in (1, 2, 5, 10) if m * 10.0 ** math.floor(math.log10(raw)) >= raw)
+    return float(round(math.floor(value / width) * width, 12))
+
+
+def _situation_of(campaign, family, params) -> dict[str, Any]:
+    """A sample's situation, of a campaign that searches one (`search.situation`): its values, and the cells of
+    the setpoint and speed the report groups it in (a damaged row keeps the campaign's: said where replayed)."""
+    try:
+        values = [float(v) for v in family.situation_values(params)]
+    except ConfigError:
+        return {}
+    ranges = {key: (low, high) for key, low, high in campaign.situation}
+    exact = dict(zip(ranges, values))
+    return {"situation": tuple(exact.items()),
+            **{key: situation_cell(*ranges[key], v) for key, v in exact.items()}}
+
+
 def _swerve_change_steps(family, params, config) -> tuple[int, ...]:
     """The steps at which a swerving attacker's planned lane changes begin (none for other maneuvers, or
     parameters the family refuses: a damaged row is said where it is replayed)."""
-    if not isinstance(family, SwerveAttack):
+    if not isinstance(getattr(family, "attack", family), SwerveAttack):
         return ()
     try:
+        if hasattr(family, "attack"):  # a situation searched with it (`SituatedAttack`): its lanes are the attack's
+            family, params = family.attack, family.attack_params(params)
         return tuple(k for k, _ in family.change_steps(params, config))
     except ConfigError:
         return ()

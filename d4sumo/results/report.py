@@ -51,8 +51,9 @@ def describe(record: Record) -> str:
     start = f"warmup {record.attack_start_s:g} s" if record.start == "warmup" else record.start
     system = f"{record.system}, " if record.system != "switching" else ""
     maneuver = f"{record.maneuver} " if record.maneuver != "inlane" else ""
+    played = {"setpoint_m": record.setpoint_m, "speed_mps": record.speed_mps, **dict(record.situation)}  # its own, searched
     head = (f"sample {record.sample_id}: {system}{maneuver}{attack_label(record)} {record.optimizer}, {where}{start}, "
-            f"setpoint {record.setpoint_m:g} m, {record.speed_mps:g} m/s")
+            f"setpoint {played['setpoint_m']:g} m, {played['speed_mps']:g} m/s")
     if record.pair is None:
         return f"{head}; {record.outcome.replace('_', ' ')}"
     return (f"{head}; {record.pair} collided {record.time_from_attack_start_s:.1f} s after the attack started, "

@@ -23,6 +23,7 @@ from ..model.world.network import network_digest
 from ..model.controllers.control import user_code
 from ..model.controllers.plugins import ControllerImportError, names_only
 from ..model.attacks.messages import MESSAGE_KEYS, attack_box, lie_label
+from . import situation
 from .optimizers import DEFAULT_OPTIMIZER, OPTIMIZERS, resolve_options, stored_options
 from .spec import Specification, parsed
 from .store import DefinitionError, Store
@@ -63,6 +64,8 @@ class Campaign:
     message: str = ""
     message_field: str = "accel"  # the field of the beacons it falsifies (accel, speed, position)
     message_sender: int = 0  # whose beacons lie: 0 the attacker, K an insider follower vK
+    #: keys of the scenario searched with the attack, each a range (`situation`): (key, low, high), ...
+    situation: tuple[tuple[str, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -84,16 +87,24 @@ class Campaign:
         if isinstance(options, dict):
             options = tuple(options.items())
         fix("optimizer_options", tuple(resolve_options(self.optimizer, dict(options)).items()))
+        fix("situation", situation.check(self.config, tuple(self.situation)))
         if self.config.attack_start_step == 0:  # nothing before the attack: the same window either way
             fix("score_from_attack_start", True)
         elif not isinstance(self.score_from_attack_start, bool):
             raise ConfigError("spec.from_attack_start", self.score_from_attack_start, "true or false")
 
     def family(self) -> AttackFamily:
-        """The attack's box: the signal family's, plus the lane change time when the attacker changes lanes,
-        plus a message attack's parameters (`messages`)."""
-        return attack_box(self.config, make_attack(self.attack, dict(self.attack_options)), self.message,
-                          self.message_field, dict(self.attack_options), self.message_sender)
+        """The search's box: the signal family's, plus the lane change time when the attacker changes lanes,
+        plus a message attack's parameters (`messages`), plus the situation's ranges (`situation`)."""
+        return situation.box(attack_box(self.config, make_attack(self.attack, dict(self.attack_options)), self.message,
+                                        self.message_field, dict(self.attack_options), self.message_sender), self.situation)
+
+    def config_for(self, params, family: AttackFamily | None = None) -> EpisodeConfig:
+        """The configuration a sample with these parameters plays: the campaign's, with the situation's keys at the
+        sample's values (``family``: the campaign's, if at hand)."""
+        if not self.situation:
+            return self.config
+        return situation.config_for(self.config, family or self.family(), params)
 
     @property
     def lie(self) -> str:
@@ -114,7 +125,7 @@ class Campaign:
             attack.update(message=self.message, message_field=self.message_field)
             if self.message_sender:
                 attack.update(message_sender=self.message_sender)
-        return {
+        definition = {
             "config": self.config.to_dict(),
             "attack": attack,
             "optimizer": self.optimizer,
@@ -124,6 +135,9 @@ class Campaign:
             "spec": ledger.stored("spec", {"formula": self.formula, "d_safe_m": self.d_safe_m, "from_attack_start":
                                            bool(self.config.attack_start_step and self.score_from_attack_start)}),
         }
+        if self.situation:  # stored where there is one: every other campaign keeps its identity
+            definition["situation"] = situation.stored(self.situation)
+        return definition
 
     @classmethod
     def from_definition(cls, definition: dict[str, Any], samples: int = 100, where: str = "the database", *,
@@ -181,6 +195,7 @@ class Campaign:
                 optimizer_options=tuple(ledger.restored(f"search.{definition['optimizer']}",
                                                         definition.get("optimizer_options", {})).items()),
                 score_from_attack_start=ledger.restored("spec", definition["spec"])["from_attack_start"],
+                situation=situation.restored(definition.get("situation", {})),
             )
         except ControllerImportError as exc:  # not damage: the database is fine, this machine lacks the module
             raise NotSimulable(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None

@@ -21,6 +21,7 @@ from ..model.stepping.batch import batch_key
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import AttackPlan, attack_plan
 from ..model.stepping.trace import Episode
+from . import situation
 from .campaign import Campaign, SampleResult
 
 log = logging.getLogger(__name__)
@@ -55,7 +56,8 @@ class Evaluator:
             keep_road(config.network, config.network_sha256)
         self.network = network or campaign_network(config)
         self.road = road or campaign_road(self.network, config)
-        check_episode(campaign.config, self.road)
+        for corner in situation.corners(config, campaign.situation) or [config]:  # every situation it searches fits the road
+            check_episode(corner, self.road)
         self._batch_road: Road | None = None
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
         self._shares_sumo = shares_sumo(campaign.config)
@@ -63,18 +65,31 @@ class Evaluator:
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
-        return attack_plan(self.family, params, self.campaign.config)
+        return attack_plan(self.family, params, self.config_for(params))
+
+    def config_for(self, params) -> EpisodeConfig:
+        """The configuration these parameters play: the campaign's, in the situation they hold (`situation`)."""
+        return self.campaign.config_for(params, self.family)
 
     def simulate(self, index: int, params, *, fcd_path: str | Path | None = None, gui: bool = False) -> Episode:
         """Sample ``index``'s episode with these parameters, alone (a replay's, a figure's): in the traffic
         that sample meets (`EpisodeConfig.for_sample`)."""
-        return simulate(self.campaign.config.for_sample(index), self.plan(params), road=self.road, fcd_path=fcd_path, gui=gui)
+        return simulate(self.config_for(params).for_sample(index), self.plan(params), road=self.road, fcd_path=fcd_path, gui=gui)
 
-    def without_attack(self, index: int, *, fcd_path: str | Path | None = None) -> Episode:
+    def without_attack(self, index: int, params=None, *, fcd_path: str | Path | None = None) -> Episode:
         """Sample ``index``'s episode with the attacker only cruising: no pedal attack, no lane change, no lie, in
-        the traffic that sample meets (`results.baseline`)."""
-        config = self.campaign.config
+        the traffic that sample meets (`results.baseline`) and the situation its ``params`` hold (where the
+        campaign searches one)."""
+        if self.campaign.situation and params is None:
+            raise ValueError("a campaign that searches its situation plays a sample without the attack in its situation: give its params")
+        config = self.config_for(params) if params is not None else self.campaign.config
         return simulate(config.for_sample(index), AttackPlan(np.full(config.steps, np.nan)), road=self.road, fcd_path=fcd_path)
+
+    def without_attack_of(self, params_of: dict) -> tuple[Callable[[int], Episode], bool]:
+        """What `results.baseline.campaign_baseline` plays (sample index -> its episode without the attack, in its own
+        situation: ``params_of``, index -> params) and whether each sample's is its own (its own traffic, or situation)."""
+        per_sample = self.campaign.config.traffic.per_sample or bool(self.campaign.situation)
+        return (lambda index: self.without_attack(index, params_of.get(index))), per_sample
 
     def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:
         t0 = time.perf_counter()
@@ -184,7 +199,7 @@ def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], 
         for s, (ev, index, x) in enumerate(samples):
             try:
                 plans.append(ev.plan(x))
-                configs.append(ev.campaign.config)
+                configs.append(ev.config_for(x))
                 playing.append(s)
             except Exception as exc:
                 finish(s, ev._failed(index, x, exc, 0.0))

@@ -288,6 +288,26 @@ class LaneChangeAttack(ManeuverAttack):
         return float(self.check(params)[self._first_added])
 
 
+class SituatedAttack(ManeuverAttack):
+    """An attack's box (``attack``) plus the keys of the situation searched with it, after its own parameters
+    (`search.situation`): the attacker's plan is the attack's, of the first parameters; the episode's
+    configuration takes the rest. Its signal parameters stay the attack's (``longitudinal``)."""
+
+    def __init__(self, attack: AttackFamily, added: tuple[Parameter, ...]):
+        super().__init__(attack, added, (1,) * len(added))
+        self.attack = attack
+        self.longitudinal = getattr(attack, "longitudinal", attack)
+
+    def _signal(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return self.attack._signal(x[:self._first_added], t)
+
+    def attack_params(self, params) -> np.ndarray:
+        return self.check(params)[:self._first_added]
+
+    def situation_values(self, params) -> np.ndarray:
+        return self.check(params)[self._first_added:]
+
+
 def swerve_knot_times(window_s: float, knots: int) -> list[float]:
     """When a swerving attacker's lane knots take hold, from the attack's start [s]: evenly, the first at once."""
     return [j * float(window_s) / knots for j in range(knots)]
@@ -355,6 +375,8 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
     lane change at the step nearest to t_lc_s after the attack's start."""
     from .pedals import attack_signal
 
+    if isinstance(family, SituatedAttack):  # the situation's values are the configuration's, not the plan's
+        family, params = family.attack, family.attack_params(params)
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
     if hasattr(family, "falsifier"):  # a message attack (`messages`): its pedals, and its lie over the air
         return AttackPlan(u, beacons=family.falsifier(params, config))
@@ -371,6 +393,8 @@ def inert_parameters(family: AttackFamily, config: EpisodeSettings, draws: int =
     """The parameters that change nothing in an episode of this configuration (a knot that acts only past
     its end, say): each moved from a few points of the box (``draws``, fixed) to a few other values, none
     changed the attacker's plan. The search still spends its samples over them."""
+    if isinstance(family, SituatedAttack):  # the situation's keys change the episode, never the plan
+        family = family.attack
     rng = np.random.default_rng(0)
     lower, upper = family.lower, family.upper
     inert = []
