@@ -311,3 +311,17 @@ def test_bench_client_drives_the_real_client_with_simulated_workers_to_the_same_
     parts = bench_client.run_parts(sweep, tmp_path, 6, 3, 0.001)  # --clients 3: sweep --part K/3, two workers each
     assert len(parts["dbs"]) == 3 and parts["episodes"] == 180 and 0 < parts["utilisation"] <= 1
     assert sorted(s for db in parts["dbs"] for s in samples(db)) == samples(one["db"])
+
+
+@pytest.mark.sumo
+def test_bench_batch_situation_plays_the_same_episodes_fixed_and_searched(capsys):
+    """tools/bench_batch.py --situation: a campaign searching its setpoint and speed, each sample within nanometres of
+    the fixed values, plays what the fixed campaign plays: its cost per sample is the situation's own."""
+    import argparse
+
+    import bench_batch
+    from d4sumo.model.config import EpisodeConfig
+
+    bench_batch.situation_cost(EpisodeConfig(start="steady", duration_s=20.0), argparse.Namespace(samples=12, repeats=1, batch=8))
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and all("(the same outcome, colliding pair and time: 12 of 12)" in line for line in lines[1:])

@@ -7,8 +7,15 @@ optimiser proposes together: a cross-entropy generation (`ce`, 10 by default), a
 or up to --batch random points. The results are checked to be identical both ways.
 
 Usage: python tools/bench_batch.py [--samples 200] [--repeats 3] [--batch 64] [--optimizers random ce cmaes]
+                                   [--situation]
 The last line is the ratio of the first optimiser's campaigns on the paper's default scenario
 (7 m, 25 m/s, from rest, knots).
+
+``--situation`` measures instead what searching the situation costs a sample (`search.situation`): the same
+attack points played by a campaign whose setpoint and speed are fixed and by one that searches them, each sample
+within nanometres of the same values (the same episodes but for rounding: what differs is the situation's own
+work, a configuration per sample),
+batched and one at a time, interleaved; it prints the ratio of their costs per sample.
 """
 
 from __future__ import annotations
@@ -16,6 +23,8 @@ from __future__ import annotations
 import os
 import statistics
 import time
+
+import numpy as np
 
 from d4sumo.model.stepping.batch import DEFAULT_BATCH
 from d4sumo.model.config import EpisodeConfig
@@ -37,6 +46,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=DEFAULT_BATCH)
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
+    parser.add_argument("--situation", action="store_true", help="what searching the setpoint and speed costs a sample")
     args = parser.parse_args()
     parser.check_counts({"--samples": (args.samples, 1), "--repeats": (args.repeats, 1), "--batch": (args.batch, 1)})
     parser.check_optimizers(args.optimizers)
@@ -45,6 +55,8 @@ def main() -> None:
     except (AttributeError, OSError):
         pass
     config = EpisodeConfig(start=args.start)
+    if args.situation:
+        return situation_cost(config, args)
     print(f"{args.samples} samples per campaign, {config.setpoint_m:g} m, {config.speed_mps:g} m/s, from {config.start}, "
           f"knots; best of {args.repeats} interleaved runs, one core")
     ratios = {}
@@ -65,6 +77,38 @@ def main() -> None:
               f"ratio {ta / tb:4.2f}   (median ratio {statistics.median(alone) / statistics.median(batched):4.2f})")
     print(f"ratio batched/unbatched: {ratios[args.optimizers[0]]:.2f}")
 
+
+def situation_cost(config: EpisodeConfig, args) -> None:
+    """The same attack points played by a campaign with its setpoint and speed fixed and by one that searches them
+    (ranges from the fixed values up), each point within a few nanometres and nanometres a second of the fixed values
+    (each a configuration of its own, as in a search, playing the same episodes to the eye: their outcomes and
+    collisions are counted alike), so what differs is the situation's own work."""
+    ranges = (("setpoint_m", config.setpoint_m, config.setpoint_m + 3.0), ("speed_mps", config.speed_mps, config.speed_mps + 5.0))
+    fixed = Campaign(config=config, optimizer="random", samples=args.samples, seed=0)
+    searched = fixed.replace(situation=ranges)
+    family = fixed.family()
+    points = np.random.default_rng(0).uniform(family.lower, family.upper, size=(args.samples, family.dimension))
+    nudge = 1e-9 * np.arange(args.samples)[:, None]  # each sample a situation of its own, as in a search: its own configuration
+    at = np.concatenate([points, np.tile([config.setpoint_m, config.speed_mps], (args.samples, 1)) + nudge], axis=1)
+    print(f"{args.samples} samples, {config.setpoint_m:g} m and {config.speed_mps:g} m/s fixed, against a campaign searching "
+          f"{', '.join(f'{k} [{lo:g}, {hi:g}]' for k, lo, hi in ranges)} played at the same values; best of {args.repeats} "
+          "interleaved runs, one core")
+    evaluators = {"fixed": (Evaluator(fixed), points), "searched": (Evaluator(searched), at)}
+    for batch in (args.batch, 1):
+        times: dict = {"fixed": [], "searched": []}
+        results = {}
+        for _ in range(args.repeats):
+            for name, (evaluator, xs) in evaluators.items():
+                t0 = time.perf_counter()
+                played = [r for first in range(0, len(xs), batch) for r in evaluator.batch(first, xs[first:first + batch])]
+                times[name].append(time.perf_counter() - t0)
+                results[name] = [(r.robustness, r.outcome, r.collision, r.min_gaps) for r in played]
+        same = sum(a[1] == b[1] and (a[2] or {}).get("pair") == (b[2] or {}).get("pair") and (a[2] or {}).get("time_s") == (b[2] or {}).get("time_s")
+                   for a, b in zip(results["fixed"], results["searched"]))  # outcome, and pair and time of the collision
+        tf, ts = min(times["fixed"]), min(times["searched"])
+        print(f"  {'batched' if batch > 1 else 'one at a time':<13} fixed {1e3 * tf / args.samples:6.2f} ms/sample   "
+              f"situation searched {1e3 * ts / args.samples:6.2f} ms/sample   ratio {ts / tf:4.2f}   "
+              f"(the same outcome, colliding pair and time: {same} of {args.samples})")
 
 if __name__ == "__main__":
     run_main(main)

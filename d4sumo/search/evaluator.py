@@ -59,6 +59,7 @@ class Evaluator:
         for corner in situation.corners(config, campaign.situation) or [config]:  # every situation it searches fits the road
             check_episode(corner, self.road)
         self._batch_road: Road | None = None
+        self._configs: dict[tuple, EpisodeConfig] = {}  # the situation's values -> its configuration (`config_for`)
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
         self._shares_sumo = shares_sumo(campaign.config)
         self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
@@ -68,8 +69,17 @@ class Evaluator:
         return attack_plan(self.family, params, self.config_for(params))
 
     def config_for(self, params) -> EpisodeConfig:
-        """The configuration these parameters play: the campaign's, in the situation they hold (`situation`)."""
-        return self.campaign.config_for(params, self.family)
+        """The configuration these parameters play: the campaign's, in the situation they hold (`situation`); made
+        once a sample (its plan and its episode ask for it; a configuration costs 0.2 ms to check)."""
+        if not self.campaign.situation:
+            return self.campaign.config
+        key = tuple(float(v) for v in params[len(params) - len(self.campaign.situation):])
+        config = self._configs.get(key)
+        if config is None:
+            if len(self._configs) >= 256:
+                self._configs.clear()
+            config = self._configs[key] = self.campaign.config_for(params, self.family)
+        return config
 
     def simulate(self, index: int, params, *, fcd_path: str | Path | None = None, gui: bool = False) -> Episode:
         """Sample ``index``'s episode with these parameters, alone (a replay's, a figure's): in the traffic
@@ -88,7 +98,8 @@ class Evaluator:
     def without_attack_of(self, params_of: dict) -> tuple[Callable[[int], Episode], bool]:
         """What `results.baseline.campaign_baseline` plays (sample index -> its episode without the attack, in its own
         situation: ``params_of``, index -> params) and whether each sample's is its own (its own traffic, or situation)."""
-        per_sample = self.campaign.config.traffic.per_sample or bool(self.campaign.situation)
+        traffic = self.campaign.config.traffic
+        per_sample = bool(self.campaign.situation) or (traffic is not None and traffic.per_sample)
         return (lambda index: self.without_attack(index, params_of.get(index))), per_sample
 
     def __call__(self, index: int, params: np.ndarray, *, fcd_path: str | Path | None = None) -> SampleResult:

@@ -104,3 +104,19 @@ def test_the_cli_refuses_a_bad_range_in_one_line_and_stores_nothing(tmp_path, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["d4sumo: error: scenario.setpoint_m: got [10, 3]; allowed: a range [low, high] with low below high (reversed)"]
     assert not db.exists()
+
+
+@pytest.mark.sumo
+def test_in_sumo_a_sample_without_the_attack_plays_in_the_samples_own_situation():
+    from d4sumo.search.evaluator import Evaluator
+
+    campaign = campaign_of({"scenario": {"setpoint_m": [3, 10], "start": "steady", "duration_s": 10.0}})
+    evaluator = Evaluator(campaign)
+    x = np.concatenate([np.zeros(9), [8.5]])
+    episode = evaluator.without_attack(0, x)
+    first_gap = episode.trace["pos_v0"][0] - campaign.config.vehicle.length_m - episode.trace["pos_v1"][0]
+    assert first_gap == pytest.approx(8.5, abs=1e-6)  # from steady state: the sample's setpoint, not the range's low end
+    with pytest.raises(ValueError, match="give its params"):
+        evaluator.without_attack(0)
+    played, per_sample = evaluator.without_attack_of({0: x})
+    assert per_sample and played(0).trace["pos_v1"][0] == episode.trace["pos_v1"][0]
