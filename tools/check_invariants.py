@@ -39,7 +39,11 @@ campaign stores a sample, and counts the samples where any of these disagree:
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]. Prints the counts; exits 1 if any is
+With --situation P, a share of the campaigns search their setpoint (and some their speed) with the attack: each
+sample plays its own, and is checked as any other.
+
+Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]
+       [--situation P]. Prints the counts; exits 1 if any is
 non-zero.
 """
 
@@ -157,6 +161,7 @@ def corridor() -> tuple[str, str]:
 
 #: the share of episodes whose every follower runs one of d4sumo's cooperative controllers, in lane (--cooperative)
 COOPERATIVE_SHARE = [0.0]
+SITUATION_SHARE = [0.0]  # of campaigns that search their setpoint and speed (`search.situation`)
 
 
 def random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
@@ -222,7 +227,12 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         insiders = [k for k in range(1, config.followers) if config.listening(k + 1)]
         if insiders and rng.random() < 0.4:  # an insider follower lies to the car behind it
             message["message_sender"] = int(rng.choice(insiders))
-    campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, **message)
+    situation = ()
+    if SITUATION_SHARE[0] and rng.random() < SITUATION_SHARE[0]:  # the setpoint (and the speed) searched: the sample's own
+        situation = (("setpoint_m", config.setpoint_m, config.setpoint_m + float(rng.choice([0.5, 3.0, 8.0]))),)
+        if config.traffic is None and not config.sumo_driven and rng.random() < 0.5:  # (its traffic is checked at one speed)
+            situation += (("speed_mps", config.speed_mps, config.speed_mps + float(rng.choice([1.0, 5.0]))),)
+    campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, situation=situation, **message)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
 
@@ -486,14 +496,16 @@ def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, 
     configurations (`partner_config`); what differs from it alone, if anything."""
     f = evaluator.family
     slot = int(rng.integers(0, partners + 1))  # on any copy of the road
-    configs = [partner_config(campaign.config, rng, road) if i % 2 else campaign.config for i in range(partners)]
+    own = evaluator.config_for(params)  # in the situation it plays, where its campaign searches one
+    configs = [partner_config(campaign.config, rng, road) if i % 2 else None for i in range(partners)]
     xs = [f.lower + rng.random(f.dimension) * (f.upper - f.lower) for _ in range(partners)]
+    configs = [c or evaluator.config_for(x) for c, x in zip(configs, xs)]  # (its campaign's: in their own situations)
     plans = [attack_plan(f, x, c) for x, c in zip(xs, configs)]
     plans.insert(slot, evaluator.plan(params))
-    configs.insert(slot, campaign.config)
+    configs.insert(slot, own)
     batched = simulate_batch(configs, plans)[slot]
     try:
-        alone = simulate(campaign.config, plans[slot], road=road)
+        alone = simulate(own, plans[slot], road=road)
     except Exception as exc:
         return None if type(batched) is type(exc) and str(batched) == str(exc) else "batch: the error differs from alone"
     if isinstance(batched, Exception):
@@ -521,6 +533,9 @@ def main(argv=None) -> int:
     parser.add_argument("--junctions", type=float, default=JUNCTION_SHARE[0],
                         help="the share of in-lane episodes played on SUMO's corridor among its own demand, through its "
                              f"signalised crossings (checked in 2D) [{JUNCTION_SHARE[0]}]")
+    parser.add_argument("--situation", type=float, default=SITUATION_SHARE[0],
+                        help="the share of episodes whose campaign searches its setpoint (and, half of those without "
+                             f"traffic, its speed): each sample plays its own [{SITUATION_SHARE[0]}]")
     parser.add_argument("--only", default="", help="check only these episodes of the seed's draw (comma-separated "
                                                    "indices, as --examples records them)")
     parser.add_argument("--examples", type=Path, help="write every disagreeing episode here, whole (JSON lines)")
@@ -536,6 +551,9 @@ def main(argv=None) -> int:
     if not 0.0 <= args.junctions <= 1.0:
         parser.error(f"--junctions: got {args.junctions}; allowed: a share in [0, 1]")
     JUNCTION_SHARE[0] = args.junctions
+    if not 0.0 <= args.situation <= 1.0:
+        parser.error(f"--situation: got {args.situation}; allowed: a share in [0, 1]")
+    SITUATION_SHARE[0] = args.situation
     rng = np.random.default_rng(args.seed)
     ROADS.extend([netgenerate_grid(), sharp_turns(), bremen_motorway()])
     roads = {(name, lane): config_road(EpisodeConfig(network=name, route=ROUTES.get(name, ()), lane=lane))
