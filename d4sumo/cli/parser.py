@@ -166,8 +166,8 @@ def _add_report(sub) -> None:
 
 
 def _add_plot(sub) -> None:
-    p = sub.add_parser("plot", help="draw one figure: time-space, accel, heatmap or clusters")
-    p.add_argument("kind", choices=("time-space", "accel", "heatmap", "clusters"))
+    p = sub.add_parser("plot", help="draw one figure: time-space, accel, heatmap, clusters or map (where the system fails)")
+    p.add_argument("kind", choices=("time-space", "accel", "heatmap", "clusters", "map"))
     p.add_argument("db", type=Path, nargs="+", help="results database(s)")
     p.add_argument("--out", type=Path, required=True, help="image file (.png, .pdf, .svg)")
     p.add_argument("--sample", type=int, help="sample id (time-space, accel)")

@@ -26,12 +26,13 @@ from .analysis import (
     table_crash_kinds, table_success_statistics, table_systems)
 from .baseline import table_without_attack
 from .clusters import cluster_knots, richest_conditions
+from .failure_map import failure_map
 from .records import Record, load_records
 from .replays import evaluator_of, replay_to_fcd  # noqa: F401 (importable from here, where they were)
 
 log = logging.getLogger(__name__)
 
-PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters")
+PLOT_KINDS = ("time-space", "accel", "heatmap", "clusters", "map")
 SEVERITY = "largest speed difference between the colliding cars at the first collision"
 
 
@@ -91,10 +92,16 @@ def plot_sample(record: Record, kind: str, out: str | Path, fcd_path: str | Path
 def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label: str = "all samples") -> Path:
     """A heatmap (one panel per attack, optimiser and start mode, one colour range) or the clusters of
     the successful knot vectors of ``records``."""
-    _check_kind(kind, ("heatmap", "clusters"))
+    _check_kind(kind, ("heatmap", "clusters", "map"))
     out = figures.check_figure_path(out, "--out")
     if kind == "heatmap":
         return figures.heatmap(records, f"Successful attacks over setpoint and target speed: {label}", out)
+    if kind == "map":
+        found = failure_map(records)
+        if found is None:
+            raise ConfigError("db", label, "samples of campaigns that search their situation (a range such as "
+                                           "scenario.setpoint_m = [3, 10]): a map is drawn over it")
+        return figures.failure_map(found, f"Where the system fails: {label}", out)
     clustering = cluster_knots(records, label)
     if clustering is None:
         raise ConfigError("filters", label, "a selection with at least 4 successful knot attacks")
@@ -212,6 +219,16 @@ def _heatmaps_section(records: list[Record], out: Path, step: Callable[[str], No
     figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
                      columns=figures.heatmap_columns(records))
     parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
+    found = failure_map(records)
+    if found is not None:  # campaigns that searched their situation
+        parts.append("<h2>Where the system fails</h2><p>Over the situation the campaigns searched with the attack: the "
+                     "success rate at each point, estimated from the samples near it (a Gaussian weight of a tenth of "
+                     "each range; a uniform prior: the mean and standard deviation of a Beta), and the line where it "
+                     "crosses one half, the boundary between the situations where the attacks mostly failed and those "
+                     f"where they mostly succeeded; {count_noun(len(found.points), 'sample')}, every system and attack "
+                     "pooled. Blank: too far from any sample to say.</p>")
+        figures.failure_map(found, "Where the system fails", out / "failure_map.png")
+        parts.append(_img("failure_map.png", "the success rate over the searched situation"))
     return parts
 
 

@@ -1,0 +1,66 @@
+"""Where the system fails, over the situation its campaigns searched (`search.situation`): the probability that
+an attack succeeds, estimated from the samples at each point of the searched box, with its uncertainty, and the
+boundary where it crosses one half.
+
+The estimate at a point weighs every sample by a Gaussian of its distance there (each key scaled to the box,
+``bandwidth`` of it): with s the weighted successes and n the weighted samples, the success rate is the mean of
+Beta(1 + s, 1 + n - s), a uniform prior updated, and its standard deviation the uncertainty. Far from every
+sample (n under `LEAST_WEIGHT`) the map says nothing. Pure numbers: `figures` draws it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .records import Record
+
+#: where the samples near a point weigh less than this, the map leaves it blank
+LEAST_WEIGHT = 1.0
+LABELS = {"setpoint_m": "setpoint [m]", "speed_mps": "target speed [m/s]"}
+
+
+@dataclass(frozen=True)
+class FailureMap:
+    keys: tuple[str, ...]  # the searched keys, one axis each (at most two)
+    axes: tuple[np.ndarray, ...]  # each axis's points
+    rate: np.ndarray  # the estimated success probability at each point (axes' shape; NaN: too far from samples)
+    std: np.ndarray  # its standard deviation
+    weight: np.ndarray  # the samples' weight there
+    points: np.ndarray  # each sample's situation (samples x keys)
+    successes: np.ndarray  # whether each sample succeeded
+
+    def label(self, i: int) -> str:
+        return LABELS.get(self.keys[i], self.keys[i])
+
+
+def situated(records: Sequence[Record]) -> list[Record]:
+    """The records of campaigns that searched their situation, scored (an errored sample tells nothing)."""
+    return [r for r in records if r.situation and r.outcome != "error"]
+
+
+def failure_map(records: Sequence[Record], *, bandwidth: float = 0.1, cells: int = 60) -> FailureMap | None:
+    """The map over the keys the records' situations share (None: no record searched one)."""
+    records = situated(records)
+    if not records:
+        return None
+    keys = tuple(k for k, _ in records[0].situation if all(k in dict(r.situation) for r in records))[:2]
+    points = np.array([[dict(r.situation)[k] for k in keys] for r in records], dtype=float)
+    successes = np.array([r.outcome == "success" for r in records])
+    low, high = points.min(axis=0), points.max(axis=0)
+    span = np.where(high > low, high - low, 1.0)
+    axes = tuple(np.linspace(lo, hi, cells) for lo, hi in zip(low, high))
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(keys))  # (points, keys)
+    z = (grid[:, None, :] - points[None, :, :]) / span / bandwidth
+    w = np.exp(-0.5 * np.sum(z * z, axis=-1))  # (grid points, samples)
+    n = w.sum(axis=1)
+    s = w @ successes.astype(float)
+    a, b = 1.0 + s, 1.0 + n - s
+    rate = a / (a + b)
+    std = np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1.0)))
+    far = n < LEAST_WEIGHT
+    shape = tuple(len(x) for x in axes)
+    rate, std = np.where(far, np.nan, rate).reshape(shape), np.where(far, np.nan, std).reshape(shape)
+    return FailureMap(keys, axes, rate, std, n.reshape(shape), points, successes)
