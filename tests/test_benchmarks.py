@@ -177,6 +177,9 @@ TOOLS_REFUSED = [  # regression: each ended in a traceback (or ran on)
     ("profile_episode.py", ["--episodes", "0"], "--episodes: got 0; allowed: a whole number of at least 1"),
     ("bench_client.py", ["--workers", "10", "0"], "--workers: got 0; allowed: a whole number in [1, 100000]"),
     ("bench_client.py", ["--workers", "10", "4", "--clients", "5"], "--clients: got 5; allowed: a whole number in [1, 4]"),
+    ("domain_vs_grid.py", ["--grid-db", "nowhere.sqlite"], "--grid-db: got 'nowhere.sqlite'; allowed: a database of "
+                                                            "examples/sweeps/paper_nonparametric.toml"),
+    ("domain_vs_grid.py", ["--samples", "0"], "--samples: got 0; allowed: a whole number in [1, 100000]"),
     ("bench_client.py", ["--episode-ms", "0"], "--episode-ms: got 0.0; allowed: a time in (0, 10000] ms"),
 ]
 
@@ -325,3 +328,11 @@ def test_bench_batch_situation_plays_the_same_episodes_fixed_and_searched(capsys
     bench_batch.situation_cost(EpisodeConfig(start="steady", duration_s=20.0), argparse.Namespace(samples=12, repeats=1, batch=8))
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 3 and all("(the same outcome, colliding pair and time: 12 of 12)" in line for line in lines[1:])
+
+
+def test_domain_vs_grid_finds_the_grid_cell_a_situation_lies_in():
+    import domain_vs_grid
+
+    assert domain_vs_grid.cell_of(7.4, 26.0) == (7.0, 25.0) and domain_vs_grid.cell_of(14.6, 29.0) == (15.0, 30.0)
+    assert domain_vs_grid.cell_of(7.5, 22.5) == (7.0, 20.0)  # half way: the nearer first
+    assert domain_vs_grid.cell_of(3.0, 20.0) == (3.0, 20.0)
