@@ -39,8 +39,8 @@ campaign stores a sample, and counts the samples where any of these disagree:
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-With --situation P, a share of the campaigns search their setpoint (and some their speed) with the attack: each
-sample plays its own, and is checked as any other.
+With --situation P, a share of the campaigns search their setpoint (and some their speed and start) with the
+attack: each sample plays its own, and is checked as any other.
 
 Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]
        [--situation P]. Prints the counts; exits 1 if any is
@@ -232,6 +232,8 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         situation = (("setpoint_m", config.setpoint_m, config.setpoint_m + float(rng.choice([0.5, 3.0, 8.0]))),)
         if config.traffic is None and not config.sumo_driven and rng.random() < 0.5:  # (its traffic is checked at one speed)
             situation += (("speed_mps", config.speed_mps, config.speed_mps + float(rng.choice([1.0, 5.0]))),)
+        if config.start != "warmup" and config.traffic is None and rng.random() < 0.3:  # from rest or steady state
+            situation += (("start", ("rest", "steady")),)
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, situation=situation, **message)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)

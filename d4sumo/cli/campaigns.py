@@ -195,15 +195,19 @@ def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, w
         print(f"  best: sample {top.id} ({top.outcome}), robustness {top.robustness:.4f}")
         if top.collision:
             print(f"  first collision: {collision_text(top.collision)}")
-        print(f"  params: {params_text(campaign.family(), top.params)}")
+        print(f"  params: {params_text(campaign.family(), top.params, campaign.situation)}")
         print(f"  replay it: d4sumo replay {args.db} {top.id} --fcd sample_{top.id}.xml")
 
 
-def params_text(family, params) -> str:
+def params_text(family, params, searched: tuple = ()) -> str:
     """A sample's parameters: the pedal family's values, then what a maneuver or a lie adds, each by its name
-    (a lie's offset and start are no knots)."""
+    (a lie's offset and start are no knots), then the situation it played (``searched``: the campaign's)."""
+    from ..search.situation import values
+
     own = len(getattr(family, "longitudinal", family).parameters)
-    added = [f"{name} {v:.3f}" for name, v in zip(family.names[own:], params[own:])]
+    mine = len(family.parameters) - len(searched)  # the attack's
+    added = [f"{name} {v:.3f}" for name, v in zip(family.names[own:mine], params[own:mine])]
+    added += [f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in values(searched, params[mine:]).items()]
     return ", ".join(f"{v:.3f}" for v in params[:own]) + (f"; {', '.join(added)}" if added else "")
 
 

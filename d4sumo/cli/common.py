@@ -148,6 +148,7 @@ def note_inert_parameters(family, config) -> None:
     still spends its samples over them."""
     from ..model.attacks.maneuvers import inert_parameters
 
+    family = getattr(family, "attack", family)  # a situation searched with it is no parameter of the attack's
     inert = inert_parameters(family, config)
     if inert:
         names = family.names

@@ -200,8 +200,7 @@ def episode_summary(config, family, params, plan, episode, robustness, d_safe, f
     played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
     situation = {}
     if hasattr(family, "situation_values"):  # a situation searched with the attack: the configuration holds its values
-        situation = {p.name: float(v) for p, v in zip(family.parameters[len(family.attack.parameters):],
-                                                      family.situation_values(params))}
+        situation = {p.name: getattr(config, p.name) for p in family.parameters[len(family.attack.parameters):]}
         family, params = family.attack, family.attack_params(params)
     return {
         "d4sumo": __version__,

@@ -44,7 +44,7 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
     systems = {cid: system_label(c.config.to_dict()) for cid, c in campaigns.items()}
     scenarios = {cid: c.config.to_dict()["scenario"] for cid, c in campaigns.items()}
     own = sorted({k for sc in scenarios.values() for k in sc} - set(SCENARIO) - set(IDENTITY_KEYS), key=_SCENARIO_KEYS.index)
-    searched = {key for c in campaigns.values() for key, _, _ in c.situation}  # each sample's own, in the scenario's columns
+    searched = {e[0] for c in campaigns.values() for e in c.situation}  # each sample's own, in the scenario's columns
     columns = list(dict.fromkeys(n for cid in campaigns for n in names[cid] if n not in searched))
     pairs = sorted({p for s in store.iter_samples(campaign_id) for p in s.min_gaps}, key=pair_order)
     writer = csv.writer(out)
@@ -55,8 +55,10 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
         c = campaigns[s.campaign_id]
         cfg = c.config
         params = dict(zip(names[s.campaign_id], s.params))
-        scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id],
-                    **{key: params[key] for key, _, _ in c.situation if key in params}}
+        scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id]}
+        if c.situation:  # the sample's own
+            played = c.config_for(s.params, families[s.campaign_id])
+            scenario.update((e[0], getattr(played, e[0])) for e in c.situation)
         writer.writerow([s.id, s.campaign_id, s.index, *(_cell(scenario.get(k, "")) for k in (*SCENARIO, *own)),
                          systems[s.campaign_id], c.attack, c.lie, c.optimizer, c.seed, s.robustness, s.outcome, s.pair, s.time_s,
                          s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]

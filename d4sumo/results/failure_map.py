@@ -24,7 +24,7 @@ LABELS = {"setpoint_m": "setpoint [m]", "speed_mps": "target speed [m/s]"}
 
 @dataclass(frozen=True)
 class FailureMap:
-    keys: tuple[str, ...]  # the searched keys, one axis each (at most two)
+    keys: tuple[str, ...]  # the searched ranges, one axis each (at most two; choices pooled)
     axes: tuple[np.ndarray, ...]  # each axis's points
     rate: np.ndarray  # the estimated success probability at each point (axes' shape; NaN: too far from samples)
     std: np.ndarray  # its standard deviation
@@ -46,7 +46,10 @@ def failure_map(records: Sequence[Record], *, bandwidth: float = 0.1, cells: int
     records = situated(records)
     if not records:
         return None
-    keys = tuple(k for k, _ in records[0].situation if all(k in dict(r.situation) for r in records))[:2]
+    keys = tuple(k for k, v in records[0].situation  # the ranges (a choice, the start, is no axis)
+                 if not isinstance(v, str) and all(k in dict(r.situation) for r in records))[:2]
+    if not keys:
+        return None
     points = np.array([[dict(r.situation)[k] for k in keys] for r in records], dtype=float)
     successes = np.array([r.outcome == "success" for r in records])
     low, high = points.min(axis=0), points.max(axis=0)

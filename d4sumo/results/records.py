@@ -15,6 +15,7 @@ from ..errors import ConfigError
 from ..model.config import EpisodeConfig
 from ..model.definition import IDENTITY_KEYS, TABLES
 from ..model.controllers.plugins import names_only
+from ..search import situation
 from ..model.attacks.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
@@ -156,13 +157,12 @@ def _situation_of(campaign, family, params) -> dict[str, Any]:
     """A sample's situation, of a campaign that searches one (`search.situation`): its values, and the cells of
     the setpoint and speed the report groups it in (a damaged row keeps the campaign's: said where replayed)."""
     try:
-        values = [float(v) for v in family.situation_values(params)]
+        exact = situation.values(campaign.situation, family.situation_values(params))
     except ConfigError:
         return {}
-    ranges = {key: (low, high) for key, low, high in campaign.situation}
-    exact = dict(zip(ranges, values))
+    ranges = {e[0]: e[1:] for e in campaign.situation if len(e) == 3}
     return {"situation": tuple(exact.items()),
-            **{key: situation_cell(*ranges[key], v) for key, v in exact.items()}}
+            **{key: situation_cell(*ranges[key], v) if key in ranges else v for key, v in exact.items()}}
 
 
 def _swerve_change_steps(family, params, config) -> tuple[int, ...]:

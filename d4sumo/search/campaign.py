@@ -64,8 +64,9 @@ class Campaign:
     message: str = ""
     message_field: str = "accel"  # the field of the beacons it falsifies (accel, speed, position)
     message_sender: int = 0  # whose beacons lie: 0 the attacker, K an insider follower vK
-    #: keys of the scenario searched with the attack, each a range (`situation`): (key, low, high), ...
-    situation: tuple[tuple[str, float, float], ...] = ()
+    #: keys of the scenario searched with the attack (`situation`): each a range, (key, low, high), or choices,
+    #: (key, (choice, ...))
+    situation: tuple[tuple, ...] = ()
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -104,7 +105,7 @@ class Campaign:
         sample's values (``family``: the campaign's, if at hand)."""
         if not self.situation:
             return self.config
-        return situation.config_for(self.config, family or self.family(), params)
+        return situation.config_for(self.config, family or self.family(), self.situation, params)
 
     @property
     def lie(self) -> str:

@@ -46,8 +46,8 @@ def test_a_samples_configuration_holds_its_situation_and_its_plan_the_attacks_al
     ({"setpoint_m": [10, 3]}, "scenario.setpoint_m: got [10, 3]; allowed: a range [low, high] with low below high (reversed)"),
     ({"setpoint_m": [3, 5, 7]}, "scenario.setpoint_m: got [3, 5, 7]; allowed: a value, or a range [low, high] of two numbers in m"),
     ({"speed_mps": [20, "fast"]}, "allowed: a value, or a range [low, high] of two numbers in m/s"),
-    ({"followers": [2, 4]}, "scenario.followers: got [2, 4]; allowed: a single value: ranges are searched on scenario.setpoint_m, "
-                            "scenario.speed_mps"),
+    ({"followers": [2, 4]}, "scenario.followers: got [2, 4]; allowed: a single value: the keys searched are scenario.setpoint_m "
+                            "(a range), scenario.speed_mps (a range), scenario.start (choices), those a batch of episodes may vary"),
     ({"setpoint_m": [0, 5]}, "scenario.setpoint_m: got 0.0"),  # outside the key's own limits
     ({"speed_mps": [20, 80]}, "scenario.speed_mps: got 80.0"),
 ])
@@ -71,7 +71,7 @@ def test_followers_sumo_drives_take_one_speed_and_a_stored_situation_is_checked(
 @pytest.mark.sumo
 def test_in_sumo_a_searched_situation_is_played_per_sample_in_batches_as_alone_and_replays_exactly(tmp_path, capsys):
     toml = tmp_path / "situation.toml"
-    toml.write_text('[scenario]\nsetpoint_m = [3, 10]\nspeed_mps = [20, 30]\nstart = "steady"\nduration_s = 20.0\n\n'
+    toml.write_text('[scenario]\nsetpoint_m = [3, 10]\nspeed_mps = [20, 30]\nstart = ["rest", "steady"]\nduration_s = 20.0\n\n'
                     '[search]\nsamples = 16\noptimizer = "random"\n')
     batched, alone = tmp_path / "batched.sqlite", tmp_path / "alone.sqlite"
     assert main(["falsify", "--config", str(toml), "--db", str(batched)]) == 0
@@ -83,8 +83,9 @@ def test_in_sumo_a_searched_situation_is_played_per_sample_in_batches_as_alone_a
 
     stored = samples(batched)
     assert stored == samples(alone) and len(stored) == 16
-    situations = {params[-2:] for _, params, *_ in stored}
-    assert len(situations) == 16 and all(3 <= s <= 10 and 20 <= v <= 30 for s, v in situations)
+    situations = {params[-3:] for _, params, *_ in stored}  # the setpoint, the speed and the start, as the file gives them
+    assert len(situations) == 16 and all(3 <= s <= 10 and 20 <= v <= 30 and 0 <= c <= 2 for s, v, c in situations)
+    assert {c < 1 for _, _, c in situations} == {True, False}  # both starts, in one batch
     assert len({outcome for _, _, _, outcome, _, _ in stored}) > 1  # the situations play differently
     with Store(batched, create=False) as store:
         ids = [s.id for s in store.samples()]
@@ -94,7 +95,8 @@ def test_in_sumo_a_searched_situation_is_played_per_sample_in_batches_as_alone_a
         replay = json.loads(capsys.readouterr().out)
         assert replay["reproduced"]
         scenario, played = replay["config"]["scenario"], replay["situation"]
-        assert (scenario["setpoint_m"], scenario["speed_mps"]) == (played["setpoint_m"], played["speed_mps"])
+        assert (scenario["setpoint_m"], scenario["speed_mps"], scenario["start"]) == (played["setpoint_m"], played["speed_mps"],
+                                                                                      played["start"])
         assert len(replay["attack"]["values"]) == 9
 
 
@@ -120,3 +122,25 @@ def test_in_sumo_a_sample_without_the_attack_plays_in_the_samples_own_situation(
         evaluator.without_attack(0)
     played, per_sample = evaluator.without_attack_of({0: x})
     assert per_sample and played(0).trace["pos_v1"][0] == episode.trace["pos_v1"][0]
+
+
+def test_the_start_is_searched_over_its_choices_each_an_equal_share_of_its_parameter():
+    searched = campaign_of({"scenario": {"start": ["rest", "steady"], "setpoint_m": [3, 10]}})
+    assert searched.situation == (("start", ("rest", "steady")), ("setpoint_m", 3.0, 10.0))
+    assert searched.definition()["situation"] == {"start": ["rest", "steady"], "setpoint_m": [3.0, 10.0]}
+    assert Campaign.from_definition(searched.definition()) == searched.replace(samples=100)
+    family = searched.family()
+    assert (family.lower[-2], family.upper[-2]) == (0.0, 2.0)
+    starts = [searched.config_for(np.concatenate([np.zeros(9), [v, 5.0]])).start for v in (0.0, 0.999, 1.0, 2.0)]
+    assert starts == ["rest", "rest", "steady", "steady"]  # its whole part; its top, the last
+
+
+@pytest.mark.parametrize("scenario, message", [
+    ({"start": ["rest"]}, "scenario.start: got ['rest']; allowed: a value, or a list of two or more choices of rest, steady"),
+    ({"start": ["rest", "rest"]}, "scenario.start: got ['rest', 'rest']; allowed: a list of choices, each once"),
+    ({"start": ["rest", "warmup"]}, "allowed: choices of rest, steady (the starts a batch may mix"),
+])
+def test_bad_choices_are_one_line_naming_the_key(scenario, message):
+    with pytest.raises(ConfigError) as info:
+        campaign_of({"scenario": scenario})
+    assert message in str(info.value)
