@@ -163,6 +163,11 @@ def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
+    scenario = doc.get("scenario", {})
+    for key, value in (scenario.items() if isinstance(scenario, Mapping) else ()):
+        if key in (*situation.KEYS, *situation.CHOICES) and isinstance(value, (list, tuple)):  # (a campaign's are taken out)
+            raise ConfigError(f"scenario.{key}", list(value), "a single value: an episode plays one situation (falsify and "
+                                                               "sweep search a range or choices)")
     expanded, note = sumocfg.expanded(doc)
     config = EpisodeConfig.from_dict(apply_preset(expanded))
     if note:  # said once the configuration is sound: bad input stays one line

@@ -144,3 +144,25 @@ def test_bad_choices_are_one_line_naming_the_key(scenario, message):
     with pytest.raises(ConfigError) as info:
         campaign_of({"scenario": scenario})
     assert message in str(info.value)
+
+
+def test_an_episode_plays_one_situation_and_says_where_a_range_is_searched(capsys):
+    assert main(["simulate", "--set", "scenario.setpoint_m=[3, 10]"]) == 2
+    assert capsys.readouterr().err.strip() == ("d4sumo: error: scenario.setpoint_m: got [3, 10]; allowed: a single value: an "
+                                               "episode plays one situation (falsify and sweep search a range or choices)")
+
+
+@pytest.mark.sumo
+def test_in_sumo_a_campaign_that_searches_its_situation_resumes_and_extends_as_one_run_whole(tmp_path):
+    args = ["falsify", "--set", "scenario.setpoint_m=[3, 10]", "--set", 'scenario.start=["rest", "steady"]', "--duration", "20",
+            "--optimizer", "random"]
+    whole, parts = tmp_path / "whole.sqlite", tmp_path / "parts.sqlite"
+    assert main([*args, "--samples", "12", "--db", str(whole)]) == 0
+    assert main([*args, "--samples", "5", "--db", str(parts)]) == 0
+    assert main([*args, "--samples", "12", "--db", str(parts)]) == 0  # extended: one campaign
+
+    def samples(db):
+        with Store(db, create=False) as store:
+            return [(s.campaign_id, s.index, s.params, s.robustness, s.outcome) for s in store.samples()]
+
+    assert samples(parts) == samples(whole) and len(samples(whole)) == 12
