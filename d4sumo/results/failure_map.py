@@ -67,3 +67,19 @@ def failure_map(records: Sequence[Record], *, bandwidth: float = 0.1, cells: int
     shape = tuple(len(x) for x in axes)
     rate, std = np.where(far, np.nan, rate).reshape(shape), np.where(far, np.nan, std).reshape(shape)
     return FailureMap(keys, axes, rate, std, n.reshape(shape), points, successes)
+
+
+#: at most this many panels (a system and a start each) in one figure: the ones with the most samples
+MOST_PANELS = 8
+
+
+def failure_maps(records: Sequence[Record]) -> list[tuple[str, FailureMap]]:
+    """One map for each system and start of the records that searched their situation (a system fails in its own
+    situations; a start from rest is another situation than one from steady state), most samples first, at most
+    `MOST_PANELS`; empty where none searched one."""
+    groups: dict[tuple[str, str], list[Record]] = {}
+    for r in situated(records):
+        groups.setdefault((r.system, r.start), []).append(r)
+    maps = [(f"{system}, start {start}", failure_map(rs)) for (system, start), rs in
+            sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))[:MOST_PANELS]]
+    return [(label, m) for label, m in maps if m is not None]

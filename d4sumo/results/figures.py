@@ -305,12 +305,22 @@ def clusters(c: Clustering, path: str | Path) -> Path:
 # --- where the system fails, over the searched situation ---------------------------------------------
 
 
-def failure_map_figure(m: FailureMap, title: str):
-    """The estimated success rate over the searched situation, the boundary where it crosses one half, and the
-    samples (a cross: a success); beside it, the estimate's standard deviation. Blank: too far from any sample."""
-    fig = _figure(figsize=(11.0, 4.4))
-    left, right = fig.subplots(1, 2)
+def failure_map_figure(maps: Sequence[tuple[str, FailureMap]], title: str):
+    """For each panel's samples (`failure_map.failure_maps`: a system and start), the estimated success rate over the
+    searched situation, the boundary where it crosses one half, and the samples (a cross: a success); beside it, the
+    estimate's standard deviation. Blank: too far from any sample."""
+    fig = _figure(figsize=(11.0, 0.6 + 3.8 * len(maps)))
+    axes = fig.subplots(len(maps), 2, squeeze=False)
+    for (label, m), (left, right) in zip(maps, axes):
+        _draw_map(fig, left, right, m, label)
+    fig.suptitle(wrap_title(f"{title}: the success rate estimated from the samples (crosses: successes; the line: where "
+                            "it crosses one half)"), fontsize=10)
+    return fig
+
+
+def _draw_map(fig, left, right, m: FailureMap, label: str) -> None:
     wins, other = m.points[m.successes], m.points[~m.successes]
+    left.set_title(f"{label}: {count_noun(len(m.points), 'sample')}", fontsize=9)
     if len(m.keys) == 1:
         x = m.axes[0]
         left.fill_between(x, np.clip(m.rate - 2 * m.std, 0, 1), np.clip(m.rate + 2 * m.std, 0, 1), alpha=0.25,
@@ -323,21 +333,18 @@ def failure_map_figure(m: FailureMap, title: str):
         left.legend(fontsize=LABEL_FONT_PT)
         right.plot(x, m.std)
         right.set(xlabel=m.label(0), ylabel="standard deviation of the rate")
-    else:
-        x, y = m.axes
-        for ax, values, label, cmap in ((left, m.rate, "success rate", SUCCESS_CMAP), (right, m.std, "its standard deviation", "magma")):
-            mesh = ax.pcolormesh(x, y, values.T, shading="auto", cmap=cmap, vmin=0.0, vmax=1.0 if ax is left else None)
-            fig.colorbar(mesh, ax=ax, label=label)
-            if np.nanmin(m.rate) < 0.5 < np.nanmax(m.rate):
-                ax.contour(x, y, m.rate.T, levels=[0.5], colors="white", linewidths=1.5)
-            ax.plot(wins[:, 0], wins[:, 1], "x", color="red", markersize=4)
-            ax.plot(other[:, 0], other[:, 1], "o", mfc="none", color="white", markersize=3, alpha=0.7)
-            ax.set(xlabel=m.label(0), ylabel=m.label(1))
-    fig.suptitle(wrap_title(f"{title}: the success rate estimated from {len(m.points)} samples (crosses: successes; the "
-                            "line: where it crosses one half)"), fontsize=10)
-    return fig
+        return
+    x, y = m.axes
+    for ax, values, name, cmap in ((left, m.rate, "success rate", SUCCESS_CMAP), (right, m.std, "its standard deviation", "magma")):
+        mesh = ax.pcolormesh(x, y, values.T, shading="auto", cmap=cmap, vmin=0.0, vmax=1.0 if ax is left else None)
+        fig.colorbar(mesh, ax=ax, label=name)
+        if np.nanmin(m.rate) < 0.5 < np.nanmax(m.rate):
+            ax.contour(x, y, m.rate.T, levels=[0.5], colors="white", linewidths=1.5)
+        ax.plot(wins[:, 0], wins[:, 1], "x", color="red", markersize=4)
+        ax.plot(other[:, 0], other[:, 1], "o", mfc="none", color="white", markersize=3, alpha=0.7)
+        ax.set(xlabel=m.label(0), ylabel=m.label(1))
 
 
-def failure_map(m: FailureMap, title: str, path: str | Path) -> Path:
+def failure_map(maps: Sequence[tuple[str, FailureMap]], title: str, path: str | Path) -> Path:
     check_figure_path(path)
-    return _save(failure_map_figure(m, title), path)
+    return _save(failure_map_figure(maps, title), path)

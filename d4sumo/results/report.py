@@ -26,7 +26,7 @@ from .analysis import (
     table_crash_kinds, table_success_statistics, table_systems)
 from .baseline import table_without_attack
 from .clusters import cluster_knots, richest_conditions
-from .failure_map import failure_map
+from .failure_map import MOST_PANELS, failure_maps
 from .records import Record, load_records
 from .replays import evaluator_of, replay_to_fcd  # noqa: F401 (importable from here, where they were)
 
@@ -97,8 +97,8 @@ def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label:
     if kind == "heatmap":
         return figures.heatmap(records, f"Successful attacks over setpoint and target speed: {label}", out)
     if kind == "map":
-        found = failure_map(records)
-        if found is None:
+        found = failure_maps(records)
+        if not found:
             raise ConfigError("db", label, "samples of campaigns that search their situation (a range such as "
                                            "scenario.setpoint_m = [3, 10]): a map is drawn over it")
         return figures.failure_map(found, f"Where the system fails: {label}", out)
@@ -219,14 +219,15 @@ def _heatmaps_section(records: list[Record], out: Path, step: Callable[[str], No
     figures.heatmaps(panels, "Successful attacks over setpoint and target speed", out / "heatmaps.png",
                      columns=figures.heatmap_columns(records))
     parts.append(_img("heatmaps.png", "successes per setpoint and target speed"))
-    found = failure_map(records)
-    if found is not None:  # campaigns that searched their situation
+    found = failure_maps(records)
+    if found:  # campaigns that searched their situation
         parts.append("<h2>Where the system fails</h2><p>Over the situation the campaigns searched with the attack: the "
                      "success rate at each point, estimated from the samples near it (a Gaussian weight of a tenth of "
                      "each range; a uniform prior: the mean and standard deviation of a Beta), and the line where it "
                      "crosses one half, the boundary between the situations where the attacks mostly failed and those "
-                     f"where they mostly succeeded; {count_noun(len(found.points), 'sample')}, every system and attack "
-                     "pooled. Blank: too far from any sample to say.</p>")
+                     f"where they mostly succeeded. A row per system and start ({count_noun(len(found), 'row')}; "
+                     f"at most {MOST_PANELS}, those with the most samples), its attacks and optimisers pooled. Blank: "
+                     "too far from any sample to say.</p>")
         figures.failure_map(found, "Where the system fails", out / "failure_map.png")
         parts.append(_img("failure_map.png", "the success rate over the searched situation"))
     return parts

@@ -1,7 +1,8 @@
 """The situation searched with the attack: keys of the scenario given as a range (``setpoint_m = [3, 10]``) or a
 list of choices (``start = ["rest", "steady"]``) rather than a value. The optimiser searches each as one more
 parameter after the attack's (`maneuvers.SituatedAttack`), so every sample stores the situation it played in its
-parameters, and a replay plays it again exactly; each episode's configuration is the campaign's with those values.
+parameters (after the attack's, in the order of their names), and a replay plays it again exactly; each episode's
+configuration is the campaign's with those values.
 
 How the box holds them: a range is a continuous parameter over it; a list of k choices a parameter over [0, k]
 whose whole part is the choice (k itself the last), as a swerving attacker's lanes are. Every optimiser searches
@@ -101,6 +102,9 @@ def check(config: EpisodeConfig, entries: tuple) -> tuple[Entry, ...]:
         out.append(entry(e[0], e[1] if len(e) == 2 else list(e[1:])))
     if len({e[0] for e in out}) != len(out):
         raise ConfigError("situation", [e[0] for e in out], "each key once")
+    # in the order of their names: a database stores a definition's keys sorted, and the parameters must be laid
+    # out as it reads them back (given start first, a replay read the setpoint from the start's parameter)
+    out.sort(key=lambda e: e[0])
     if config.sumo_driven and any(e[0] == "speed_mps" for e in out):
         raise ConfigError("scenario.speed_mps", [list(e[1:]) for e in out if e[0] == "speed_mps"][0],
                           "a single value with followers SUMO's models drive: they read the target speed from their "

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from d4sumo.results import figures
-from d4sumo.results.failure_map import failure_map
+from d4sumo.results.failure_map import failure_map, failure_maps
 from d4sumo.results.records import Record
 
 
@@ -46,7 +46,13 @@ def test_one_searched_key_gives_a_curve_no_searched_key_no_map_and_far_from_samp
     assert np.isnan(failure_map(two, bandwidth=0.01).rate).any()  # between two samples, nothing to say
 
 
-def test_the_maps_figure_draws_both_kinds(tmp_path):
+def test_a_map_for_each_system_and_start_and_the_figure_draws_both_kinds(tmp_path):
+    records = _records(40) + [dataclasses.replace(r, start="steady") for r in _records(60, seed=1)]
+    records += [dataclasses.replace(r, system="cacc") for r in _records(30, seed=2)]
+    maps = failure_maps(records)
+    assert [label for label, _ in maps] == ["switching, start steady", "switching, start rest", "cacc, start rest"]
+    assert [len(m.points) for _, m in maps] == [60, 40, 30]
+    assert failure_maps([dataclasses.replace(r, situation=()) for r in records]) == []
     for keys in (("setpoint_m", "speed_mps"), ("speed_mps",)):
-        path = figures.failure_map(failure_map(_records(80, keys=keys)), "Where the system fails", tmp_path / f"{len(keys)}.png")
+        path = figures.failure_map(failure_maps(_records(80, keys=keys)), "Where the system fails", tmp_path / f"{len(keys)}.png")
         assert path.stat().st_size > 10_000
