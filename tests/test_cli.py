@@ -136,9 +136,11 @@ def test_falsify_labels_every_number_of_the_best_samples_collision(tmp_path, cap
     db = tmp_path / "r.sqlite"
     assert main(["falsify", "--optimizer", "random", "--samples", "6", "--seed", "2", "--db", str(db), "--quiet"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[2].startswith("  best: sample ") and ", robustness " in lines[2]
+    assert re.fullmatch(r"  distinct successes: \d+ attacks? \(parameters more than 5% of their range apart\), \d+ kinds? of "
+                        r"crash \(by the pair, the time in 2 s bins and the speed difference in 10 km/h bins\)", lines[2]), lines[2]
+    assert lines[3].startswith("  best: sample ") and ", robustness " in lines[3]
     assert re.fullmatch(r"  first collision: v\d-v\d collided at t = \d+\.\d\d s, -?\d+\.\d m along the road, "
-                        r"speed difference \d+\.\d km/h", lines[3]), lines[3]
+                        r"speed difference \d+\.\d km/h", lines[4]), lines[4]
 
 
 @pytest.mark.sumo

@@ -56,7 +56,7 @@ def cmd_falsify(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        _say_falsify(args, campaign, summary, counts, nearest, without)
+        _say_falsify(args, campaign, summary, counts, nearest, without, result["distinct_successes"])
     return 0
 
 
@@ -143,6 +143,10 @@ def _falsify_result(args: argparse.Namespace, campaign, evaluator, summary, coun
 
         without = campaign_baseline(evaluator.without_attack, False, ((s.index, s.outcome, (s.collision or {}).get("time_s"))
                                                                       for s in summary.samples), step_s=campaign.config.step_s)
+    from ..results.analysis import crash_kinds, distinct_count
+
+    wins = [s for s in summary.samples if s.outcome == "success"]
+    family = evaluator.family
     result = {
         "db": str(args.db),
         "campaign_id": summary.campaign_id,
@@ -151,6 +155,9 @@ def _falsify_result(args: argparse.Namespace, campaign, evaluator, summary, coun
         "seed": campaign.seed,
         "samples": len(summary.samples),
         "outcomes": counts,
+        # how many of the successes are different attacks, and different crashes
+        "distinct_successes": {"attacks": distinct_count([s.params for s in wins], family.lower, family.upper),
+                               "crash_kinds": crash_kinds([s.collision for s in wins if s.collision])},
         **({"nearest_traffic_m": nearest} if nearest is not None else {}),
         **({"without_attack": {"episodes": without.played, "crashed": without.crashed, "kinds": dict(without.kinds),
                                "traffics_doing": dict(without.traffics)}} if without is not None else {}),
@@ -162,7 +169,7 @@ def _falsify_result(args: argparse.Namespace, campaign, evaluator, summary, coun
     return result, nearest, without
 
 
-def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, without) -> None:
+def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, without, distinct: dict) -> None:
     """The summary in words."""
     top = summary.best
     config = campaign.config
@@ -175,6 +182,10 @@ def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, w
     print(f"campaign {summary.campaign_id} ({attack}, {where}{sensing}{campaign.optimizer}, seed {campaign.seed}) in {args.db}: "
           f"{len(summary.samples)} samples")
     print("  " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if counts.get("success"):
+        from ..results.analysis import distinct_text
+
+        print("  " + distinct_text(distinct["attacks"], distinct["crash_kinds"]))
     if config.traffic is not None:
         from ..results.analysis import TRAFFIC_MEETS_M, traffic_nearness_text
 

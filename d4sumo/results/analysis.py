@@ -251,6 +251,25 @@ def distinct_count(params: Sequence[Sequence[float]], lower: Sequence[float], up
     return len(kept)
 
 
+#: two crashes of one pair are one kind where their times fall in one bin of this many seconds and their speed
+#: differences in one of this many km/h (`crash_kinds`)
+CRASH_TIME_S, CRASH_SPEED_KMH = 2.0, 10.0
+
+
+def crash_kinds(collisions: Sequence[dict]) -> int:
+    """How many kinds of crash these first collisions are: which pair collided, when (in buckets of `CRASH_TIME_S`)
+    and how hard (in buckets of `CRASH_SPEED_KMH` of speed difference)."""
+    return len({(c["pair"], int(c["time_s"] // CRASH_TIME_S), int(c["speed_diff_kmh"] // CRASH_SPEED_KMH))
+                for c in collisions})
+
+
+def distinct_text(distinct: int, kinds: int) -> str:
+    """A campaign's distinct successes in words."""
+    return (f"distinct successes: {distinct} attack{'s' * (distinct != 1)} (parameters more than "
+            f"{DISTINCT_RADIUS:.0%} of their range apart), {kinds} kind{'s' * (kinds != 1)} of crash (by the pair, the "
+            f"time in {CRASH_TIME_S:g} s bins and the speed difference in {CRASH_SPEED_KMH:g} km/h bins)")
+
+
 def success_grid(records: Sequence[Record], setpoints: Sequence[float] | None = None,
                  speeds: Sequence[float] | None = None) -> tuple[list[float], list[float], np.ndarray]:
     """Successes over setpoint (rows) x speed (columns); the axes default to the values in ``records``."""

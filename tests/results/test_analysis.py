@@ -291,3 +291,14 @@ def test_the_report_keeps_a_table_of_a_few_columns_whole_in_tables_txt():
 
     text = table_success_statistics([_sample(i) for i in range(4)]).to_text(width=TEXT_WIDTH)
     assert "continued" not in text
+
+
+def test_crashes_are_told_apart_by_pair_time_and_how_hard():
+    from d4sumo.results.analysis import crash_kinds, distinct_text
+
+    crash = {"pair": "v1-v2", "time_s": 8.1, "position_m": 60.0, "speed_diff_kmh": 21.0}
+    alike = [crash, {**crash, "time_s": 9.9, "speed_diff_kmh": 29.9}, {**crash, "position_m": 99.0}]
+    assert crash_kinds(alike) == 1
+    assert crash_kinds([*alike, {**crash, "pair": "v2-v3"}, {**crash, "time_s": 10.0}, {**crash, "speed_diff_kmh": 30.0}]) == 4
+    assert crash_kinds([]) == 0
+    assert distinct_text(1, 1).startswith("distinct successes: 1 attack (parameters more than 5% of their range apart), 1 kind ")
