@@ -140,8 +140,8 @@ def _replay_openscenario(args, row, campaign, fcd) -> int:
     from ..search.runner import Evaluator
     from ..search.store import campaign_key
 
-    config = campaign.config
     stored = Evaluator(campaign)  # the sample as stored: its road, its pedals
+    config = stored.config_for(row.params)  # in the situation it played
     key = campaign_key(campaign.definition())  # the campaign an export of this sample names
     if args.network is not None:
         network = opendrive_network(args.network) if args.network.suffix == ".xodr" else args.network

@@ -175,7 +175,7 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
     out_dir = Path(out_dir)
     evaluator = evaluator_of(record)
     campaign = evaluator.campaign
-    config = campaign.config
+    config = evaluator.config_for(record.params)  # in the situation the sample played
     if campaign.message:  # another simulator would see the attacker's motion, and none of its lies
         raise NotExported(record.sample_id, f"its campaign has a message attack, {campaign.message}", "a sample of a "
                           "campaign without a message attack (OpenSCENARIO carries the cars' motion, not what their V2V "
@@ -191,7 +191,7 @@ def export_openscenario(record: Record, out_dir: str | Path, fcd: str | Path | N
                 if record.pair else None
         tracks = read_fcd_xy(fcd)
         opendrive_output(evaluator.road.net_file, Path(tmp) / ROAD_FILE, config.network)
-        scenario = _scenario(record, campaign, tracks, outcome, first)
+        scenario = _scenario(record, campaign, config, tracks, outcome, first)
         scenario.write_xml(str(Path(tmp) / SCENARIO_FILE))
         out_dir.mkdir(parents=True, exist_ok=True)
         for name in (ROAD_FILE, SCENARIO_FILE):  # each replaced whole: a reader never sees half a file
@@ -286,10 +286,10 @@ def _at_start(xosc, name: str):
     return xosc.ValueTrigger(name, 0.0, xosc.ConditionEdge.none, xosc.SimulationTimeCondition(0.0, xosc.Rule.greaterOrEqual))
 
 
-def _scenario(record: Record, campaign, tracks: dict, outcome: str, first):
+def _scenario(record: Record, campaign, config, tracks: dict, outcome: str, first):
+    """``config``: the sample's (its campaign's, in the situation it played)."""
     from scenariogeneration import xosc
 
-    config = campaign.config
     ids = [vid for vid in config.vehicle_ids if vid in tracks]
     n = config.followers + 1
     # the scenario's clock starts with the platoon (among traffic SUMO's ran through the traffic's warm-up first)

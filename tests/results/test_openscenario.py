@@ -246,3 +246,25 @@ def test_a_counterexample_among_traffic_on_a_curved_real_motorway_exports_as_it_
     summary = json.loads(back.stdout)
     assert summary["reproduced"] and summary["collision"]["pair"] == sample.collision["pair"]
     assert max(summary["largest_position_difference_m"].values()) < 0.01
+
+
+@pytest.mark.sumo
+def test_a_sample_of_a_campaign_that_searched_its_situation_exports_and_replays_in_its_own(tmp_path, capsys):
+    """Regression: the export wrote the campaign's setpoint and speed (its ranges' low ends), and the replay of the
+    exported motion played there, not in the sample's own situation."""
+    from d4sumo.cli import main
+    from d4sumo.search.campaign import open_store
+
+    db = tmp_path / "situation.sqlite"
+    assert main(["falsify", "--set", "scenario.setpoint_m=[3, 12]", "--set", "scenario.speed_mps=[20, 30]", "--start", "steady",
+                 "--duration", "20", "--optimizer", "random", "--samples", "10", "--db", str(db), "--quiet"]) == 0
+    with open_store(db, create=False) as store:
+        s = next(s for s in store.samples() if s.outcome != "no_crash")
+    capsys.readouterr()
+    assert main(["export", str(db), str(s.id), "--openscenario", str(tmp_path / "x")]) == 0
+    text = (tmp_path / "x" / "scenario.xosc").read_text()
+    assert f'name="setpoint_m" value="{s.params[-2]!r}"' in text and f'name="target_speed_mps" value="{s.params[-1]!r}"' in text
+    capsys.readouterr()
+    assert main(["replay", str(db), str(s.id), "--openscenario", str(tmp_path / "x" / "scenario.xosc"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["reproduced"] and max(summary["largest_position_difference_m"].values()) < 1e-3
