@@ -158,6 +158,7 @@ def comparisons(records: Sequence[Record]) -> list[Comparison]:
     """The paper's tables that the records' grids cover, with our rows beside them; one set per scenario
     when the records hold several (never pooled: a collision location means something else on another
     road), each title naming its scenario."""
+    records = [r for r in records if not r.situation]  # the paper's grid fixed each campaign's situation
     labels = scenario_labels(records)
     by_scenario: dict[str, list[Record]] = {}
     for r in records:

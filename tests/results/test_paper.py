@@ -18,6 +18,8 @@ def test_the_paper_tables_come_only_for_the_grids_the_records_cover():
     assert comparisons([record(attack="knots", optimizer="random", start="rest")]) == []  # not one of the paper's rows
     assert comparisons([record(speed_mps=25.0)]) == []  # the paper's parametric runs were at 20 m/s
     assert comparisons([record(system="sumo:ACC")]) == []  # nor another system under test
+    # nor a campaign that searched its situation: its samples' cells are no campaigns of the grid
+    assert comparisons([record(situation=(("setpoint_m", 5.3), ("speed_mps", 20.4)))]) == []
     titles = [c.title for c in comparisons([record()])]
     assert titles == ["Table 1: successful parametric attacks (steady state, 20 m/s)",
                       "Table 2: attacker crashes / no-crash samples at 2-5 m"]
