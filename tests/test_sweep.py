@@ -973,3 +973,14 @@ def test_a_dask_sweep_asks_the_scheduler_for_its_threads_at_most_once_a_second(m
     assert [threads() for _ in range(50)] == [3] * 50 and Cluster.asks == 1
     clock[0] += 1.0
     assert threads() == 3 and Cluster.asks == 2
+
+
+def test_every_example_sweep_loads():
+    """The sweep files the docs point to are sweeps this version reads (a campaign that searches its situation
+    among them)."""
+    folder = Path(__file__).resolve().parent.parent / "examples" / "sweeps"
+    sweeps = {path.stem: Sweep.load(path) for path in sorted(folder.glob("*.toml"))}
+    assert len(sweeps) >= 10 and all(s.campaigns for s in sweeps.values())
+    domain = sweeps["domain"].campaigns
+    assert [c.optimizer for c in domain] == ["random", "auto"]
+    assert domain[0].situation == (("setpoint_m", 3.0, 15.0), ("speed_mps", 20.0, 30.0), ("start", ("rest", "steady")))
