@@ -146,9 +146,9 @@ def note_unused_flags(args: argparse.Namespace, config, family, formula: str | N
 def note_inert_parameters(family, config) -> None:
     """Parameters of the attack that change nothing in this episode (past its end): said, as the search
     still spends its samples over them."""
-    from ..model.attacks.maneuvers import inert_parameters
+    from ..model.attacks.maneuvers import attack_of, inert_parameters
 
-    family = getattr(family, "attack", family)  # a situation searched with it is no parameter of the attack's
+    family, _ = attack_of(family)  # a situation searched with it is no parameter of the attack's
     inert = inert_parameters(family, config)
     if inert:
         names = family.names

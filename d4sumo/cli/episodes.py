@@ -195,13 +195,13 @@ def episode_plan(family, params, config: EpisodeConfig):
 
 
 def episode_summary(config, family, params, plan, episode, robustness, d_safe, fcd) -> dict:
-    from ..model.attacks.maneuvers import lane_changes, maneuver_of
+    from ..model.attacks.maneuvers import attack_of, lane_changes, maneuver_of
 
     played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
-    situation = {}
-    if hasattr(family, "situation_values"):  # a situation searched with the attack: the configuration holds its values
-        situation = {p.name: getattr(config, p.name) for p in family.parameters[len(family.attack.parameters):]}
-        family, params = family.attack, family.attack_params(params)
+    attack, params = attack_of(family, params) if family is not None else (None, params)
+    # a situation searched with the attack: the configuration holds its values
+    situation = {p.name: getattr(config, p.name) for p in family.parameters[len(attack.parameters):]} if attack is not family else {}
+    family = attack
     return {
         "d4sumo": __version__,
         "config": config.to_dict(),

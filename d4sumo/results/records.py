@@ -16,7 +16,7 @@ from ..model.config import EpisodeConfig
 from ..model.definition import IDENTITY_KEYS, TABLES
 from ..model.controllers.plugins import names_only
 from ..search import situation
-from ..model.attacks.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, lane_change_steps
+from ..model.attacks.maneuvers import LANE_CHANGE_PARAMETER, MANEUVERS, SwerveAttack, attack_of, lane_change_steps
 
 #: the [scenario] keys the tables lay out as their rows and columns (setpoint, target speed, start mode).
 #: Every other key a campaign stores (network, route, duration, step, warm-up, followers, the maneuver and
@@ -149,7 +149,8 @@ def situation_cell(low: float, high: float, value: float) -> float:
     """The low end of the cell of [low, high] that ``value`` falls in: the range split in cells of a round width
     (1, 2 or 5 times a power of ten) into at most `CELLS`, from a multiple of that width."""
     raw = (high - low) / CELLS
-    width = next(m * 10.0 ** math.floor(math.log10(raw)) for m in (1, 2, 5, 10) if m * 10.0 ** math.floor(math.log10(raw)) >= raw)
+    decade = 10.0 ** math.floor(math.log10(raw))
+    width = next(m * decade for m in (1, 2, 5, 10) if m * decade >= raw)
     return float(round(math.floor(value / width) * width, 12))
 
 
@@ -168,11 +169,10 @@ def _situation_of(campaign, family, params) -> dict[str, Any]:
 def _swerve_change_steps(family, params, config) -> tuple[int, ...]:
     """The steps at which a swerving attacker's planned lane changes begin (none for other maneuvers, or
     parameters the family refuses: a damaged row is said where it is replayed)."""
-    if not isinstance(getattr(family, "attack", family), SwerveAttack):
+    if not isinstance(attack_of(family)[0], SwerveAttack):
         return ()
     try:
-        if hasattr(family, "attack"):  # a situation searched with it (`SituatedAttack`): its lanes are the attack's
-            family, params = family.attack, family.attack_params(params)
+        family, params = attack_of(family, params)  # a situation searched with it: its lanes are the attack's
         return tuple(k for k, _ in family.change_steps(params, config))
     except ConfigError:
         return ()

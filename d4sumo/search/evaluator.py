@@ -70,7 +70,7 @@ class Evaluator:
 
     def config_for(self, params) -> EpisodeConfig:
         """The configuration these parameters play: the campaign's, in the situation they hold (`situation`); made
-        once a sample (its plan and its episode ask for it; a configuration costs 0.2 ms to check)."""
+        once a sample (its plan and its episode ask for it; a configuration costs about 55 us to check)."""
         if not self.campaign.situation:
             return self.campaign.config
         key = tuple(float(v) for v in params[len(params) - len(self.campaign.situation):])

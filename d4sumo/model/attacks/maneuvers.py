@@ -308,6 +308,14 @@ class SituatedAttack(ManeuverAttack):
         return self.check(params)[self._first_added:]
 
 
+def attack_of(family: AttackFamily, params=None) -> tuple[AttackFamily, object]:
+    """The attack's own box and parameters: where a situation is searched with it (`SituatedAttack`), without the
+    situation's, which never change the attacker's plan; else ``family`` and ``params`` as they are."""
+    if isinstance(family, SituatedAttack):
+        return family.attack, (None if params is None else family.attack_params(params))
+    return family, params
+
+
 def swerve_knot_times(window_s: float, knots: int) -> list[float]:
     """When a swerving attacker's lane knots take hold, from the attack's start [s]: evenly, the first at once."""
     return [j * float(window_s) / knots for j in range(knots)]
@@ -375,8 +383,7 @@ def attack_plan(family: AttackFamily | None, params, config: EpisodeSettings) ->
     lane change at the step nearest to t_lc_s after the attack's start."""
     from .pedals import attack_signal
 
-    if isinstance(family, SituatedAttack):  # the situation's values are the configuration's, not the plan's
-        family, params = family.attack, family.attack_params(params)
+    family, params = attack_of(family, params)  # the situation's values are the configuration's, not the plan's
     u = attack_signal(family, params, steps=config.steps, step_s=config.step_s, start_step=config.attack_start_step)
     if hasattr(family, "falsifier"):  # a message attack (`messages`): its pedals, and its lie over the air
         return AttackPlan(u, beacons=family.falsifier(params, config))
@@ -393,8 +400,7 @@ def inert_parameters(family: AttackFamily, config: EpisodeSettings, draws: int =
     """The parameters that change nothing in an episode of this configuration (a knot that acts only past
     its end, say): each moved from a few points of the box (``draws``, fixed) to a few other values, none
     changed the attacker's plan. The search still spends its samples over them."""
-    if isinstance(family, SituatedAttack):  # the situation's keys change the episode, never the plan
-        family = family.attack
+    family, _ = attack_of(family)  # the situation's keys change the episode, never the plan
     rng = np.random.default_rng(0)
     lower, upper = family.lower, family.upper
     inert = []
