@@ -163,11 +163,11 @@ def _get(doc: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
 
 
 def episode_config(doc: Mapping[str, Any]) -> EpisodeConfig:
-    scenario = doc.get("scenario", {})
-    for key, value in (scenario.items() if isinstance(scenario, Mapping) else ()):
-        if key in (*situation.KEYS, *situation.CHOICES) and isinstance(value, (list, tuple)):  # (a campaign's are taken out)
-            raise ConfigError(f"scenario.{key}", list(value), "a single value: an episode plays one situation (falsify and "
-                                                               "sweep search a range or choices)")
+    _, searched = situation.split(doc)  # (a campaign's are taken out before)
+    if searched:
+        table, _, key = situation.field(searched[0][0]).partition(".")
+        raise ConfigError(f"{table}.{key}", _short(doc[table][key]), "a single value: an episode plays one situation (falsify and sweep "
+                                                        "search a range or choices)")
     expanded, note = sumocfg.expanded(doc)
     config = EpisodeConfig.from_dict(apply_preset(expanded))
     if note:  # said once the configuration is sound: bad input stays one line
@@ -248,8 +248,8 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
     doc = apply_preset(link_collision_distance(doc), campaign=True)  # what the document sets wins over a preset
     if "params" in doc.get("attack", {}):
         raise ConfigError("attack.params", _short(doc["attack"]["params"]), "no fixed parameters in a campaign: the optimiser chooses them")
-    scenario, ranges = situation.split(doc.get("scenario", {}) if isinstance(doc.get("scenario"), Mapping) else {})
-    config = episode_config({**doc, "scenario": scenario} if ranges else doc)
+    fixed, ranges = situation.split(doc)
+    config = episode_config(fixed if ranges else doc)
     family = _family(doc, tuple(f for f in FAMILIES if f != "constant"))
     optimizer = _get(doc, "search.optimizer", DEFAULT_OPTIMIZER)
     if not isinstance(optimizer, str) or optimizer not in OPTIMIZERS:

@@ -325,9 +325,12 @@ def test_bench_batch_situation_plays_the_same_episodes_fixed_and_searched(capsys
     import bench_batch
     from d4sumo.model.config import EpisodeConfig
 
-    bench_batch.situation_cost(EpisodeConfig(start="steady", duration_s=20.0), argparse.Namespace(samples=12, repeats=1, batch=8))
-    lines = capsys.readouterr().out.splitlines()
-    assert len(lines) == 3 and all("(the same outcome, colliding pair and time: 12 of 12)" in line for line in lines[1:])
+    for keys in ([], ["controller.acc_kp", "vehicle.actuator_lag_s"]):  # (keys a batch carries per platoon)
+        bench_batch.situation_cost(EpisodeConfig(start="steady", duration_s=20.0),
+                                   argparse.Namespace(samples=12, repeats=1, batch=8, situation=keys))
+        lines = capsys.readouterr().out.splitlines()
+        assert len(lines) == 3 and all("(the same outcome, colliding pair and time: 12 of 12)" in line for line in lines[1:])
+        assert all(k in lines[0] for k in keys)
 
 
 def test_domain_vs_grid_finds_the_grid_cell_a_situation_lies_in():

@@ -7,7 +7,7 @@ optimiser proposes together: a cross-entropy generation (`ce`, 10 by default), a
 or up to --batch random points. The results are checked to be identical both ways.
 
 Usage: python tools/bench_batch.py [--samples 200] [--repeats 3] [--batch 64] [--optimizers random ce cmaes]
-                                   [--situation]
+                                   [--situation [KEY ...]]
 The last line is the ratio of the first optimiser's campaigns on the paper's default scenario
 (7 m, 25 m/s, from rest, knots).
 
@@ -15,7 +15,9 @@ The last line is the ratio of the first optimiser's campaigns on the paper's def
 attack points played by a campaign whose setpoint and speed are fixed and by one that searches them, each sample
 within nanometres of the same values (the same episodes but for rounding: what differs is the situation's own
 work, a configuration per sample),
-batched and one at a time, interleaved; it prints the ratio of their costs per sample.
+batched and one at a time, interleaved; it prints the ratio of their costs per sample. It searches the setpoint
+and speed, or the keys named (``--situation controller.acc_kp``: a key a batch holds for all its episodes, so that
+each sample plays in a batch of its own configuration).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import numpy as np
 
 from d4sumo.model.stepping.batch import DEFAULT_BATCH
 from d4sumo.model.config import EpisodeConfig
+from d4sumo.search import situation
 from d4sumo.search.campaign import Campaign
 from d4sumo.search.runner import Evaluator, run_campaign
 from toolargs import Parser, run_main
@@ -46,7 +49,8 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=DEFAULT_BATCH)
     parser.add_argument("--optimizers", nargs="+", default=["random", "ce", "cmaes"])
     parser.add_argument("--start", default="rest", choices=["rest", "steady"])
-    parser.add_argument("--situation", action="store_true", help="what searching the setpoint and speed costs a sample")
+    parser.add_argument("--situation", nargs="*", metavar="KEY", help="what searching the setpoint and speed (or these keys, "
+                                                                      "each from its value up a tenth) costs a sample")
     args = parser.parse_args()
     parser.check_counts({"--samples": (args.samples, 1), "--repeats": (args.repeats, 1), "--batch": (args.batch, 1)})
     parser.check_optimizers(args.optimizers)
@@ -55,7 +59,7 @@ def main() -> None:
     except (AttributeError, OSError):
         pass
     config = EpisodeConfig(start=args.start)
-    if args.situation:
+    if args.situation is not None:
         return situation_cost(config, args)
     print(f"{args.samples} samples per campaign, {config.setpoint_m:g} m, {config.speed_mps:g} m/s, from {config.start}, "
           f"knots; best of {args.repeats} interleaved runs, one core")
@@ -84,12 +88,19 @@ def situation_cost(config: EpisodeConfig, args) -> None:
     (each a configuration of its own, as in a search, playing the same episodes to the eye: their outcomes and
     collisions are counted alike), so what differs is the situation's own work."""
     ranges = (("setpoint_m", config.setpoint_m, config.setpoint_m + 3.0), ("speed_mps", config.speed_mps, config.speed_mps + 5.0))
+    if args.situation:
+        values = {key: situation.played(config, key) for key in args.situation}
+        for key, value in values.items():
+            if not isinstance(value, float):
+                raise SystemExit(f"--situation: got {key!r}; allowed: a key of [scenario], [controller] or [vehicle] that holds "
+                                 "a real number in the default configuration")
+        ranges = tuple((key, value, value * 1.1) for key, value in values.items())
     fixed = Campaign(config=config, optimizer="random", samples=args.samples, seed=0)
     searched = fixed.replace(situation=ranges)
     family = fixed.family()
     points = np.random.default_rng(0).uniform(family.lower, family.upper, size=(args.samples, family.dimension))
     nudge = 1e-9 * np.arange(args.samples)[:, None]  # each sample a situation of its own, as in a search: its own configuration
-    at = np.concatenate([points, np.tile([config.setpoint_m, config.speed_mps], (args.samples, 1)) + nudge], axis=1)
+    at = np.concatenate([points, np.tile([lo for _, lo, _ in searched.situation], (args.samples, 1)) + nudge], axis=1)
     print(f"{args.samples} samples, {config.setpoint_m:g} m and {config.speed_mps:g} m/s fixed, against a campaign searching "
           f"{', '.join(f'{k} [{lo:g}, {hi:g}]' for k, lo, hi in ranges)} played at the same values; best of {args.repeats} "
           "interleaved runs, one core")

@@ -39,8 +39,9 @@ campaign stores a sample, and counts the samples where any of these disagree:
   starts; in one SUMO, on a random copy of the road) is bit for bit the episode played alone: every
   signal, the collision record, the minimum gaps.
 
-With --situation P, a share of the campaigns search their setpoint (and some their speed and start) with the
-attack: each sample plays its own, and is checked as any other.
+With --situation P, a share of the campaigns search their setpoint (and some their speed, start, vehicle's actuator
+lag, V2V loss and latency, radar noise and controller gain) with the attack: each sample plays its own, and is
+checked as any other.
 
 Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]
        [--situation P]. Prints the counts; exits 1 if any is
@@ -230,10 +231,20 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
     situation = ()
     if SITUATION_SHARE[0] and rng.random() < SITUATION_SHARE[0]:  # the setpoint (and the speed) searched: the sample's own
         situation = (("setpoint_m", config.setpoint_m, config.setpoint_m + float(rng.choice([0.5, 3.0, 8.0]))),)
-        if config.traffic is None and not config.sumo_driven and rng.random() < 0.5:  # (its traffic is checked at one speed)
+        if config.traffic is None and rng.random() < 0.5:  # (its traffic is checked at one speed)
             situation += (("speed_mps", config.speed_mps, config.speed_mps + float(rng.choice([1.0, 5.0]))),)
         if config.start != "warmup" and config.traffic is None and rng.random() < 0.3:  # from rest or steady state
             situation += (("start", ("rest", "steady")),)
+        # keys a batch holds for all its episodes: each sample plays in a batch of its own configuration
+        lag = config.vehicle.actuator_lag_s
+        if rng.random() < 0.3:
+            situation += (("vehicle.actuator_lag_s", lag, lag + float(rng.choice([0.1, 0.4]))),)
+        if config.v2v is not None and rng.random() < 0.5:
+            situation += (("v2v.loss", 0.0, float(rng.choice([0.2, 0.6]))), ("v2v.latency_s", (0.0, 0.1, 0.3)))
+        if config.radar is not None and rng.random() < 0.5:
+            situation += (("radar.gap_noise_m", config.radar.gap_noise_m, config.radar.gap_noise_m + 0.5),)
+        if isinstance(config.controller, ControllerConfig) and config.controller.cls == "switching" and rng.random() < 0.4:
+            situation += (("controller.acc_kp", 0.5, 1.5),)
     campaign = Campaign(config=config, attack=family, optimizer="random", formula=formula, situation=situation, **message)
     f = campaign.family()
     return campaign, f.lower + rng.random(f.dimension) * (f.upper - f.lower)
@@ -499,9 +510,11 @@ def batch_differs(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, 
     f = evaluator.family
     slot = int(rng.integers(0, partners + 1))  # on any copy of the road
     own = evaluator.config_for(params)  # in the situation it plays, where its campaign searches one
-    configs = [partner_config(campaign.config, rng, road) if i % 2 else None for i in range(partners)]
+    configs = [partner_config(own, rng, road) if i % 2 else None for i in range(partners)]
     xs = [f.lower + rng.random(f.dimension) * (f.upper - f.lower) for _ in range(partners)]
-    configs = [c or evaluator.config_for(x) for c, x in zip(configs, xs)]  # (its campaign's: in their own situations)
+    key = batch_key(own)
+    # its campaign's, in their own situations, where a batch may carry them beside it (else in the episode's own)
+    configs = [c or (lambda cx: cx if batch_key(cx) == key else own)(evaluator.config_for(x)) for c, x in zip(configs, xs)]
     plans = [attack_plan(f, x, c) for x, c in zip(xs, configs)]
     plans.insert(slot, evaluator.plan(params))
     configs.insert(slot, own)

@@ -196,11 +196,13 @@ def episode_plan(family, params, config: EpisodeConfig):
 
 def episode_summary(config, family, params, plan, episode, robustness, d_safe, fcd) -> dict:
     from ..model.attacks.maneuvers import attack_of, lane_changes, maneuver_of
+    from ..search.situation import played as searched_value
 
     played = len(episode.trace) - 1  # steps played: a change planned after the episode ended did not happen
     attack, params = attack_of(family, params) if family is not None else (None, params)
     # a situation searched with the attack: the configuration holds its values
-    situation = {p.name: getattr(config, p.name) for p in family.parameters[len(attack.parameters):]} if attack is not family else {}
+    situation = ({p.name: searched_value(config, p.name) for p in family.parameters[len(attack.parameters):]}
+                 if attack is not family else {})
     family = attack
     return {
         "d4sumo": __version__,

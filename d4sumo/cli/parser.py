@@ -177,6 +177,8 @@ def _add_plot(sub) -> None:
     p.add_argument("--start", choices=START_MODES, help="only this start mode")
     p.add_argument("--setpoint", type=float, help="only this setpoint in m")
     p.add_argument("--speed", type=float, help="only this target speed in m/s")
+    p.add_argument("--keys", help="map: the one or two searched keys it is drawn over, comma-separated (setpoint_m,v2v.loss) "
+                                  "[the first two the campaigns searched]")
     p.set_defaults(func=cmd_plot)
 
 

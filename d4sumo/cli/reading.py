@@ -116,5 +116,5 @@ def cmd_plot(args: argparse.Namespace) -> int:
     check_distinct(args.db)
     print(plot_figure(args.db, args.kind, args.out, sample=args.sample, fcd_path=check_output_file("--fcd", args.fcd),
                       attack=args.attack, optimizer=args.optimizer, start=args.start, setpoint_m=args.setpoint,
-                      speed_mps=args.speed))
+                      speed_mps=args.speed, keys=args.keys))
     return 0

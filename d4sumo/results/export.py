@@ -10,6 +10,7 @@ from typing import Any, TextIO
 
 from ..model.config import EpisodeConfig
 from ..model.definition import IDENTITY_KEYS
+from ..search import situation
 from ..search.campaign import Campaign
 from ..search.store import Store
 from .records import system_label
@@ -45,6 +46,7 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
     scenarios = {cid: c.config.to_dict()["scenario"] for cid, c in campaigns.items()}
     own = sorted({k for sc in scenarios.values() for k in sc} - set(SCENARIO) - set(IDENTITY_KEYS), key=_SCENARIO_KEYS.index)
     searched = {e[0] for c in campaigns.values() for e in c.situation}  # each sample's own, in the scenario's columns
+    own += sorted(k for k in searched if "." in k)  # a searched key of another table (v2v.loss): a column of its own
     columns = list(dict.fromkeys(n for cid in campaigns for n in names[cid] if n not in searched))
     pairs = sorted({p for s in store.iter_samples(campaign_id) for p in s.min_gaps}, key=pair_order)
     writer = csv.writer(out)
@@ -58,7 +60,7 @@ def write_csv(store: Store, out: TextIO, campaign_id: int | None = None) -> int:
         scenario = {**{k: getattr(cfg, k) for k in SCENARIO}, **scenarios[s.campaign_id]}
         if c.situation:  # the sample's own
             played = c.config_for(s.params, families[s.campaign_id])
-            scenario.update((e[0], getattr(played, e[0])) for e in c.situation)
+            scenario.update((e[0], situation.played(played, e[0])) for e in c.situation)
         writer.writerow([s.id, s.campaign_id, s.index, *(_cell(scenario.get(k, "")) for k in (*SCENARIO, *own)),
                          systems[s.campaign_id], c.attack, c.lie, c.optimizer, c.seed, s.robustness, s.outcome, s.pair, s.time_s,
                          s.position_m, s.speed_diff_kmh, round(s.wall_s, 6), s.error]

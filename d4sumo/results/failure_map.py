@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import ConfigError
 from .records import Record
 
 #: where the samples near a point weigh less than this, the map leaves it blank
@@ -41,14 +42,24 @@ def situated(records: Sequence[Record]) -> list[Record]:
     return [r for r in records if r.situation and r.outcome != "error"]
 
 
-def failure_map(records: Sequence[Record], *, bandwidth: float = 0.1, cells: int = 60) -> FailureMap | None:
-    """The map over the keys the records' situations share (None: no record searched one)."""
+def searched_keys(records: Sequence[Record]) -> tuple[str, ...]:
+    """The keys every record's situation holds a number for, in the order of their names (a named choice, the start,
+    is no axis)."""
+    records = situated(records)
+    return tuple(k for k, v in records[0].situation
+                 if not isinstance(v, str) and all(k in dict(r.situation) for r in records)) if records else ()
+
+
+def failure_map(records: Sequence[Record], keys: Sequence[str] | None = None, *, bandwidth: float = 0.1,
+                cells: int = 60) -> FailureMap | None:
+    """The map over ``keys``, one or two keys the records' situations share (none: the first two), or None where no
+    record searched one."""
     records = situated(records)
     if not records:
         return None
-    keys = tuple(k for k, v in records[0].situation  # the ranges (a choice, the start, is no axis)
-                 if not isinstance(v, str) and all(k in dict(r.situation) for r in records))[:2]
-    if not keys:
+    keys = tuple(keys) if keys else searched_keys(records)[:2]
+    records = [r for r in records if all(k in dict(r.situation) for k in keys)]  # (given keys: the records that hold them)
+    if not keys or not records:
         return None
     points = np.array([[dict(r.situation)[k] for k in keys] for r in records], dtype=float)
     successes = np.array([r.outcome == "success" for r in records])
@@ -73,13 +84,18 @@ def failure_map(records: Sequence[Record], *, bandwidth: float = 0.1, cells: int
 MOST_PANELS = 8
 
 
-def failure_maps(records: Sequence[Record]) -> list[tuple[str, FailureMap]]:
+def failure_maps(records: Sequence[Record], keys: Sequence[str] | None = None) -> list[tuple[str, FailureMap]]:
     """One map for each system and start of the records that searched their situation (a system fails in its own
     situations; a start from rest is another situation than one from steady state), most samples first, at most
-    `MOST_PANELS`; empty where none searched one."""
+    `MOST_PANELS`; empty where none searched one. ``keys``: one or two keys to draw it over (none: the first two);
+    a key no record searched is a ConfigError naming those it searched."""
+    if keys is not None:
+        shared = sorted({k for r in situated(records) for k, v in r.situation if not isinstance(v, str)})
+        if not 1 <= len(keys) <= 2 or len(set(keys)) != len(keys) or any(k not in shared for k in keys):
+            raise ConfigError("--keys", ",".join(keys), f"one or two of the searched keys: {', '.join(shared) or 'none searched'}")
     groups: dict[tuple[str, str], list[Record]] = {}
     for r in situated(records):
         groups.setdefault((r.system, r.start), []).append(r)
-    maps = [(f"{system}, start {start}", failure_map(rs)) for (system, start), rs in
+    maps = [(f"{system}, start {start}", failure_map(rs, keys)) for (system, start), rs in
             sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))[:MOST_PANELS]]
     return [(label, m) for label, m in maps if m is not None]

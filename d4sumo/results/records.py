@@ -162,8 +162,8 @@ def _situation_of(campaign, family, params) -> dict[str, Any]:
     except ConfigError:
         return {}
     ranges = {e[0]: e[1:] for e in campaign.situation if len(e) == 3}
-    return {"situation": tuple(exact.items()),
-            **{key: situation_cell(*ranges[key], v) if key in ranges else v for key, v in exact.items()}}
+    return {"situation": tuple(exact.items()),  # (another key's value is in the situation alone: the report's grid is these)
+            **{key: situation_cell(*ranges[key], v) if key in ranges else v for key, v in exact.items() if key in GRID_KEYS}}
 
 
 def _swerve_change_steps(family, params, config) -> tuple[int, ...]:

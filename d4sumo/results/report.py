@@ -89,15 +89,17 @@ def plot_sample(record: Record, kind: str, out: str | Path, fcd_path: str | Path
     return _sample_figure(record, kind, fcd, out)
 
 
-def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label: str = "all samples") -> Path:
-    """A heatmap (one panel per attack, optimiser and start mode, one colour range) or the clusters of
-    the successful knot vectors of ``records``."""
+def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label: str = "all samples", *,
+                   keys: tuple[str, ...] | None = None) -> Path:
+    """A heatmap (one panel per attack, optimiser and start mode, one colour range), the map of where the system
+    fails (over ``keys``, searched keys; none: the first two) or the clusters of the successful knot vectors of
+    ``records``."""
     _check_kind(kind, ("heatmap", "clusters", "map"))
     out = figures.check_figure_path(out, "--out")
     if kind == "heatmap":
         return figures.heatmap(records, f"Successful attacks over setpoint and target speed: {label}", out)
     if kind == "map":
-        found = failure_maps(records)
+        found = failure_maps(records, keys)
         if not found:
             raise ConfigError("db", label, "samples of campaigns that search their situation (a range such as "
                                            "scenario.setpoint_m = [3, 10]): a map is drawn over it")
@@ -110,11 +112,14 @@ def plot_selection(records: Sequence[Record], kind: str, out: str | Path, label:
 
 def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample: int | None = None,
                 fcd_path: str | Path | None = None, attack: str | None = None, optimizer: str | None = None,
-                start: str | None = None, setpoint_m: float | None = None, speed_mps: float | None = None) -> str:
+                start: str | None = None, setpoint_m: float | None = None, speed_mps: float | None = None,
+                keys: str | None = None) -> str:
     """``d4sumo plot``: one figure into ``out`` (checked first: a file in an existing folder); a sample
     (time-space, accel) or a selection (heatmap, clusters). Returns the line to print."""
     _check_kind(kind, PLOT_KINDS)
     out = figures.check_figure_path(out, "--out")
+    if keys is not None and kind != "map":
+        raise ConfigError("--keys", keys, "keys only with a map: the searched keys it is drawn over")
     if fcd_path is not None and kind not in ("time-space", "accel"):
         raise ConfigError("--fcd", str(fcd_path), "an FCD file only with a time-space or accel plot")
     if kind in ("time-space", "accel") and sample is None:
@@ -133,7 +138,7 @@ def plot_figure(dbs: Sequence[str | Path], kind: str, out: str | Path, *, sample
     if not chosen:
         raise ConfigError("filters", {k: v for k, v in filters.items() if v is not None}, "values that match stored samples")
     label = ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{v}" for k, v in filters.items() if v is not None) or "all samples"
-    plot_selection(chosen, kind, out, label)
+    plot_selection(chosen, kind, out, label, keys=None if keys is None else tuple(k.strip() for k in keys.split(",")))
     return f"{kind} plot written to {out}"
 
 

@@ -63,6 +63,10 @@ class Evaluator:
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
         self._shares_sumo = shares_sumo(campaign.config)
         self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
+        #: whether every sample's configuration has the campaign's key: its situation searches only what a batch carries
+        #: per episode (a key's value changes the key where it does at the box's corners)
+        self._one_key = len({batch_key(c) for c in situation.corners(config, campaign.situation)} | {self.batch_key}) == 1
+        self._keys: dict[tuple, str] = {}  # the situation's values -> its configuration's batch key
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
@@ -80,6 +84,18 @@ class Evaluator:
                 self._configs.clear()
             config = self._configs[key] = self.campaign.config_for(params, self.family)
         return config
+
+    def batch_key_for(self, params) -> str:
+        """The `batch.batch_key` of the configuration these parameters play: samples with one key may share a SUMO."""
+        if self._one_key:
+            return self.batch_key
+        key = tuple(float(v) for v in params[len(params) - len(self.campaign.situation):])
+        found = self._keys.get(key)
+        if found is None:
+            if len(self._keys) >= 256:
+                self._keys.clear()
+            found = self._keys[key] = batch_key(self.config_for(params))
+        return found
 
     def simulate(self, index: int, params, *, fcd_path: str | Path | None = None, gui: bool = False) -> Episode:
         """Sample ``index``'s episode with these parameters, alone (a replay's, a figure's): in the traffic
@@ -168,7 +184,8 @@ class _CallerError(Exception):
 
 def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], None] | None = None) -> list[list[SampleResult]]:
     """Play the jobs' samples side by side in one SUMO, whichever campaigns they belong to (their
-    configurations share one `batch.batch_key`): each result is the one `Evaluator.__call__` gives
+    configurations share one `batch.batch_key`; samples of a situation that changes it, in one SUMO per key):
+    each result is the one `Evaluator.__call__` gives
     alone, each job's in order. ``on_result(job, result)`` hears of each sample as its episode ends
     (in any order; ``job``: its job's position in ``jobs``).
     A single episode, or followers that may not share SUMO, play one at a time instead."""
@@ -195,8 +212,7 @@ def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], 
             except BaseException as exc:  # the caller's own failure (storing, say): not the episode's
                 raise _CallerError(exc) from exc
 
-    def done(j: int, episode) -> None:
-        s = playing[j]
+    def done(s: int, episode) -> None:
         ev, index, x = samples[s]
         t = time.perf_counter()
         if isinstance(episode, Exception):  # a user's controller failed in it
@@ -205,19 +221,24 @@ def play_together(jobs: Sequence[Job], on_result: Callable[[int, SampleResult], 
             r = ev._scored(index, x, episode, t)
         finish(s, dataclasses.replace(r, wall_s=r.wall_s + (t - t0) / len(samples)))  # plus its share so far
 
-    plans, configs, playing = [], [], []
+    # samples whose configurations share a batch key play side by side, one SUMO for each key (a situation that
+    # searches a key a batch holds for all its episodes: the radar's noise, the controller's gains, the vehicle)
+    groups: dict[str, tuple[list, list, list]] = {}  # batch key -> the plans, configurations and samples it plays
     try:
         for s, (ev, index, x) in enumerate(samples):
             try:
-                plans.append(ev.plan(x))
-                configs.append(ev.config_for(x))
-                playing.append(s)
+                plan, config, key = ev.plan(x), ev.config_for(x), ev.batch_key_for(x)
             except Exception as exc:
                 finish(s, ev._failed(index, x, exc, 0.0))
-        if plans:
+                continue
+            plans, configs, playing = groups.setdefault(key, ([], [], []))
+            plans.append(plan)
+            configs.append(config)
+            playing.append(s)
+        for plans, configs, playing in groups.values():
             try:
                 road = jobs[0][0].batch_road(len(plans))
-                simulate_batch(configs, plans, road=road, on_episode=done)
+                simulate_batch(configs, plans, road=road, on_episode=lambda j, episode, playing=playing: done(playing[j], episode))
             except _CallerError:
                 raise
             except Exception as exc:  # SUMO failed: the samples not yet finished play alone, as they would have

@@ -56,3 +56,17 @@ def test_a_map_for_each_system_and_start_and_the_figure_draws_both_kinds(tmp_pat
     for keys in (("setpoint_m", "speed_mps"), ("speed_mps",)):
         path = figures.failure_map(failure_maps(_records(80, keys=keys)), "Where the system fails", tmp_path / f"{len(keys)}.png")
         assert path.stat().st_size > 10_000
+
+
+def test_the_map_is_drawn_over_the_keys_named_and_a_key_not_searched_is_one_line():
+    import pytest
+
+    from d4sumo.errors import ConfigError
+
+    records = _records(60)
+    m = failure_maps(records, ("speed_mps", "setpoint_m"))[0][1]
+    assert m.keys == ("speed_mps", "setpoint_m") and m.rate.shape == (60, 60)
+    assert failure_maps(records, ("speed_mps",))[0][1].keys == ("speed_mps",)
+    for keys in (("v2v.loss",), ("setpoint_m", "setpoint_m"), ("setpoint_m", "speed_mps", "start")):
+        with pytest.raises(ConfigError, match="--keys: .*allowed: one or two of the searched keys: setpoint_m, speed_mps"):
+            failure_maps(records, keys)

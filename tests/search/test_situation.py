@@ -56,10 +56,11 @@ def test_a_samples_configuration_holds_its_situation_and_its_plan_the_attacks_al
     ({"setpoint_m": [10, 3]}, "scenario.setpoint_m: got [10, 3]; allowed: a range [low, high] with low below high (reversed)"),
     ({"setpoint_m": [3, 5, 7]}, "scenario.setpoint_m: got [3, 5, 7]; allowed: a value, or a range [low, high] of two numbers in m"),
     ({"speed_mps": [20, "fast"]}, "allowed: a value, or a range [low, high] of two numbers in m/s"),
-    ({"followers": [2, 4]}, "scenario.followers: got [2, 4]; allowed: a single value: the keys searched are scenario.setpoint_m "
-                            "(a range), scenario.speed_mps (a range), scenario.start (choices), those a batch of episodes may vary"),
-    ({"setpoint_m": [0, 5]}, "scenario.setpoint_m: got 0.0"),  # outside the key's own limits
-    ({"speed_mps": [20, 80]}, "scenario.speed_mps: got 80.0"),
+    ({"followers": [2, 4]}, "scenario.followers: got [2, 4]; allowed: a single value: the number of followers is the campaign's"),
+    ({"duration_s": [20, 40]}, "scenario.duration_s: got [20, 40]; allowed: a single value: the attack's signal and the "
+                               "specification are made for one length of episode"),
+    ({"setpoint_m": [0, 5]}, "scenario.setpoint_m: got 0;"),  # outside the key's own limits, as given
+    ({"speed_mps": [20, 80]}, "scenario.speed_mps: got 80.0; allowed: a number in (0, 70] m/s"),  # (its high end, in a corner)
 ])
 def test_a_bad_range_is_one_line_naming_its_key(scenario, message):
     with pytest.raises(ConfigError) as info:
@@ -67,15 +68,13 @@ def test_a_bad_range_is_one_line_naming_its_key(scenario, message):
     assert message in str(info.value)
 
 
-def test_followers_sumo_drives_take_one_speed_and_a_stored_situation_is_checked():
-    config = EpisodeConfig(controller=ControllerConfig("sumo:ACC"))
-    with pytest.raises(ConfigError, match="scenario.speed_mps: got \\[20.0, 30.0\\]; allowed: a single value with followers SUMO"):
-        Campaign(config, situation=(("speed_mps", 20.0, 30.0),))
-    assert Campaign(config, situation=(("setpoint_m", 3.0, 10.0),)).situation  # the setpoint varies in a batch
+def test_a_stored_situation_is_checked():
     with pytest.raises(ConfigError, match="situation"):
         situation.restored([3, 10])
     with pytest.raises(ConfigError, match="each key once"):
         Campaign(situation=(("setpoint_m", 3.0, 10.0), ("setpoint_m", 4.0, 5.0)))
+    with pytest.raises(ConfigError, match="v2v.loss: got \\[0.0, 1.5\\]|v2v.loss: got 1.5"):
+        Campaign(EpisodeConfig(controller=ControllerConfig("cacc")), situation=(("v2v.loss", 0.0, 1.5),))
 
 
 @pytest.mark.sumo
@@ -175,3 +174,101 @@ def test_in_sumo_a_campaign_that_searches_its_situation_resumes_and_extends_as_o
             return [(s.campaign_id, s.index, s.params, s.robustness, s.outcome) for s in store.samples()]
 
     assert samples(parts) == samples(whole) and len(samples(whole)) == 12
+
+
+def test_any_numeric_key_of_the_tables_is_searched_stored_and_read_back_as_ranges_whole_numbers_and_choices():
+    given = {"scenario": {"start": "steady"}, "controller": {"class": "cacc", "c1": [0.3, 0.7]},
+             "v2v": {"loss": [0, 0.5], "seed": [0, 3], "latency_s": {"choices": [0, 0.1, 0.3]}},
+             "radar": {"gap_noise_m": [0, 0.5]}, "vehicle": {"actuator_lag_s": [0.2, 0.8]}}
+    searched = campaign_of(given)
+    assert searched.situation == (("controller.c1", 0.3, 0.7), ("radar.gap_noise_m", 0.0, 0.5), ("v2v.latency_s", (0.0, 0.1, 0.3)),
+                                  ("v2v.loss", 0.0, 0.5), ("v2v.seed", 0, 3), ("vehicle.actuator_lag_s", 0.2, 0.8))
+    assert searched.definition()["situation"]["v2v.latency_s"] == {"choices": [0.0, 0.1, 0.3]}
+    stored = json.loads(json.dumps(searched.definition(), sort_keys=True))
+    assert Campaign.from_definition(stored, samples=searched.samples) == searched
+    family = searched.family()
+    assert list(family.lower[-6:]) == [0.3, 0.0, 0.0, 0.0, 0.0, 0.2] and list(family.upper[-6:]) == [0.7, 0.5, 3.0, 0.5, 4.0, 0.8]
+    x = np.concatenate([np.zeros(family.dimension - 6), [0.55, 0.25, 1.2, 0.35, 3.99, 0.5]])
+    config = searched.config_for(x)
+    assert dict(config.controller.params)["c1"] == 0.55 and config.radar.gap_noise_m == 0.25
+    assert (config.v2v.latency_s, config.v2v.loss, config.v2v.seed, config.vehicle.actuator_lag_s) == (0.1, 0.35, 3, 0.5)
+    assert config == campaign_of({**given, "controller": {"class": "cacc", "c1": 0.55}, "vehicle": {"actuator_lag_s": 0.5},
+                                  "v2v": {"loss": 0.35, "seed": 3, "latency_s": 0.1}, "radar": {"gap_noise_m": 0.25}}).config
+    assert searched.config.radar is None  # the low corner senses the truth: no radar, as a campaign without one
+    assert [searched.config_for(np.concatenate([x[:-2], [v, 0.5]])).v2v.seed for v in (0.0, 0.99, 1.0, 4.0)] == [0, 0, 1, 3]
+
+
+def test_a_traffic_range_is_searched_over_levels_each_warmed_up_once():
+    searched = campaign_of({"scenario": {"start": "steady"}, "traffic": {"vehicles_per_hour": [300, 1800]}})
+    parameter = searched.family().parameters[-1]
+    assert (parameter.name, parameter.low, parameter.high) == ("traffic.vehicles_per_hour", 0.0, float(situation.TRAFFIC_LEVELS))
+    played = [searched.config_for(np.concatenate([np.zeros(9), [v]])).traffic.vehicles_per_hour for v in (0, 0.99, 1, 5.5, 10.2, 11)]
+    assert played == [300.0, 300.0, 450.0, 1050.0, 1800.0, 1800.0]
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"v2v": {"seed": [0, 2.5]}, "controller": {"class": "cacc"}}, "v2v.seed: got [0.0, 2.5]; allowed: whole numbers: the key holds one"),
+    ({"v2v": {"latency_s": {"choices": [0.1]}}, "controller": {"class": "cacc"}}, "v2v.latency_s: got {'choices': [0.1]}; allowed: a value, "
+                                                                                  "a range [low, high], or {choices = [a, b, ...]}"),
+    ({"v2v": {"latency_s": {"choices": [0.1, 0.1]}}, "controller": {"class": "cacc"}}, "v2v.latency_s: got [0.1, 0.1]; allowed: a list "
+                                                                                       "of choices, each once"),
+    ({"v2v": {"loss": [0, 1.5]}, "controller": {"class": "cacc"}}, "v2v.loss: got 1.5"),  # outside the key's own limits
+    ({"radar": {"gap_noise_m": [0, 0.5], "seed": 4}}, "radar.seed: got 4; allowed: 0 (or left out) where the radar's ranges start at "
+                                                      "the truth"),
+    ({"controller": [{"class": "switching", "acc_kp": [0.1, 0.5]}, "switching", "switching"]}, "controller.v1.acc_kp"),
+    ({"scenario": {"swerve_lanes": [1, 2], "maneuver": "swerve"}}, "scenario.swerve_lanes: got [1, 2]; allowed: a single value: the "
+                                                                   "attack's box holds its lanes"),
+])
+def test_a_bad_search_of_another_table_is_one_line_naming_its_key(doc, message):
+    with pytest.raises(ConfigError) as info:
+        campaign_of(doc)
+    assert message in str(info.value)
+
+
+def test_an_episode_refuses_a_range_of_any_table(capsys):
+    assert main(["simulate", "--set", "v2v.loss=[0, 0.5]", "--set", "controller.class=cacc"]) == 2
+    assert capsys.readouterr().err.strip() == ("d4sumo: error: v2v.loss: got [0, 0.5]; allowed: a single value: an episode plays one "
+                                               "situation (falsify and sweep search a range or choices)")
+
+
+def _stored_samples(db):
+    with Store(db, create=False) as store:
+        return [(s.index, s.params, s.robustness, s.outcome, s.collision, s.min_gaps) for s in store.samples()]
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("tables", [
+    # keys a batch holds for all its episodes: each sample's configuration plays in a batch of its own key
+    '[controller]\nclass = "cacc"\n\n[v2v]\nloss = [0, 0.6]\nlatency_s = {choices = [0, 0.1, 0.2]}\n\n[vehicle]\nactuator_lag_s = [0.2, 0.8]\n\n'
+    '[radar]\ngap_noise_m = [0, 0.3]\n',
+    # the speed where SUMO's models read it from their vehicle type, and one of their attributes
+    '[controller]\nclass = "sumo:ACC"\ntau = [0.8, 1.6]\n',
+])
+def test_in_sumo_a_search_of_any_table_plays_in_batches_as_alone_and_replays_exactly(tmp_path, capsys, tables):
+    toml = tmp_path / "situation.toml"
+    toml.write_text('[scenario]\nstart = "steady"\nsetpoint_m = 5.0\nspeed_mps = [20, 30]\nduration_s = 15.0\n\n' + tables +
+                    '\n[search]\nsamples = 12\noptimizer = "random"\n')
+    batched, alone = tmp_path / "batched.sqlite", tmp_path / "alone.sqlite"
+    assert main(["falsify", "--config", str(toml), "--db", str(batched)]) == 0
+    assert main(["falsify", "--config", str(toml), "--db", str(alone), "--batch", "1"]) == 0
+    stored = _stored_samples(batched)
+    assert stored == _stored_samples(alone) and len({params for _, params, *_ in stored}) == 12
+    capsys.readouterr()
+    for sample_id in (1, 7):
+        assert main(["replay", str(batched), str(sample_id), "--json"]) == 0
+        replay = json.loads(capsys.readouterr().out)
+        assert replay["reproduced"] and replay["situation"]["speed_mps"] == replay["config"]["scenario"]["speed_mps"]
+
+
+@pytest.mark.sumo
+def test_in_sumo_a_traffic_range_plays_its_levels_and_replays_exactly(tmp_path, capsys):
+    db = tmp_path / "traffic.sqlite"
+    assert main(["falsify", "--set", "scenario.start=steady", "--duration", "10", "--set", "traffic.vehicles_per_hour=[300, 1500]",
+                 "--set", "traffic.warmup_s=20", "--samples", "4", "--optimizer", "random", "--db", str(db)]) == 0
+    with Store(db, create=False) as store:
+        campaign = Campaign.from_definition(store.campaigns()[0].definition)
+        levels = {campaign.config_for(s.params).traffic.vehicles_per_hour for s in store.samples()}
+        assert levels <= {300.0 + 120.0 * i for i in range(situation.TRAFFIC_LEVELS)} and len(levels) > 1
+    capsys.readouterr()
+    assert main(["replay", str(db), "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reproduced"]

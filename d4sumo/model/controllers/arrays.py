@@ -36,13 +36,14 @@ _ZERO, _ONE, _MINUS_ONE = _c(0.0), _c(1.0), _c(-1.0)
 
 
 class ActuatorArray:
-    """`Actuator` over an array of cars; ``max_speed_mps`` broadcasts against the cars' shape."""
+    """`Actuator` over an array of cars; ``max_speed_mps`` broadcasts against the cars' shape. ``lags_s``: each
+    row's actuator lag where it differs from row to row (`per_row`; none: the vehicle's)."""
 
-    def __init__(self, vehicle: VehicleParams, step_s: float, shape: tuple[int, ...], max_speed_mps):
+    def __init__(self, vehicle: VehicleParams, step_s: float, shape: tuple[int, ...], max_speed_mps, lags_s=None):
         self.accel_max = _c(vehicle.max_accel_mps2)
         self.decel_max = _c(vehicle.max_decel_mps2)
-        lag = vehicle.actuator_lag_s
-        self.alpha = _c(1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag))
+        self.alpha = per_row([1.0 if lag <= 0.0 else 1.0 - math.exp(-step_s / lag) for lag in (lags_s or [vehicle.actuator_lag_s])],
+                             shape)
         self.step_s = _c(step_s)
         self.max_speed_mps = np.broadcast_to(np.asarray(max_speed_mps, dtype=float), shape)
         self.accel_mps2 = np.zeros(shape)
@@ -61,12 +62,15 @@ class ActuatorArray:
 
 class CruiseArray:
     """`CruiseControl` over an array of cars; only the cars in ``active`` use it (and change its state).
-    ``target_speed_mps``: one speed, or an array broadcasting against ``shape`` (`per_row`)."""
+    ``target_speed_mps``: one speed, or an array broadcasting against ``shape`` (`per_row`); ``params``: its gains,
+    or each row's (a batch whose episodes search them)."""
 
-    def __init__(self, params: SwitchingParams, target_speed_mps, step_s: float, shape: tuple[int, ...]):
-        self.kp, self.ki, self.kd = _c(params.cruise_kp), _c(params.cruise_ki), _c(params.cruise_kd)
-        self.clamp, self.minus_clamp = _c(params.cruise_integral_clamp), _c(-params.cruise_integral_clamp)
-        self.limit, self.minus_limit = _c(params.cruise_output_limit_mps2), _c(-params.cruise_output_limit_mps2)
+    def __init__(self, params: "SwitchingParams | list[SwitchingParams]", target_speed_mps, step_s: float, shape: tuple[int, ...]):
+        rows = params if isinstance(params, list) else [params]
+        gain = lambda name, sign=1.0: per_row([sign * getattr(p, name) for p in rows], shape)  # noqa: E731
+        self.kp, self.ki, self.kd = gain("cruise_kp"), gain("cruise_ki"), gain("cruise_kd")
+        self.clamp, self.minus_clamp = gain("cruise_integral_clamp"), gain("cruise_integral_clamp", -1.0)
+        self.limit, self.minus_limit = gain("cruise_output_limit_mps2"), gain("cruise_output_limit_mps2", -1.0)
         self.step_s = _c(step_s)
         self.target_mps = np.asarray(target_speed_mps, dtype=float)
         self.integral = np.zeros(shape)
@@ -108,14 +112,14 @@ class CommandArray:
 
 
 class SwitchingArray:
-    """`SwitchingController` (or `TimeGapController`) over an array of followers (episodes x cars) that
-    share its gains: built from one such controller per episode (row), whose setpoint and target
-    speed may differ from row to row (a batch of several campaigns' episodes)."""
+    """`SwitchingController` (or `TimeGapController`) over an array of followers (episodes x cars): built from one
+    such controller per episode (row), whose setpoint, target speed and gains may differ from row to row (a batch
+    of several campaigns' episodes, or of a campaign that searches them)."""
 
     def __init__(self, controllers: "SwitchingController | list[SwitchingController]", shape: tuple[int, ...], step_s: float):
         rows = controllers if isinstance(controllers, list) else [controllers]
         controller = rows[0]
-        self.cruise = CruiseArray(controller.params, per_row([c.target_speed_mps for c in rows], shape), step_s, shape)
+        self.cruise = CruiseArray([c.params for c in rows], per_row([c.target_speed_mps for c in rows], shape), step_s, shape)
         self.mode = np.full(shape, MODE_CC)
         self._mode_known = False
         self._time_gap = isinstance(controller, TimeGapController)
@@ -123,11 +127,11 @@ class SwitchingArray:
         self._setpoint = per_row([c.setpoint_m for c in rows], shape)
         self._cc_gap = per_row([c.setpoint_m + c._eps_x - GAP_TOLERANCE_M for c in rows], shape)
         self._acc_gap = per_row([c.setpoint_m + GAP_TOLERANCE_M for c in rows], shape)
-        self._h = _c(getattr(controller, "time_gap_s", 0.0))
-        self._eps_x, self._tolerance = _c(controller._eps_x), _c(GAP_TOLERANCE_M)
+        self._h = per_row([getattr(c, "time_gap_s", 0.0) for c in rows], shape)
+        self._eps_x, self._tolerance = per_row([c._eps_x for c in rows], shape), _c(GAP_TOLERANCE_M)
         self._cc_speed = per_row([c._cc_speed for c in rows], shape)
         self._acc_speed = per_row([c._acc_speed for c in rows], shape)
-        self._acc_kp, self._acc_kv = _c(controller._acc_kp), _c(controller._acc_kv)
+        self._acc_kp, self._acc_kv = per_row([c._acc_kp for c in rows], shape), per_row([c._acc_kv for c in rows], shape)
         self._command = CommandArray(controller.vehicle)
 
     def command(self, gap_m: np.ndarray, speed_mps: np.ndarray, lead_speed_mps: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from ..config import EpisodeConfig
+from ..world.network import is_network_path
 from ..controllers.arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per_row
 from ..controllers.control import CruiseControl
 from ..attacks.maneuvers import Pair, maneuver_of
@@ -34,21 +35,40 @@ DEFAULT_BATCH = 64
 
 
 def batch_key(config: EpisodeConfig) -> str:
-    """Configurations whose episodes may play in one batch have the same key: they differ at most in
-    the setpoint, the target speed and the start from rest or steady (what the batch carries per
-    episode), so several campaigns of a sweep can share one SUMO. Followers driven by SUMO's models
-    read the target speed from their vehicle type, so theirs must be the same too."""
-    scenario = dict(config.to_dict())
-    scenario["scenario"] = {k: v for k, v in scenario["scenario"].items() if k not in _PER_EPISODE}
+    """Configurations whose episodes may play in one batch have the same key: they differ at most in what the
+    batch carries per episode, so several campaigns of a sweep (or the samples of a campaign that searches its
+    situation) can share one SUMO:
+
+    - the setpoint, the target speed and the start from rest or steady (`PER_EPISODE`); followers driven by SUMO's
+      models read the target speed from their vehicle type, so theirs must be the same too;
+    - the numbers of one Python controller for every follower (its gains: the arrays and each platoon take them per
+      episode), its radar's and its V2V channel's numbers (each platoon senses and beacons on its own), and the
+      actuator's lag (none of SUMO's; a road of one's own keeps it, its traffic lights' drivers plan with it).
+
+    Whether the arrays command them (`EpisodeConfig.batch_arrays`) is one for the batch."""
+    doc = dict(config.to_dict())
+    doc["scenario"] = {k: v for k, v in doc["scenario"].items() if k not in PER_EPISODE}
     if config.start == "warmup":  # the warm-up's length decides the attack's start
-        scenario["scenario"]["start"] = "warmup"
+        doc["scenario"]["start"] = "warmup"
     if config.sumo_driven:
-        scenario["scenario"]["speed_mps"] = config.speed_mps
-    return json.dumps(scenario, sort_keys=True, default=str)
+        doc["scenario"]["speed_mps"] = config.speed_mps
+    if isinstance(doc.get("controller"), dict) and not config.controllers[0].sumo_model:
+        doc["controller"] = {k: v for k, v in doc["controller"].items() if not _is_number(v)}
+    doc.pop("radar", None)
+    if isinstance(doc.get("v2v"), dict):
+        doc["v2v"] = {k: v for k, v in doc["v2v"].items() if not _is_number(v)}
+    if not is_network_path(config.network):
+        doc["vehicle"] = {k: v for k, v in doc["vehicle"].items() if k != "actuator_lag_s"}
+    doc["arrays"] = config.batch_arrays
+    return json.dumps(doc, sort_keys=True, default=str)
 
 
-#: what may differ between the episodes of one batch (`batch_key`)
-_PER_EPISODE = ("setpoint_m", "speed_mps", "start")
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+#: what may differ between the episodes of one batch's [scenario] (`batch_key`)
+PER_EPISODE = ("setpoint_m", "speed_mps", "start")
 
 
 def episode_configs(config: EpisodeConfig | Sequence[EpisodeConfig], count: int) -> list[EpisodeConfig]:
@@ -59,7 +79,7 @@ def episode_configs(config: EpisodeConfig | Sequence[EpisodeConfig], count: int)
         raise ValueError(f"{len(configs)} configurations for {count} episodes")
     distinct = {id(c): c for c in configs}
     if len(distinct) > 1 and len({batch_key(c) for c in distinct.values()}) > 1:
-        raise ValueError("a batch's configurations differ in more than setpoint, target speed and start")
+        raise ValueError("a batch's configurations differ in more than a batch carries per episode (`batch_key`)")
     return configs
 
 
@@ -87,7 +107,8 @@ class PlatoonBatch:
         # each distinct configuration's followers: their controllers carry its setpoint and target speed
         rows_followers = {k: (self.followers if c is config else followers_of(c)) for k, c in distinct.items()}
         episode_followers = [rows_followers[id(c)] for c in configs]
-        gains = cruise_params(config)
+        row_gains = {k: cruise_params(c) for k, c in distinct.items()}  # (a situation searched may set each episode's gains)
+        gains = [row_gains[id(c)] for c in configs]
         speeds = [c.speed_mps for c in configs]  # the target speed of each episode
         self.attacker_cruise = CruiseArray(gains, per_row([c.attacker_cruise_mps for c in configs], (m,)), dt, (m,))
         self._command = CommandArray(vehicle)
@@ -110,9 +131,9 @@ class PlatoonBatch:
             cars = np.array([i for i, _ in members])
             prototype = self.followers[cars[0] - 1].controller
             kernel = ARRAY_KERNELS.get(type(prototype))
-            if kernel is None:
+            if kernel is None:  # one object per episode, of its own controller table (its own parameters)
                 for i, column in members:
-                    self._scalar.append((i, column, [PythonFollower(controller, c, i) for c in configs]))
+                    self._scalar.append((i, column, [PythonFollower(f[i - 1].config, c, i) for f, c in zip(episode_followers, configs)]))
                 continue
             columns = [c for _, c in members]
             modes = [self._with_mode.index(i) for i, _ in members]
@@ -120,7 +141,8 @@ class PlatoonBatch:
             self._kernels.append((_index(cars.tolist()), _index([i - 1 for i in cars.tolist()]), _index(columns),
                                   _index(modes), kernel(rows, (m, len(cars)), dt)))
         max_speeds = [attacker_max_speed_mps] + [np.inf] * len(python) + [attacker_max_speed_mps] * len(others)
-        self.actuator = ActuatorArray(vehicle, dt, (m, len(self.commanded)), np.array(max_speeds))
+        self.actuator = ActuatorArray(vehicle, dt, (m, len(self.commanded)), np.array(max_speeds),
+                                      [c.vehicle.actuator_lag_s for c in configs])
         self.commands = np.zeros((config.steps, m, len(self.commanded)))  # each step's commands, as played
         self.modes = np.zeros((config.steps, m, len(self._with_mode))) if self._with_mode else None
         self._scalar.sort(key=lambda entry: entry[0])  # car order: the first follower to fail is the one named alone
@@ -204,7 +226,8 @@ class PlatoonBatch:
         whose few episodes left cost less that way than the arrays' fixed cost per step. (A lane-changing
         maneuver's pairs are the caller's: it records them for every episode.)"""
         config = self.configs[e]
-        followers = [f if f.sumo_driven else PythonFollower(f.config, config, i) for i, f in enumerate(self.followers, start=1)]
+        own = config.controllers  # its own tables: a situation searched may set each episode's gains
+        followers = [f if f.sumo_driven else PythonFollower(own[i - 1], config, i) for i, f in enumerate(self.followers, start=1)]
         for i, _, scalar in self._scalar:  # a user's controller: its own object goes on
             followers[i - 1] = scalar[e]
         platoon = Platoon(config, self.attacks_u[e], float(self.actuator.max_speed_mps[e, 0]), followers)

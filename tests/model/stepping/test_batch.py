@@ -8,6 +8,9 @@ from conftest import assert_same_episode, random_plans
 
 from d4sumo.engine.ballistic import integrate, integrate_batch
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.model.world.sensing import RadarParams
+from d4sumo.model.world.v2v import ChannelParams
+from d4sumo.model.world.vehicle import VehicleParams
 from d4sumo.model.controllers.commands import ControllerError
 
 
@@ -86,6 +89,14 @@ MIXED = {  # several campaigns' configurations in one batch: setpoints, target s
     "timegap": [EpisodeConfig(setpoint_m=s, speed_mps=v, start="steady",
                               controller=ControllerConfig("timegap", params=(("time_gap_s", 0.6),)))
                 for s, v in ((4.0, 20.0), (8.0, 30.0))],
+    # a campaign that searches its situation: each row its own gains, time gap and actuator lag
+    "gains": [EpisodeConfig(setpoint_m=s, start=start, controller=ControllerConfig(
+                  "switching", params=(("acc_kp", kp), ("acc_kv", kv), ("cruise_kp", ckp), ("eps_x_m", eps))),
+                  vehicle=VehicleParams(actuator_lag_s=lag))
+              for s, kp, kv, ckp, eps, lag, start in ((5.0, 0.9304, 2.1599, 0.4, 1.0, 0.5, "rest"), (5.0, 0.5, 1.5, 0.7, 0.5, 0.3, "steady"),
+                                                      (7.5, 1.4, 2.6, 0.2, 2.0, 0.8, "rest"))],
+    "time gaps": [EpisodeConfig(setpoint_m=3.0, start="steady", controller=ControllerConfig("timegap", params=(("time_gap_s", h),)))
+                  for h in (0.4, 0.9, 1.5)],
 }
 
 
@@ -113,3 +124,31 @@ def test_a_batch_refuses_configurations_that_differ_in_more_than_setpoint_speed_
     sumo = ControllerConfig("sumo:ACC")
     assert batch_key(EpisodeConfig(controller=sumo, speed_mps=20)) != batch_key(EpisodeConfig(controller=sumo))
     assert batch_key(EpisodeConfig(controller=sumo, setpoint_m=3)) == batch_key(EpisodeConfig(controller=sumo))
+    # what each platoon carries per episode: a Python controller's numbers, the actuator's lag, the radar, the channel
+    gains = ControllerConfig("switching", params=(("acc_kp", 0.5),))
+    assert batch_key(EpisodeConfig(controller=gains, vehicle=VehicleParams(actuator_lag_s=0.2))) == batch_key(EpisodeConfig())
+    assert batch_key(EpisodeConfig(controller=ControllerConfig("sumo:ACC", (("tau", 1.5),)))) != batch_key(EpisodeConfig(controller=sumo))
+    assert batch_key(EpisodeConfig(vehicle=VehicleParams(length_m=4.0))) != batch_key(EpisodeConfig())
+    noisy = EpisodeConfig(radar=RadarParams(gap_noise_m=0.2))
+    assert batch_key(noisy) != batch_key(EpisodeConfig())  # the arrays command the one, each platoon the other
+    assert batch_key(noisy) == batch_key(EpisodeConfig(radar=RadarParams(gap_noise_m=0.5, seed=3)))
+    cacc = ControllerConfig("cacc")
+    assert batch_key(EpisodeConfig(controller=cacc, v2v=ChannelParams(loss=0.3))) == batch_key(EpisodeConfig(controller=cacc))
+
+
+def test_a_user_controller_in_a_batch_runs_with_each_episodes_own_parameters():
+    import sys
+
+    sys.modules[__name__].Flaky = Flaky
+    configs = [EpisodeConfig(setpoint_m=7.0, controller=ControllerConfig(f"{__name__}:Flaky", params=(("acc_kp", kp),)))
+               for kp in (0.4, 0.9304, 1.6)] * 2
+    signals = np.array([random_plans(c, 1, seed=i)[0].u for i, c in enumerate(configs)])
+    for detach_at_step in (None, 150):
+        batched = integrate_batch(configs, signals, 40.0, detach_at_step=detach_at_step)
+        for config, u, result in zip(configs, signals, batched):
+            try:
+                alone = integrate(config, u, 40.0)
+            except ControllerError as exc:
+                assert isinstance(result, ControllerError) and str(result) == str(exc)
+                continue
+            assert_same_episode(result, alone)
