@@ -57,7 +57,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "v2v": tuple(f.name for f in dataclasses.fields(ChannelParams)),
     "attack": ("family", "params", *MESSAGE_KEYS, *ATTACK_OPTIONS),
     "spec": ("d_safe_m", "formula"),
-    "search": ("optimizer", "samples", "seed", *OPTIMIZERS),
+    "search": ("optimizer", "samples", "seed", "boundary", *OPTIMIZERS),
 }
 
 
@@ -272,6 +272,7 @@ def campaign_of(doc: Mapping[str, Any]) -> Campaign:
         message_field=doc.get("attack", {}).get("message_field", "accel"),
         message_sender=doc.get("attack", {}).get("message_sender", 0),
         situation=ranges,
+        boundary=_get(doc, "search.boundary", 0.0),
     )
 
 

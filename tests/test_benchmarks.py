@@ -339,3 +339,17 @@ def test_domain_vs_grid_finds_the_grid_cell_a_situation_lies_in():
     assert domain_vs_grid.cell_of(7.4, 26.0) == (7.0, 25.0) and domain_vs_grid.cell_of(14.6, 29.0) == (15.0, 30.0)
     assert domain_vs_grid.cell_of(7.5, 22.5) == (7.0, 20.0)  # half way: the nearer first
     assert domain_vs_grid.cell_of(3.0, 20.0) == (3.0, 20.0)
+
+
+def test_bench_boundary_scores_each_campaigns_map_against_the_reference(capsys, monkeypatch):
+    """tools/bench_boundary.py: a small run prints each campaign's share of the domain on the wrong side, and the
+    locating campaign's map is drawn from its locating samples alone."""
+    import bench_boundary
+
+    monkeypatch.setattr(sys, "argv", ["bench_boundary.py", "--samples", "16", "--seeds", "1", "--reference", "100"])
+    bench_boundary.main()
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("from rest: reference of 100 random samples")
+    rows = {line.split("  ")[1].strip(): line for line in lines[2:5]}
+    assert set(rows) == {"random", "boundary", "auto + boundary 0.5"}
+    assert "(drawn from 16 samples)" in rows["boundary"] and "(drawn from 8 samples)" in rows["auto + boundary 0.5"]

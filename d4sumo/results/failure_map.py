@@ -4,8 +4,11 @@ boundary where it crosses one half.
 
 The estimate at a point weighs every sample by a Gaussian of its distance there (each key scaled to the box,
 ``bandwidth`` of it): with s the weighted successes and n the weighted samples, the success rate is the mean of
-Beta(1 + s, 1 + n - s), a uniform prior updated, and its standard deviation the uncertainty. Far from every
-sample (n under `LEAST_WEIGHT`) the map says nothing. Pure numbers: `figures` draws it.
+Beta(1 + s, 1 + n - s), a uniform prior updated, and its standard deviation the uncertainty
+(`situation.kernel_estimate`, which a campaign locating the boundary estimates with too). Far from every sample
+(n under `LEAST_WEIGHT`) the map says nothing. Where a campaign spent samples locating the boundary
+(``[search] boundary``), the map is drawn from those alone: a random attack each, so that the rate is the
+situation's, not the optimiser's. Pure numbers: `figures` draws it.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConfigError
+from ..search.situation import kernel_estimate
 from .records import Record
 
 #: where the samples near a point weigh less than this, the map leaves it blank
@@ -67,13 +71,7 @@ def failure_map(records: Sequence[Record], keys: Sequence[str] | None = None, *,
     span = np.where(high > low, high - low, 1.0)
     axes = tuple(np.linspace(lo, hi, cells) for lo, hi in zip(low, high))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(keys))  # (points, keys)
-    z = (grid[:, None, :] - points[None, :, :]) / span / bandwidth
-    w = np.exp(-0.5 * np.sum(z * z, axis=-1))  # (grid points, samples)
-    n = w.sum(axis=1)
-    s = w @ successes.astype(float)
-    a, b = 1.0 + s, 1.0 + n - s
-    rate = a / (a + b)
-    std = np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1.0)))
+    rate, std, n = kernel_estimate((points - low) / span, successes.astype(float), (grid - low) / span, bandwidth)
     far = n < LEAST_WEIGHT
     shape = tuple(len(x) for x in axes)
     rate, std = np.where(far, np.nan, rate).reshape(shape), np.where(far, np.nan, std).reshape(shape)
@@ -96,6 +94,7 @@ def failure_maps(records: Sequence[Record], keys: Sequence[str] | None = None) -
     groups: dict[tuple[str, str], list[Record]] = {}
     for r in situated(records):
         groups.setdefault((r.system, r.start), []).append(r)
+    groups = {k: [r for r in rs if r.locating] or rs for k, rs in groups.items()}  # (see the module)
     maps = [(f"{system}, start {start}", failure_map(rs, keys)) for (system, start), rs in
             sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))[:MOST_PANELS]]
     return [(label, m) for label, m in maps if m is not None]

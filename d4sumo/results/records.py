@@ -69,6 +69,9 @@ class Record:
     #: its setpoint_m and speed_mps are then the cell of the range it fell in (`situation_cell`), so that the
     #: report's tables and maps group samples of nearby situations
     situation: tuple[tuple[str, float], ...] = ()
+    #: whether its campaign spent it locating the boundary between safe and unsafe situations (``[search] boundary``):
+    #: a random attack, in a situation chosen where the success rate is least known
+    locating: bool = False
 
     @property
     def time_from_attack_start_s(self) -> float | None:
@@ -131,7 +134,7 @@ def load_records(paths: Sequence[str | Path]) -> list[Record]:
                 records.append(Record(
                     db=str(path), sample_id=s.id, campaign_id=s.campaign_id, params=s.params, robustness=s.robustness,
                     outcome=s.outcome, pair=s.pair, time_s=s.time_s, position_m=s.position_m,
-                    speed_diff_kmh=s.speed_diff_kmh, index=s.index,
+                    speed_diff_kmh=s.speed_diff_kmh, index=s.index, locating=bool(c.boundary) and situation.locating(s.index, c.boundary),
                     swerve_change_steps=_swerve_change_steps(families[s.campaign_id], s.params, c.config),
                     **(settings[s.campaign_id] if not c.situation else
                        {**settings[s.campaign_id], **_situation_of(c, families[s.campaign_id], s.params)}),

@@ -67,6 +67,9 @@ class Campaign:
     #: keys of the scenario searched with the attack (`situation`): each a range, (key, low, high), or choices,
     #: (key, (choice, ...))
     situation: tuple[tuple, ...] = ()
+    #: the share of its samples spent locating the boundary between the situations where attacks mostly succeed and
+    #: those where they mostly fail (`optimizers.boundary`), rather than on the worst attack; 0: none
+    boundary: float = 0.0
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -89,6 +92,10 @@ class Campaign:
             options = tuple(options.items())
         fix("optimizer_options", tuple(resolve_options(self.optimizer, dict(options)).items()))
         fix("situation", situation.check(self.config, tuple(self.situation)))
+        fix("boundary", check_number("search.boundary", self.boundary, 0.0, 1.0, "(a share of the samples)"))
+        if self.boundary and not self.situation:
+            raise ConfigError("search.boundary", self.boundary, "0 where the campaign searches no situation: give a range "
+                                                                "(scenario.setpoint_m = [3, 10]) to locate a boundary over")
         if self.config.attack_start_step == 0:  # nothing before the attack: the same window either way
             fix("score_from_attack_start", True)
         elif not isinstance(self.score_from_attack_start, bool):
@@ -138,6 +145,8 @@ class Campaign:
         }
         if self.situation:  # stored where there is one: every other campaign keeps its identity
             definition["situation"] = situation.stored(self.situation)
+        if self.boundary:
+            definition["boundary"] = self.boundary
         return definition
 
     @classmethod
@@ -197,6 +206,7 @@ class Campaign:
                                                         definition.get("optimizer_options", {})).items()),
                 score_from_attack_start=ledger.restored("spec", definition["spec"])["from_attack_start"],
                 situation=situation.restored(definition.get("situation", {})),
+                boundary=definition.get("boundary", 0.0),
             )
         except ControllerImportError as exc:  # not damage: the database is fine, this machine lacks the module
             raise NotSimulable(f"{where}: its follower controller {exc.given} cannot be simulated here: {exc.hint}") from None

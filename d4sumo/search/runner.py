@@ -16,6 +16,7 @@ from ..model.stepping.batch import DEFAULT_BATCH
 from .campaign import Campaign, CampaignSummary, SampleResult
 from .evaluator import Evaluator, Job, play_together
 from .optimizers import make_optimizer
+from .optimizers.boundary import BoundarySearch
 from .store import Store, StoreError
 
 log = logging.getLogger(__name__)
@@ -72,8 +73,13 @@ class CampaignRunner:
         self.numerics_differ_at: int | None = None
         rng = np.random.default_rng(campaign.seed)
         family = evaluator.family
-        self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, budget=campaign.samples, rng=rng,
-                                        options=dict(campaign.optimizer_options), signals=family.signals)
+        share = campaign.boundary
+        self.optimizer = make_optimizer(campaign.optimizer, family.lower, family.upper, rng=rng, signals=family.signals,
+                                        budget=max(1, BoundarySearch.inner_budget(campaign.samples, share)) if share else campaign.samples,
+                                        options=dict(campaign.optimizer_options))
+        if share:  # a share of the samples locates the boundary; the optimiser proposes the rest as it would alone
+            self.optimizer = BoundarySearch(self.optimizer, family.lower, family.upper, campaign.samples,
+                                            np.random.default_rng((campaign.seed, 1)), situation=len(campaign.situation), share=share)
         self.scores: list[float] = []
         self.queue: list[np.ndarray] = []  # asked for, not played yet: samples done, done + 1, ..
         self._replay()

@@ -311,3 +311,28 @@ def restored(table: Any) -> tuple[Entry, ...]:
     if not isinstance(table, Mapping):
         raise ConfigError("situation", table, "a table {key: [low, high], [choice, ...] or {choices = [...]}}")
     return tuple(entry(key, value) for key, value in table.items())
+
+
+# --- the boundary between safe and unsafe situations: where the success rate crosses one half ---------------------
+
+#: the kernel's width, as a share of each range
+BANDWIDTH = 0.1
+
+
+def locating(index: int, share: float) -> bool:
+    """Whether sample ``index`` (0-based) is spent locating the boundary, at this share of the budget."""
+    return math.floor((index + 1) * share) > math.floor(index * share)
+
+
+def kernel_estimate(points: np.ndarray, successes: np.ndarray, at: np.ndarray, bandwidth: float = BANDWIDTH
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The success rate at each row of ``at`` estimated from samples (rows of ``points``, in the same scaled units, and
+    how far each succeeded, 0 to 1): each sample weighed by a Gaussian of its distance, ``bandwidth`` wide; with s the
+    weighted successes and n the weighted samples, the mean and standard deviation of Beta(1 + s, 1 + n - s), a
+    uniform prior updated. Returns (rate, sd, n)."""
+    z = (at[:, None, :] - points[None, :, :]) / bandwidth
+    w = np.exp(-0.5 * np.sum(z * z, axis=-1))  # (at, samples)
+    n = w.sum(axis=1)
+    s = w @ successes
+    a, b = 1.0 + s, 1.0 + n - s
+    return a / (a + b), np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1.0))), n
