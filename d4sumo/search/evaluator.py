@@ -17,7 +17,7 @@ from ..engine.networks import keep_road
 from ..engine.scenarios import NetworkSource, Road, batch_road, build_road, network_source
 from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
-from ..model.stepping.batch import batch_key
+from ..model.stepping.batch import PER_EPISODE, batch_key, known_key
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import AttackPlan, attack_plan
 from ..model.stepping.trace import Episode
@@ -63,9 +63,10 @@ class Evaluator:
         self._failures: dict[str, int] = {}  # each failure's message: how many samples ended in it
         self._shares_sumo = shares_sumo(campaign.config)
         self.batch_key = batch_key(campaign.config)  # campaigns with one key may share a SUMO
-        #: whether every sample's configuration has the campaign's key: its situation searches only what a batch carries
-        #: per episode (a key's value changes the key where it does at the box's corners)
-        self._one_key = len({batch_key(c) for c in situation.corners(config, campaign.situation)} | {self.batch_key}) == 1
+        #: whether every sample's configuration has the campaign's key: its situation searches only the [scenario] keys a
+        #: batch carries per episode (the speed not where SUMO's models read it from their vehicle type); another key
+        #: (a gain, where one value may make the arrays play it and another not) is asked each configuration's own
+        self._one_key = all(e[0] in PER_EPISODE and not (e[0] == "speed_mps" and config.sumo_driven) for e in campaign.situation)
         self._keys: dict[tuple, str] = {}  # the situation's values -> its configuration's batch key
 
     def plan(self, params) -> AttackPlan:
@@ -83,6 +84,8 @@ class Evaluator:
             if len(self._configs) >= 256:
                 self._configs.clear()
             config = self._configs[key] = self.campaign.config_for(params, self.family)
+            if self._one_key:  # its key is the campaign's: every corner of the situation's box has it
+                known_key(config, self.batch_key)
         return config
 
     def batch_key_for(self, params) -> str:

@@ -56,8 +56,20 @@ class ControllerConfig:
     def controller_class(self) -> type:
         return resolve_controller(self.cls, self.params)
 
+    def __getstate__(self) -> dict:
+        """Pickled (to a worker, a warm-up's process) without its built parameters: a class made at run time (an
+        FMU's) pickles by nothing but its name; they are built again where asked."""
+        state = dict(self.__dict__)
+        state.pop("_built", None)
+        return state
+
     def build_params(self) -> Any:
-        return build_params(self.controller_class(), dict(self.params))
+        built = self.__dict__.get("_built")
+        if built is None:
+            built = build_params(self.controller_class(), dict(self.params))
+            if dataclasses.is_dataclass(built) and type(built).__dataclass_params__.frozen:  # immutable: one for all who ask
+                object.__setattr__(self, "_built", built)
+        return built
 
     def to_dict(self) -> dict:
         """As a definition stores it: the authors' code's options only where they differ from the paper's

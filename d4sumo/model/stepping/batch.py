@@ -35,6 +35,32 @@ DEFAULT_BATCH = 64
 
 
 def batch_key(config: EpisodeConfig) -> str:
+    """`_batch_key`, kept for the last configurations asked for (a batch checks its configurations' keys, and a
+    campaign that searches its situation makes one a sample)."""
+    try:
+        return _KEYS[config]
+    except KeyError:
+        pass
+    except TypeError:  # a configuration holding something unhashable
+        return _batch_key(config)
+    if len(_KEYS) >= 1024:
+        _KEYS.clear()
+    key = _KEYS[config] = _batch_key(config)
+    return key
+
+
+_KEYS: dict[EpisodeConfig, str] = {}
+
+
+def known_key(config: EpisodeConfig, key: str) -> None:
+    """Keep ``key`` as ``config``'s `batch_key`, known by its maker (a sample's configuration in a situation whose every
+    corner has its campaign's key: `evaluator.Evaluator.config_for`), so that a batch's check costs nothing."""
+    if len(_KEYS) >= 1024:
+        _KEYS.clear()
+    _KEYS[config] = key
+
+
+def _batch_key(config: EpisodeConfig) -> str:
     """Configurations whose episodes may play in one batch have the same key: they differ at most in what the
     batch carries per episode, so several campaigns of a sweep (or the samples of a campaign that searches its
     situation) can share one SUMO:
