@@ -3,7 +3,6 @@ between followers that the in-lane attack cannot crash, and batches equal episod
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from conftest import assert_same_episode, random_plans
 
