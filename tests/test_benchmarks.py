@@ -353,3 +353,37 @@ def test_bench_boundary_scores_each_campaigns_map_against_the_reference(capsys, 
     rows = {line.split("  ")[1].strip(): line for line in lines[2:5]}
     assert set(rows) == {"random", "boundary", "auto + boundary 0.5"}
     assert "(drawn from 16 samples)" in rows["boundary"] and "(drawn from 8 samples)" in rows["auto + boundary 0.5"]
+
+
+def test_bench_peers_plays_each_peers_sample_as_the_campaigns_own_episode(tmp_path):
+    """tools/bench_peers.py: a peer's sample i is the episode the d4sumo campaign plays as its sample i, at the peer's
+    point; VerifAI's samplers speak over a pipe (here a stand-in sampler of uniform points, in this Python: the pipe
+    and the signs are d4sumo's side), and PSY-TaLiRo's optimisers where it is installed (`.[peers]`)."""
+    import importlib.util
+
+    import bench_peers
+
+    problem = {"scenario": {"duration_s": 20.0}}
+    stand_in = tmp_path / "uniform.py"
+    stand_in.write_text("import json, sys\nimport numpy as np\nrng = np.random.default_rng(int(sys.argv[4]))\n"
+                        "for _ in range(int(sys.argv[3])):\n    print(json.dumps(rng.random(int(sys.argv[2])).tolist()), flush=True)\n"
+                        "    rho = float(sys.stdin.readline())\n    assert rho == rho\n")
+    monkey = bench_peers.HERE
+    try:
+        bench_peers.HERE = tmp_path
+        (tmp_path / "peers_verifai.py").write_text(stand_in.read_text())
+        played = bench_peers.verifai_run(problem, "random", 6, 3, sys.executable)
+    finally:
+        bench_peers.HERE = monkey
+    own = bench_peers.Episodes(problem, 6, 3)
+    for i, r in enumerate(played):  # each is the campaign's own sample i at that point
+        again = own.evaluator(i, np.asarray(r.params))
+        assert (again.robustness, again.outcome, again.collision) == (r.robustness, r.outcome, r.collision)
+    assert len(played) == 6 and len({r.params for r in played}) == 6
+    first, wins, distinct, kinds = bench_peers.scores(played, own.family, 6)
+    assert wins == sum(r.outcome == "success" for r in played) and distinct <= wins and kinds <= wins
+    assert first == (next(i for i, r in enumerate(played) if r.outcome == "success") + 1 if wins else 7)
+    if importlib.util.find_spec("staliro") is not None:
+        for optimizer in bench_peers.PSY_TALIRO:
+            ran = bench_peers.psy_taliro_run(problem, optimizer, 6, 3)
+            assert len(ran) == 6 and all(r.outcome != "error" for r in ran)

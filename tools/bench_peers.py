@@ -25,12 +25,14 @@ Usage: python tools/bench_peers.py [--samples 100] [--seeds 8] [--problems defau
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -139,13 +141,10 @@ def main() -> None:
     args = parser.parse_args()
     parser.check_counts({"--samples": (args.samples, 1), "--seeds": (args.seeds, 1)})
     parser.check_optimizers(args.d4sumo)
-    if args.psy_taliro:
-        try:
-            import staliro  # noqa: F401
-        except ImportError:
-            parser.error("--psy-taliro: PSY-TaLiRo is not installed here: pip install -e '.[peers]' (or --psy-taliro with "
-                         "no names)")
-    runs: dict[str, callable] = {f"d4sumo {o}": (lambda p, n, s, o=o: d4sumo_run(p, o, n, s)) for o in args.d4sumo}
+    if args.psy_taliro and importlib.util.find_spec("staliro") is None:
+        parser.error("--psy-taliro: PSY-TaLiRo is not installed here: pip install -e '.[peers]' (or --psy-taliro with "
+                     "no names)")
+    runs: dict[str, Callable] = {f"d4sumo {o}": (lambda p, n, s, o=o: d4sumo_run(p, o, n, s)) for o in args.d4sumo}
     runs.update({f"PSY-TaLiRo {o}": (lambda p, n, s, o=o: psy_taliro_run(p, o, n, s)) for o in args.psy_taliro})
     if args.verifai_python:
         runs.update({f"VerifAI {o}": (lambda p, n, s, o=o: verifai_run(p, o, n, s, args.verifai_python)) for o in args.verifai})
