@@ -23,7 +23,7 @@ from typing import Any
 
 #: the releases, oldest first: the versions a ledger entry may name
 RELEASES = ("0.2", "0.3", "0.4", "0.5", "0.6", "0.7", "0.8", "0.9", "0.10", "0.10.1", "0.11", "0.12", "0.13", "0.14",
-            "0.15", "0.16", "0.17", "0.18", "0.19", "0.20", "0.21")
+            "0.15", "0.16", "0.17", "0.18", "0.19", "0.20", "0.21", "0.22")
 
 
 @dataclass(frozen=True)
@@ -84,6 +84,8 @@ LEDGER = (
     Added("search.auto.per_signal", "0.11", 0, "held sampling across signals"),
     # 0.7's auto stored it (256); it was gone from 0.8 to 0.19, which learned from bo's 128
     Added("search.auto.learn_points", "0.20", 128, "the GP's kernel learned from 128 scores"),
+    Added("search.bo.edges", "0.22", 0.0),  # (its default: none of the candidates held at the box's bounds)
+    Added("search.auto.edges", "0.22", 0.0),
 )
 
 

@@ -723,3 +723,27 @@ def test_bo_conditions_through_inducing_points_past_that_many_scores(inducing, s
     opt.asked = 290
     opt.ask()
     assert opt._gp.sparse == sparse and len(opt._gp.t) == 290
+
+
+@pytest.mark.parametrize("name", ["bo", "auto"])
+def test_edges_holds_candidates_at_the_bounds_and_none_leaves_the_proposals_as_they_were(name):
+    """``edges``: a share of BO's global candidates with each coordinate, as likely as not, held at a bound (the
+    pedals floored or released that win a lie); at 0, the default, no draw changes."""
+    lower, upper = -np.ones(6), np.ones(6)
+
+    def run(options):
+        opt = make_optimizer(name, lower, upper, budget=40, rng=np.random.default_rng(3), options=options)
+        asked = []
+        while opt.asked < 40:
+            xs = [opt.ask() for _ in range(min(opt.ready(), 40 - opt.asked))]
+            for x in xs:
+                opt.tell(x, float(np.sum(np.abs(x))))  # best at the corners
+            asked += xs
+        return np.array(asked[10:])  # after the design
+
+    plain, default, held = run({}), run({"edges": 0.0}), run({"edges": 0.5})
+    assert np.array_equal(plain, default)
+    at_bounds = lambda xs: int(np.sum(np.isclose(np.abs(xs), 1.0, rtol=0, atol=1e-12)))  # noqa: E731
+    assert at_bounds(held) > 2 * max(at_bounds(plain), 1)
+    with pytest.raises(ConfigError, match=f"search.{name}.edges"):
+        make_optimizer(name, lower, upper, budget=5, rng=np.random.default_rng(0), options={"edges": 1.5})

@@ -114,7 +114,7 @@ class BayesianOptimization(GaussianProcessSearch):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000)}
+               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000), "edges": (0.0, 0.0, 1.0)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -128,6 +128,10 @@ class BayesianOptimization(GaussianProcessSearch):
         n_local = int(self.candidates * self.local_fraction)
         local = np.clip(best + self.rng.normal(0.0, self.local_scale, size=(n_local, self.dimension)), 0.0, 1.0)
         glob = self.rng.random((self.candidates - n_local, self.dimension))
+        n_edges = int(len(glob) * self.options["edges"])
+        if n_edges:  # each of their coordinates, as likely as not, held at a bound: pedals floored or released
+            held = self.rng.random((n_edges, self.dimension)) < 0.5
+            glob[:n_edges] = np.where(held, self.rng.integers(0, 2, size=(n_edges, self.dimension)), glob[:n_edges])
         return np.vstack([local, glob])
 
     def _propose(self) -> np.ndarray:
