@@ -95,6 +95,7 @@ def failure_maps(records: Sequence[Record], keys: Sequence[str] | None = None) -
     for r in situated(records):
         groups.setdefault((r.system, r.start), []).append(r)
     groups = {k: [r for r in rs if r.locating] or rs for k, rs in groups.items()}  # (see the module)
-    maps = [(f"{system}, start {start}", failure_map(rs, keys)) for (system, start), rs in
+    maps = [(f"{system}, start {start}{', locating the boundary' if rs[0].locating else ''}", failure_map(rs, keys))
+            for (system, start), rs in
             sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))[:MOST_PANELS]]
     return [(label, m) for label, m in maps if m is not None]

@@ -98,8 +98,8 @@ def test_the_map_is_drawn_from_the_samples_spent_locating_where_a_campaign_has_t
         # the optimiser's worst attacks succeed everywhere; random ones below 8 m alone
         records.append(dataclasses.replace(base, sample_id=i, index=i, locating=spent, situation=(("setpoint_m", setpoint),),
                                            outcome="success" if not spent or setpoint < 8 else "no_crash"))
-    ((_, m),) = failure_maps(records)
-    assert len(m.points) == 100 and m.rate[np.argmin(abs(m.axes[0] - 12.0))] < 0.2
+    ((label, m),) = failure_maps(records)
+    assert label == "switching, start rest, locating the boundary" and len(m.points) == 100 and m.rate[np.argmin(abs(m.axes[0] - 12.0))] < 0.2
 
 
 @pytest.mark.sumo
