@@ -272,3 +272,18 @@ def test_in_sumo_a_traffic_range_plays_its_levels_and_replays_exactly(tmp_path, 
     capsys.readouterr()
     assert main(["replay", str(db), "2", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["reproduced"]
+
+
+def test_the_guides_example_is_a_campaign_searching_every_kind():
+    """docs/campaigns.md's example of a situation searched: a range, named choices, numeric choices, whole numbers."""
+    import tomllib
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "campaigns.md").read_text()
+    block = text[text.index("## The situation searched with the attack"):]
+    block = block[block.index("```toml") + len("```toml"):]
+    campaign = campaign_of(tomllib.loads(block[:block.index("```")]))
+    kinds = {e[0]: e for e in campaign.situation}
+    assert kinds["start"] == ("start", ("rest", "steady")) and kinds["v2v.latency_s"] == ("v2v.latency_s", (0, 0.1, 0.3))
+    assert kinds["v2v.seed"] == ("v2v.seed", 0, 9) and kinds["controller.c1"] == ("controller.c1", 0.3, 0.7)
+    assert len(campaign.situation) == 9
