@@ -186,6 +186,13 @@ def _say_falsify(args: argparse.Namespace, campaign, summary, counts, nearest, w
         from ..results.analysis import distinct_text
 
         print("  " + distinct_text(distinct["attacks"], distinct["crash_kinds"]))
+    if campaign.boundary:
+        from ..search.situation import locating
+
+        spent = [s for s in summary.samples if locating(s.index, campaign.boundary)]
+        wins = sum(s.outcome == "success" for s in spent)
+        print(f"  locating the boundary: {len(spent)} of the samples, a random attack each, {wins} of them successes "
+              f"(d4sumo plot map {args.db} --out map.png draws it from them)")
     if config.traffic is not None:
         from ..results.analysis import TRAFFIC_MEETS_M, traffic_nearness_text
 

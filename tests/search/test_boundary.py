@@ -103,11 +103,13 @@ def test_the_map_is_drawn_from_the_samples_spent_locating_where_a_campaign_has_t
 
 
 @pytest.mark.sumo
-def test_in_sumo_a_campaign_locating_its_boundary_plays_batched_as_alone(tmp_path):
+def test_in_sumo_a_campaign_locating_its_boundary_plays_batched_as_alone(tmp_path, capsys):
     args = ["falsify", "--set", "scenario.setpoint_m=[3, 15]", "--set", "scenario.speed_mps=[20, 30]", "--set", "search.boundary=0.5",
             "--duration", "15", "--samples", "40"]
     batched, alone = tmp_path / "batched.sqlite", tmp_path / "alone.sqlite"
     assert main([*args, "--db", str(batched)]) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if "locating the boundary" in line]
+    assert len(said) == 1 and said[0].startswith("  locating the boundary: 20 of the samples, a random attack each, ")
     assert main([*args, "--db", str(alone), "--batch", "1"]) == 0
 
     def samples(db):
