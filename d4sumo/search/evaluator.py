@@ -67,7 +67,6 @@ class Evaluator:
         #: batch carries per episode (the speed not where SUMO's models read it from their vehicle type); another key
         #: (a gain, where one value may make the arrays play it and another not) is asked each configuration's own
         self._one_key = all(e[0] in PER_EPISODE and not (e[0] == "speed_mps" and config.sumo_driven) for e in campaign.situation)
-        self._keys: dict[tuple, str] = {}  # the situation's values -> its configuration's batch key
 
     def plan(self, params) -> AttackPlan:
         """What the attacker does with these parameters: its signal, and its lane change if it makes one."""
@@ -84,21 +83,13 @@ class Evaluator:
             if len(self._configs) >= 256:
                 self._configs.clear()
             config = self._configs[key] = self.campaign.config_for(params, self.family)
-            if self._one_key:  # its key is the campaign's: every corner of the situation's box has it
+            if self._one_key:  # its key is the campaign's: it varies only what a batch carries per episode
                 known_key(config, self.batch_key)
         return config
 
     def batch_key_for(self, params) -> str:
         """The `batch.batch_key` of the configuration these parameters play: samples with one key may share a SUMO."""
-        if self._one_key:
-            return self.batch_key
-        key = tuple(float(v) for v in params[len(params) - len(self.campaign.situation):])
-        found = self._keys.get(key)
-        if found is None:
-            if len(self._keys) >= 256:
-                self._keys.clear()
-            found = self._keys[key] = batch_key(self.config_for(params))
-        return found
+        return self.batch_key if self._one_key else batch_key(self.config_for(params))  # (kept by configuration)
 
     def simulate(self, index: int, params, *, fcd_path: str | Path | None = None, gui: bool = False) -> Episode:
         """Sample ``index``'s episode with these parameters, alone (a replay's, a figure's): in the traffic

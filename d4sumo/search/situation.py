@@ -29,7 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, is_number
 from ..model.attacks.maneuvers import SituatedAttack
 from ..model.attacks.pedals import AttackFamily, Parameter
 from ..model.config import EpisodeConfig
@@ -67,12 +67,9 @@ def _is_list(value: Any) -> bool:
     return isinstance(value, (list, tuple))
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def _unit(key: str) -> str:
-    for suffix, unit in (("vehicles_per_hour", "vehicles per hour per lane"), ("_mps2", "m/s^2"), ("_mps", "m/s"), ("_m", "m"), ("_s", "s"), ("_per_hour", "per hour")):
+    for suffix, unit in (("vehicles_per_hour", "vehicles per hour per lane"), ("_mps2", "m/s^2"), ("_mps", "m/s"),
+                         ("_m", "m"), ("_s", "s")):
         if key.endswith(suffix):
             return unit
     return ""
@@ -87,12 +84,12 @@ def _searched(table: str, key: str, value: Any) -> bool:
         return False
     if table == "scenario":
         return key in CHOICES or _numeric_scenario_key(key)
-    return len(value) > 0 and all(_is_number(v) for v in value)
+    return len(value) > 0 and all(is_number(v) for v in value)
 
 
 def _numeric_scenario_key(key: str) -> bool:
     default = getattr(EpisodeConfig, key, None)
-    return _is_number(default) or default is None and key in ("lane", "attacker_declared_decel_mps2")
+    return is_number(default) or default is None and key in ("lane", "attacker_declared_decel_mps2")
 
 
 def split(doc: Mapping[str, Any]) -> tuple[dict, tuple[Entry, ...]]:
@@ -140,12 +137,12 @@ def entry(key: str, value: Any) -> Entry:
     if isinstance(value, Mapping):
         choices = value.get("choices")
         if set(value) != {"choices"} or not _is_list(choices) or len(choices) < 2 \
-                or not all(_is_number(v) and math.isfinite(v) for v in choices):
+                or not all(is_number(v) and math.isfinite(v) for v in choices):
             raise ConfigError(name, given, "a value, a range [low, high], or {choices = [a, b, ...]} of two or more numbers")
         _once(name, choices)
         return key, tuple(float(v) if isinstance(v, float) else v for v in choices)
     unit = _unit(bare)
-    if not (_is_list(value) and len(value) == 2 and all(_is_number(v) and math.isfinite(v) for v in value)):
+    if not (_is_list(value) and len(value) == 2 and all(is_number(v) and math.isfinite(v) for v in value)):
         raise ConfigError(name, given, f"a value, or a range [low, high] of two numbers{' in ' + unit if unit else ''}")
     low, high = float(value[0]), float(value[1])
     if not low < high:
@@ -206,14 +203,11 @@ def _typed(config: EpisodeConfig, e: Entry) -> Entry:
     key = e[0]
     if key in CHOICES:
         return e
-    bare = key.rpartition(".")[2]
-    if bare in FIXED and "." not in key:
-        raise ConfigError(field(key), list(e[1:]), f"a single value: {FIXED[bare]}")
     value = played(config, key)
     shown = list(e[1]) if len(e) == 2 else list(e[1:])
     if key.startswith("controller.") and isinstance(config.controller, tuple):
         raise ConfigError(field(key), shown, "a single value in a mixed platoon (one [controller] table searches its keys)")
-    if not _is_number(value):
+    if not is_number(value):
         raise ConfigError(field(key), shown, "a single value: ranges and choices are taken on keys that hold a number")
     if not isinstance(value, int):
         return (key, tuple(float(v) for v in e[1])) if len(e) == 2 else (key, float(e[1]), float(e[2]))

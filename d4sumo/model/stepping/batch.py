@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...errors import is_number
 from ..config import EpisodeConfig
 from ..world.network import is_network_path
 from ..controllers.arrays import ARRAY_KERNELS, ActuatorArray, CommandArray, CruiseArray, per_row
@@ -79,18 +80,14 @@ def _batch_key(config: EpisodeConfig) -> str:
     if config.sumo_driven:
         doc["scenario"]["speed_mps"] = config.speed_mps
     if isinstance(doc.get("controller"), dict) and not config.controllers[0].sumo_model:
-        doc["controller"] = {k: v for k, v in doc["controller"].items() if not _is_number(v)}
+        doc["controller"] = {k: v for k, v in doc["controller"].items() if not is_number(v)}
     doc.pop("radar", None)
     if isinstance(doc.get("v2v"), dict):
-        doc["v2v"] = {k: v for k, v in doc["v2v"].items() if not _is_number(v)}
+        doc["v2v"] = {k: v for k, v in doc["v2v"].items() if not is_number(v)}
     if not is_network_path(config.network):
         doc["vehicle"] = {k: v for k, v in doc["vehicle"].items() if k != "actuator_lag_s"}
     doc["arrays"] = config.batch_arrays
     return json.dumps(doc, sort_keys=True, default=str)
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 #: what may differ between the episodes of one batch's [scenario] (`batch_key`)
@@ -159,7 +156,7 @@ class PlatoonBatch:
             kernel = ARRAY_KERNELS.get(type(prototype))
             if kernel is None:  # one object per episode, of its own controller table (its own parameters)
                 for i, column in members:
-                    self._scalar.append((i, column, [PythonFollower(f[i - 1].config, c, i) for f, c in zip(episode_followers, configs)]))
+                    self._scalar.append((i, column, [PythonFollower(c.controllers[i - 1], c, i) for c in configs]))
                 continue
             columns = [c for _, c in members]
             modes = [self._with_mode.index(i) for i, _ in members]

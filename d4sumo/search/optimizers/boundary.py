@@ -29,10 +29,12 @@ BLOCK = 8
 CANDIDATES = 1024
 
 
-def straddle(points: np.ndarray, successes: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """The straddle score of each candidate (unit-cube rows): 1.96 sd - |p - 1/2| of `kernel_estimate`."""
+def straddle(points: np.ndarray, successes: np.ndarray, candidates: np.ndarray) -> tuple[int, float]:
+    """The candidate (unit-cube rows) the straddle rule chooses, the greatest 1.96 sd - |p - 1/2| of
+    `kernel_estimate`, and its estimated rate p."""
     rate, sd, _ = kernel_estimate(points, successes, candidates)
-    return 1.96 * sd - np.abs(rate - 0.5)
+    best = int(np.argmax(1.96 * sd - np.abs(rate - 0.5)))
+    return best, float(rate[best])
 
 
 class BoundarySearch(Optimizer):
@@ -109,10 +111,10 @@ class BoundarySearch(Optimizer):
             attack = self.rng.random(d - k)
             candidates = self.rng.random((CANDIDATES, k))
             if points:
-                chosen = candidates[int(np.argmax(straddle(np.array(points), np.array(successes), candidates)))]
-                rate, _, _ = kernel_estimate(np.array(points), np.array(successes), chosen[None, :])
+                best, rate = straddle(np.array(points), np.array(successes), candidates)
+                chosen = candidates[best]
                 points.append(chosen)  # believed at the estimate's own rate, so that the next is chosen elsewhere
-                successes.append(float(rate[0]))
+                successes.append(rate)
             else:
                 chosen = candidates[0]
             self._chosen[member] = self._unit_to_box(np.concatenate([attack, chosen]))
