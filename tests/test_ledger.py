@@ -34,8 +34,8 @@ def test_a_key_at_its_earlier_value_is_left_out_and_given_back_and_a_bool_is_nev
     assert ledger.restored("traffic", {"seed": 0})["insertion_checks"] is False
     assert ledger.stored("scenario", {"route": [], "lane": None, "rebuild": True, "signals": "obey"}) == {"signals": "obey"}
     assert ledger.stored("search.auto", {"per_signal": 0, "stall": False}) == {"stall": False}  # False is no option's 0
-    assert [e.key for e in ledger.added_after("0.19")] == ["v2v.match_radar", "search.auto.learn_points", "search.bo.edges",
-                                                         "search.auto.edges"]
+    assert [e.key for e in ledger.added_after("0.19")] == ["traffic.edging_sensed", "v2v.match_radar", "search.auto.learn_points",
+                                                         "search.bo.edges", "search.auto.edges"]
 
 
 def test_every_default_campaign_of_today_holds_no_key_at_its_earlier_value():

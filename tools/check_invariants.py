@@ -28,7 +28,9 @@ campaign stores a sample, and counts the samples where any of these disagree:
   precision (6 decimals), and no gap recomputed from the FCD alone (who follows whom from its lateral
   coordinate) is below c (beyond that precision) before the stored collision time, nor is the
   collision pair's FCD gap above c at it; every car that keeps its lane drove the road's lane path
-  (the platoon's lane on each edge, as d4sumo reads it from the network's connections);
+  (the platoon's lane on each edge, as d4sumo reads it from the network's connections); with a
+  lane-changing attacker, every car's gap signal is the FCD's gap to the nearest car ahead in the lanes
+  it covers (within 150 m to the FCD's precision, farther no less);
 - among a network's own demand across signalised crossings (SUMO's corridor example, --junctions), in 2D:
   no car of the platoon overlaps any other vehicle in SUMO's FCD (`bodies.body_gap_m` of its x, y, angle,
   length and width) before the stored collision time, and a collision with a traffic car is a 2D
@@ -43,8 +45,14 @@ With --situation P, a share of the campaigns search their setpoint (and some the
 lag, V2V loss and latency, radar noise and controller gain) with the attack: each sample plays its own, and is
 checked as any other.
 
+With --ramps P, a share of the lane-changing episodes play through an on-ramp that moves the platoon's lane to
+another of SUMO's indices and back (SUMO's Bremen motorway, the example acceleration lane), half of them among
+traffic (Bremen's own demand, or a flow): who follows whom from the FCD then places each car across the road by its
+lane, counted from the platoon's on that edge, and its lateral position in it; along the route by where its lane's
+edge starts (sumolib's lengths).
+
 Usage: python tools/check_invariants.py [N] [--seed S] [--batch K] [--traffic P] [--cooperative P] [--junctions P]
-       [--situation P]. Prints the counts; exits 1 if any is
+       [--ramps P] [--situation P]. Prints the counts; exits 1 if any is
 non-zero.
 """
 
@@ -81,6 +89,9 @@ from d4sumo.search.store import Store
 from toolargs import Parser, run_main
 
 FCD_TOLERANCE_M = 2.5e-6  # two positions, each one or two numbers rounded to 6 decimals
+#: with a lane-changing attacker, each car's gap to the nearest car ahead in the lanes it covers is exact up to
+#: this far: SUMO's search for a car's leader across a junction missed one farther (tests/engine/test_traffic.py)
+SENSED_EXACTLY_M = 150.0
 #: the roads drawn from: the shipped 4-lane highway (one edge), and roads of several edges: a speed
 #: change, a lane drop, a curve (in-lane maneuvers only there: lanes are told from the FCD's y); then
 #: netgenerate's grid and three sharp turns (`sharp_turns`), made at the first run
@@ -143,6 +154,9 @@ SYSTEMS = [ControllerConfig("switching"), ControllerConfig("timegap"), Controlle
 TRAFFIC_SHARE = [0.15]
 #: the share of in-lane episodes played on SUMO's corridor among its own demand, through its signalised crossings (--junctions)
 JUNCTION_SHARE = [0.0]
+#: the share of lane-changing episodes played through an on-ramp, where the platoon's lane index changes
+#: (SUMO's Bremen motorway and the example acceleration lane), half of those among traffic (--ramps)
+RAMP_SHARE = [0.0]
 #: SUMO's corridor example (tools/game/corridor): its main route through three signalised crossings
 CORRIDOR_ROUTE = ("gneE27", "gneE25", "gneE18", "gneE29")
 CORRIDOR: dict[str, str] = {}
@@ -212,6 +226,8 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
         config = dataclasses.replace(config, network=network, network_sha256=None, route=CORRIDOR_ROUTE, lane=None, duration_s=50.0,
                                      start="steady", speed_mps=float(rng.choice([8.0, 11.0, 13.0])), rebuild=True,
                                      traffic={"demand": demand, "seed": int(rng.integers(0, 1000))})
+    if RAMP_SHARE[0] and config.maneuver_class.lateral and rng.random() < RAMP_SHARE[0]:  # (drawn only when asked)
+        config = through_a_ramp(config, rng)
     if config.v2v is not None and rng.random() < 0.5:  # cooperative followers over a late or lossy channel
         config = dataclasses.replace(config, v2v={"beacon_interval_s": float(rng.choice([0.05, 0.1, 0.2])),
                                                   "latency_s": float(rng.choice([0.0, 0.1, 0.3])),
@@ -253,7 +269,26 @@ def _random_episode(rng: np.random.Generator) -> tuple[Campaign, np.ndarray]:
 #: the traffic's vehicle types drawn from, and their lengths [m] (SUMO's passenger car is 5 m)
 TRAFFIC_TYPES = {"car": {"share": 0.8, "speedDev": 0.1}, "truck": {"share": 0.2, "vClass": "truck", "length": 12.0, "maxSpeed": 25.0},
                  "idm": {"share": 0.5, "carFollowModel": "IDM", "tau": 1.2}}
-TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0, "DEFAULT_VEHTYPE": 5.0}
+TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0, "DEFAULT_VEHTYPE": 5.0,
+                   "highway": 5.0, "ramp": 5.0}  # and the types of SUMO's Bremen demand
+
+
+def through_a_ramp(config: EpisodeConfig, rng: np.random.Generator) -> EpisodeConfig:
+    """The lane-changing episode on a road whose on-ramp moves the platoon's lane to another of SUMO's
+    indices and back: SUMO's Bremen motorway (among its own demand, a flow, or alone) or the example
+    acceleration lane (among a flow, or alone), from steady state."""
+    from d4sumo.sumohome import sumo_home
+
+    bremen = bremen_motorway()
+    network = str(rng.choice([bremen, ROADS[4]]))
+    traffic = None
+    if rng.random() < 0.5:
+        traffic = (traffic_table(rng) if network != bremen or rng.random() < 0.5 else
+                   {"demand": str(Path(sumo_home()) / "tools" / "game" / "highway" / "highway.rou.xml"),
+                    "seed": int(rng.integers(0, 1000)), "per_sample": bool(rng.random() < 0.3)})
+    return dataclasses.replace(config, network=network, network_sha256=None, route=ROUTES.get(network, ()), lane=None,
+                               rebuild=network != bremen, start="steady", speed_mps=float(rng.choice([25.0, 30.0])), traffic=traffic,
+                               duration_s=30.0 if network == bremen else 80.0)
 
 
 def traffic_table(rng: np.random.Generator) -> dict:
@@ -299,29 +334,94 @@ def lane_change(rng: np.random.Generator, followers: int) -> dict:
                 obstacle_speed_mps=float(rng.choice([0.0, 5.0, 12.5])), lane_change_s=float(rng.choice([0.0, 2.0])))
 
 
-def read_fcd(path: Path, ids: tuple[str, ...], one_edge: bool,
-             traffic: list | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, list[str]]]:
-    """Positions along the route and lateral coordinates, samples x cars, and each car's lanes in the
-    order it drove them (junction lanes left out). On a route of many edges a position is the car's first
-    lane position (every car starts on the first edge) plus SUMO's odometer, not the lane position, which
-    starts again at 0 on each edge. ``traffic``: a list to which each sample's traffic cars are appended,
-    {id: (lane, front position, length, lateral coordinate)} (roads of one edge)."""
-    rows: dict[float, dict[str, tuple[float, float, float]]] = {}
+def read_fcd(path: Path, ids: tuple[str, ...], road, traffic: list | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, list[str]]]:
+    """Positions along the route and across it, samples x cars, and each car's lanes in the order it drove
+    them (junction lanes left out). On a route of many edges a position is the car's first lane position
+    (every car starts on the first edge) plus SUMO's odometer, not the lane position, which starts again
+    at 0 on each edge. Across the road: a coordinate from the right edge of the platoon's lane (`Across`).
+    ``traffic``: a list to which each sample's traffic cars on the route are appended, {id: (lane, position
+    along the route, length, across)}."""
+    rows: dict[float, dict[str, tuple]] = {}
     lanes: dict[str, list[str]] = {}
     others: dict[float, dict] = {}
-    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle", ["id", "y", "type", "pos", "lane", "odometer"]):
+    for step, v in parse_fast_nested(str(path), "timestep", ["time"], "vehicle",
+                                     ["id", "y", "type", "pos", "lane", "odometer", "posLat"]):
         if v.id not in ids:
-            others.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), TRAFFIC_LENGTHS[v.type], float(v.y))
+            others.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), TRAFFIC_LENGTHS[v.type], float(v.y),
+                                                             float(v.posLat))
             continue
-        rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y), float(v.odometer))
+        rows.setdefault(float(step.time), {})[v.id] = (float(v.pos), float(v.y), float(v.odometer), v.lane, float(v.posLat))
         driven = lanes.setdefault(v.id, [])
         if not v.lane.startswith(":") and (not driven or driven[-1] != v.lane):
             driven.append(v.lane)
-    table = np.array([[rows[t][vid] for vid in ids] for t in sorted(rows)])
-    positions = table[:, :, 0] if one_edge else table[0, :, 0] + table[:, :, 2]
+    times = sorted(rows)
+    table = np.array([[rows[t][vid][:3] for vid in ids] for t in times])
+    positions = table[:, :, 0] if road.one_edge else table[0, :, 0] + table[:, :, 2]
+    place = Across(road, ids)
+    cross = np.array([[np.nan if (a := place(vid, *rows[t][vid][3:], rows[t][vid][1], rows[t]["v1"][1])) is None else a
+                       for vid in ids] for t in times])
     if traffic is not None:
-        traffic += [others.get(t, {}) for t in sorted(rows)]
-    return positions, table[:, :, 1], lanes
+        seen = {}
+        for t in sorted(others):  # every traffic car in the order it drove (a junction's lane: the one it came from)
+            cars = {}
+            for vid, (lane, pos, length, y, lateral) in others[t].items():
+                a = place(vid, lane, lateral, y, rows[t]["v1"][1] if t in rows else np.nan)
+                along = place.along(lane, pos)
+                if along is not None and a is not None:
+                    cars[vid] = (lane, along, length, a)
+            seen[t] = cars
+        traffic += [seen.get(t, {}) for t in times]
+    return positions, cross, lanes
+
+
+class Across:
+    """Where a car is across the road and along the route, from the FCD and the network file alone.
+
+    On a road of one edge (straight): across, its y less v1's (v1 keeps the platoon's lane) plus half a
+    lane; along, its lane position. On a route of many edges: across, its place from the platoon's lane on
+    the edge it drives (SUMO's index less the road's lane path's there; on a junction's lane, the place of
+    the lane it came from) times the lane width, plus its lateral position in its lane (posLat); along,
+    where the lane's edge starts (sumolib's lengths of the route's edges and of the junction lanes of the
+    platoon's lane path) plus its lane position. A car on a lane off the route is nowhere (None)."""
+
+    def __init__(self, road, ids: tuple[str, ...]):
+        self.one_edge, self.width = road.one_edge, road.lane_width_m
+        self.path = dict(zip(road.route_edges, road.platoon_path))
+        self.came: dict[str, int] = {}
+        self.starts: dict[str, float] = {}
+        if not road.one_edge:
+            import sumolib
+
+            net = sumolib.net.readNet(str(road.net_file), withInternal=True)
+            along = 0.0
+            for edge, to, (p, q) in zip(road.route_edges, [*road.route_edges[1:], None], zip(road.platoon_path, [*road.platoon_path[1:], 0])):
+                self.starts[edge] = along
+                lane = net.getLane(f"{edge}_{p}")
+                along += lane.getLength()
+                for _ in range(8) if to is not None else ():  # through the junction along the platoon's lane
+                    via = next((c.getViaLaneID() for c in lane.getOutgoing() if c.getToLane().getID() == f"{to}_{q}"), "")
+                    if not via:
+                        break
+                    self.starts.setdefault(via.rpartition("_")[0], along)
+                    lane = net.getLane(via)
+                    along += lane.getLength()
+
+    def __call__(self, vid: str, lane: str, lateral: float, y: float, y_v1: float) -> float | None:
+        if self.one_edge:
+            return y - y_v1 + 0.5 * self.width
+        edge, _, index = lane.rpartition("_")
+        if edge in self.path:
+            self.came[vid] = int(index) - self.path[edge]
+        elif not lane.startswith(":"):
+            self.came.pop(vid, None)
+        place = self.came.get(vid)
+        return None if place is None else (place + 0.5) * self.width + lateral
+
+    def along(self, lane: str, pos: float) -> float | None:
+        if self.one_edge:
+            return pos
+        start = self.starts.get(lane.rpartition("_")[0])
+        return None if start is None else start + pos
 
 
 def fcd_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, lanes: list[str],
@@ -348,20 +448,36 @@ def fcd_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, lanes: list[
     return out
 
 
-def fcd_lateral_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, y: np.ndarray, traffic: list[dict],
+def fcd_lateral_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, cross: np.ndarray, traffic: list[dict],
                               lane_width_m: float) -> list[list[tuple]]:
     """Who follows whom at each FCD sample with traffic and a lane-changing attacker, from the FCD alone:
-    every car's lanes from its lateral coordinate (lane 0's centre is where v1 drives), the nearest cars
-    in each lane, a pair of two traffic cars or of a traffic car over 1000 m away left out (a traffic car
-    is index N + 1, as the stored pairs count it)."""
+    every car's lanes from its coordinate across the road (`Across`), the nearest cars in each lane, a pair
+    of two traffic cars or of a traffic car over 1000 m away left out (a traffic car is index N + 1, as the
+    stored pairs count it)."""
     n, lengths = len(config.vehicle_ids), [v.length_m for v in config.car_vehicles]
     out = []
-    for xs, ys, cars in zip(positions, y, traffic):
+    for xs, across, cars in zip(positions, cross, traffic):
         ids = sorted(cars)
-        lanes = [occupied_lanes(yi - ys[1] + 0.5 * lane_width_m, lane_width_m) for yi in [*ys, *(cars[t][3] for t in ids)]]
+        lanes = [occupied_lanes(a, lane_width_m) for a in [*across, *(cars[t][3] for t in ids)]]
         pairs = lane_pairs([*xs, *(cars[t][1] for t in ids)], lanes, [*lengths, *(cars[t][2] for t in ids)], apart=n)
         out.append([(min(a, n), min(b, n), g) for a, b, g in pairs if g < 1000.0 or max(a, b) < n])
     return out
+
+
+def fcd_gaps_differ(config: EpisodeConfig, episode, pairs: list[list[tuple]]) -> bool:
+    """Whether some car's gap signal (to the nearest car ahead in the lanes it covers, whoever it is) is not
+    the FCD's at some sample: nearer than `SENSED_EXACTLY_M`, within the FCD's precision; farther, no less.
+    A standing car (a stopped obstacle) is held to the latter only: SUMO's search for its leader ends at the
+    next junction, which it would never reach."""
+    n = len(config.vehicle_ids)
+    for k, sample in enumerate(pairs[:len(episode.trace)]):
+        for i, vid in enumerate(config.vehicle_ids):
+            want = min((g for a, b, g in sample if b == i and g < 1000.0), default=1000.0)  # the trace's free road
+            got = episode.trace[f"gap_{vid}"][k]
+            exact = want < SENSED_EXACTLY_M and episode.trace[f"speed_{vid}"][k] > 0.0
+            if (abs(want - got) > FCD_TOLERANCE_M) if exact else (got < want - FCD_TOLERANCE_M):
+                return True
+    return False
 
 
 def fcd_lanes_differ(config: EpisodeConfig, road, lanes: dict[str, list[str]]) -> bool:
@@ -373,13 +489,12 @@ def fcd_lanes_differ(config: EpisodeConfig, road, lanes: dict[str, list[str]]) -
     return any(lanes[vid] != expected[:len(lanes[vid])] for vid in keeping)
 
 
-def fcd_pairs(config: EpisodeConfig, positions: np.ndarray, y: np.ndarray, lane_width_m: float) -> list[list[tuple]]:
-    """Who follows whom at each FCD sample, from the FCD alone: lanes from the lateral coordinate (lane 0's
-    centre is where v1, which never changes lanes, drives)."""
+def fcd_pairs(config: EpisodeConfig, positions: np.ndarray, cross: np.ndarray, lane_width_m: float) -> list[list[tuple]]:
+    """Who follows whom at each FCD sample, from the FCD alone: lanes from the coordinate across the road (`Across`)."""
     maneuver = maneuver_of(config)
     out = []
-    for xs, ys in zip(positions, y):
-        lanes = [occupied_lanes(yi - ys[1] + 0.5 * lane_width_m, lane_width_m) for yi in ys] if maneuver.lateral else None
+    for xs, across in zip(positions, cross):
+        lanes = [occupied_lanes(a, lane_width_m) for a in across] if maneuver.lateral else None
         out.append(maneuver.pairs(list(xs), lanes))
     return out
 
@@ -419,7 +534,7 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         broken.append("rtamt/numpy psi")
     road = evaluator.road
     traffic: list[dict] = []
-    positions, y, lanes = read_fcd(fcd, config.vehicle_ids, road.one_edge, traffic)
+    positions, cross, lanes = read_fcd(fcd, config.vehicle_ids, road, traffic)
     if fcd_lanes_differ(config, road, lanes):
         broken.append("FCD/platoon lane")
     trace_positions = np.column_stack([episode.trace[f"pos_{vid}"] for vid in config.vehicle_ids])
@@ -427,16 +542,18 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     if positions.shape != trace_positions.shape or np.max(np.abs(positions - trace_positions)) > rounding:
         broken.append("FCD/trace positions")
         return broken
-    if config.traffic is not None and not road.one_edge:  # across junctions among a network's demand: in 2D
+    if config.traffic is not None and not road.one_edge and not config.maneuver_class.lateral:  # across junctions: in 2D
         return broken + fcd_bodies_differ(config, fcd, episode, c, crash)
     if config.traffic is not None and config.maneuver_class.lateral:
-        pairs = fcd_lateral_traffic_pairs(config, positions, y, traffic, road.lane_width_m)
+        pairs = fcd_lateral_traffic_pairs(config, positions, cross, traffic, road.lane_width_m)
     elif config.traffic is not None:
         pairs = fcd_traffic_pairs(config, positions, [lanes[vid][0] for vid in config.vehicle_ids], traffic)
     else:
-        pairs = fcd_pairs(config, positions, y, road.lane_width_m)
+        pairs = fcd_pairs(config, positions, cross, road.lane_width_m)
     if any(g < crash - FCD_TOLERANCE_M for sample in pairs[:-1] for _, _, g in sample):
         broken.append("FCD collision before the end")
+    if config.maneuver_class.lateral and fcd_gaps_differ(config, episode, pairs):
+        broken.append("FCD/gaps ahead")
     if config.maneuver == "inlane":  # the minimum gaps from the attack's start, as the FCD shows them
         ids, seen = (*config.vehicle_ids, "traffic"), {}
         for sample in pairs[config.attack_start_step:]:
@@ -452,7 +569,9 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         for a, b, g in pairs[-1]:  # a car covering two lanes may be in two pairs of one name: the nearer
             last[f"{ids[a]}-{ids[b]}"] = min(g, last.get(f"{ids[a]}-{ids[b]}", g))
         pair = "-".join(car if car in ids else "traffic" for car in c["pair"].split("-"))  # any traffic car as one
-        if last.get(pair, np.inf) > crash + FCD_TOLERANCE_M or row.min_gaps[pair] >= crash:
+        # with a car off the platoon's lanes, inside a junction (`junctions`): a 2D collision
+        in_2d = "traffic" in pair and not road.one_edge and fcd_collision_2d(config, fcd, episode, c, crash)
+        if (last.get(pair, np.inf) > crash + FCD_TOLERANCE_M and not in_2d) or row.min_gaps[pair] >= crash:
             broken.append("collision pair/gap")
     elif len(episode.trace) != config.steps + 1:
         x = episode.trace["pos_v0"]  # only the end distance may end it early: the attacker there, not before
@@ -461,16 +580,29 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
     return broken
 
 
-def fcd_bodies_differ(config: EpisodeConfig, fcd: Path, episode, collision: dict | None, crash: float) -> list[str]:
-    """In 2D, from SUMO's FCD alone: no car of the platoon within c of any other vehicle before the stored
-    collision (or the episode's end), and the stored collision's pair within c at it."""
+def fcd_bodies(config: EpisodeConfig, fcd: Path, episode) -> tuple[dict[float, dict[str, Body]], list[float]]:
+    """Every vehicle's body at each FCD sample, and the episode's samples' times."""
     ids = config.vehicle_ids
     sizes = {vid: (v.length_m, CAR_WIDTH_M) for vid, v in zip(ids, config.car_vehicles)}
     steps: dict[float, dict[str, Body]] = {}
     for step, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "x", "y", "angle", "type"]):
         length, width = sizes.get(v.id, (TRAFFIC_LENGTHS.get(v.type, 5.0), CAR_WIDTH_M))  # the demand's: SUMO's passenger car
         steps.setdefault(float(step.time), {})[v.id] = Body(float(v.x), float(v.y), float(v.angle), length, width)
-    times = [t for t in sorted(steps) if "v0" in steps[t]][:len(episode.trace)]
+    return steps, [t for t in sorted(steps) if "v0" in steps[t]][:len(episode.trace)]
+
+
+def fcd_collision_2d(config: EpisodeConfig, fcd: Path, episode, collision: dict, crash: float) -> bool:
+    """Whether the stored collision's pair is within c of each other in 2D in the FCD at its time."""
+    steps, times = fcd_bodies(config, fcd, episode)
+    a, b = collision["pair"].split("-", 1)
+    return bool(times) and body_gap_m(steps[times[-1]][a], steps[times[-1]][b]) <= crash + FCD_TOLERANCE_M
+
+
+def fcd_bodies_differ(config: EpisodeConfig, fcd: Path, episode, collision: dict | None, crash: float) -> list[str]:
+    """In 2D, from SUMO's FCD alone: no car of the platoon within c of any other vehicle before the stored
+    collision (or the episode's end), and the stored collision's pair within c at it."""
+    ids = config.vehicle_ids
+    steps, times = fcd_bodies(config, fcd, episode)
     broken = []
     for k, t in enumerate(times):
         cars = steps[t]
@@ -479,11 +611,9 @@ def fcd_bodies_differ(config: EpisodeConfig, fcd: Path, episode, collision: dict
         if k < len(times) - 1 and near[0] < crash - FCD_TOLERANCE_M:
             broken.append("FCD 2D collision before the end")
             break
-    if collision is not None and times:
-        a, b = collision["pair"].split("-", 1)
-        if body_gap_m(steps[times[-1]][a], steps[times[-1]][b]) > crash + FCD_TOLERANCE_M and any(
-                "traffic" in car for car in (a, b)):
-            broken.append("collision pair/2D gap")
+    if collision is not None and times and any("traffic" in car for car in collision["pair"].split("-", 1)) and not (
+            fcd_collision_2d(config, fcd, episode, collision, crash)):
+        broken.append("collision pair/2D gap")
     return broken
 
 
@@ -548,6 +678,10 @@ def main(argv=None) -> int:
     parser.add_argument("--junctions", type=float, default=JUNCTION_SHARE[0],
                         help="the share of in-lane episodes played on SUMO's corridor among its own demand, through its "
                              f"signalised crossings (checked in 2D) [{JUNCTION_SHARE[0]}]")
+    parser.add_argument("--ramps", type=float, default=RAMP_SHARE[0],
+                        help="the share of lane-changing episodes played through an on-ramp that moves the platoon's "
+                             f"lane index (SUMO's Bremen motorway, the example acceleration lane), half of them among "
+                             f"traffic [{RAMP_SHARE[0]}]")
     parser.add_argument("--situation", type=float, default=SITUATION_SHARE[0],
                         help="the share of episodes whose campaign searches its setpoint (and, half of those without "
                              f"traffic, its speed): each sample plays its own [{SITUATION_SHARE[0]}]")
@@ -566,6 +700,9 @@ def main(argv=None) -> int:
     if not 0.0 <= args.junctions <= 1.0:
         parser.error(f"--junctions: got {args.junctions}; allowed: a share in [0, 1]")
     JUNCTION_SHARE[0] = args.junctions
+    if not 0.0 <= args.ramps <= 1.0:
+        parser.error(f"--ramps: got {args.ramps}; allowed: a share in [0, 1]")
+    RAMP_SHARE[0] = args.ramps
     if not 0.0 <= args.situation <= 1.0:
         parser.error(f"--situation: got {args.situation}; allowed: a share in [0, 1]")
     SITUATION_SHARE[0] = args.situation
@@ -578,6 +715,7 @@ def main(argv=None) -> int:
                                                                traffic={"demand": corridor()[1]}))
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
+    ramps: Counter[str] = Counter()  # lane-changing episodes through an on-ramp that moves the platoon's lane index
     examples: dict[str, str] = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -599,6 +737,8 @@ def main(argv=None) -> int:
                     continue
             if only and index not in only:  # (its batch partners are drawn from a generator of its own index)
                 continue
+            if campaign.config.maneuver_class.lateral and road.lane_shifts:
+                ramps["among traffic" if campaign.config.traffic is not None else "alone"] += 1
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
             outcome = store.samples(cid)[-1].outcome if not problems or not problems[0].startswith("error") else "error"
@@ -619,6 +759,8 @@ def main(argv=None) -> int:
                       file=sys.stderr)
         store.close()
     print(f"episodes: {args.n} (seed {args.seed}); outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    if ramps:
+        print("lane changes through an on-ramp: " + ", ".join(f"{k} {v}" for k, v in sorted(ramps.items())))
     print(f"disagreements: {sum(broken.values())}")
     for name, count in sorted(broken.items()):
         print(f"  {name}: {count}  e.g. {examples[name][:400]}")

@@ -33,9 +33,10 @@ SPEED_MODE_PYTHON = 32  # all checks off: Python's speed is applied as given
 LANE_CHANGE_MODE_OFF = 0  # no lane change of SUMO's own; a TraCI request is carried out without regard to others
 LANE_CHANGE_MODE_SUMO = 1621  # SUMO's default: its model changes lanes, respecting others
 FCD_PRECISION = 6  # decimals in FCD: gaps recomputed from it agree with the trace to far below 1 cm
-#: SUMO's default FCD attributes and the odometer, from which a position along a route of many edges
-#: comes (a lane position starts again at 0 on each edge)
-FCD_ATTRIBUTES = "x,y,angle,type,speed,pos,lane,slope,acceleration,odometer"
+#: SUMO's default FCD attributes, the odometer, from which a position along a route of many edges comes
+#: (a lane position starts again at 0 on each edge), and the lateral position in the lane, from which a
+#: car's place across the lanes comes on a curved road (its y does not tell it there)
+FCD_ATTRIBUTES = "x,y,angle,type,speed,pos,lane,slope,acceleration,odometer,posLat"
 
 
 # --- followers driven by SUMO's car-following models ---------------------------------------------

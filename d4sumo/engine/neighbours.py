@@ -1,14 +1,63 @@
 """Who is ahead of whom among SUMO's traffic: each car of a platoon, its leader and follower as SUMO sees them
 in its lane (a traffic car, or a car of its own platoon), with the gap between their bumpers; for a
-lane-changing attacker, in each lane it covers. The pairs the step loop scores, the speeds its cars sense."""
+lane-changing attacker, in each lane it covers. The pairs the step loop scores, the speeds its cars sense.
+Where each lane of the route lies, along it and across it (`RouteLanes`)."""
 
 from __future__ import annotations
 
+from ..errors import SumoError
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import Pair
-from ..model.world.lanes import FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
-from .calls import vehicle_call
+from ..model.world.lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
+from .calls import vehicle_call, via_lanes
 from .scenarios import Road
+
+
+class RouteLanes:
+    """Where each lane of one copy of the route lies: where it starts along the route [m], and its place
+    across the road counted from the platoon's lane on its edge (0 the platoon's, 1 the one to its left, -1
+    an on-ramp's acceleration lane to its right). That covers every lane of the route's edges and the
+    junction lanes between two of them, each of those counted from the lane it leaves.
+
+    An on-ramp adds a lane on the right, so SUMO's index of the platoon's lane, and of every lane beside it,
+    changes along the route (`Road.lane_path`): a place across the road is read from the lane's own edge.
+    Along the route, a lane of an edge starts where the edge does (the platoon's odometer, `route_position`:
+    the edges' lanes, and the junction lanes between the corridor's, are as long as each other,
+    `Road.even_lanes`); on a road of one edge that is 0, and a position along it is the lane position itself."""
+
+    def __init__(self, api, route: tuple[str, ...], path: tuple[int, ...]):
+        #: lane id -> (its start along the route [m], its place across the road, SUMO's index of the platoon's
+        #: lane's place on its edge: the lane's own index minus its place)
+        self.lanes: dict[str, tuple[float, int, int]] = {}
+        along = 0.0
+        for k, edge in enumerate(route):
+            count = api.edge.getLaneNumber(edge)
+            for i in range(count):
+                self.lanes[f"{edge}_{i}"] = (along, i - path[k], path[k])
+            if k + 1 == len(route):
+                break
+            end = along + api.lane.getLength(f"{edge}_{path[k]}")
+            for i in range(count):  # the junction lanes from each lane of the edge into the next one
+                for to_lane in sorted({link[0] for link in api.lane.getLinks(f"{edge}_{i}")
+                                       if link[0].rpartition("_")[0] == route[k + 1]}):
+                    start = end
+                    for via in via_lanes(api, f"{edge}_{i}", to_lane):
+                        index = int(via.rpartition("_")[2])
+                        self.lanes.setdefault(via, (start, i - path[k], index - (i - path[k])))
+                        start += api.lane.getLength(via)
+            along = end + sum(api.lane.getLength(via) for via in
+                              via_lanes(api, f"{edge}_{path[k]}", f"{route[k + 1]}_{path[k + 1]}"))
+
+    def place(self, lane: str) -> int:
+        """The lane's place across the road (SumoError off the route: never a silent guess)."""
+        try:
+            return self.lanes[lane][1]
+        except KeyError:
+            raise SumoError(f"a car of the platoon drove lane {lane}, off its route") from None
+
+    def index(self, lane: str, place: int) -> int:
+        """SUMO's index, on the edge of ``lane``, of the lane at ``place`` across the road."""
+        return self.lanes[lane][2] + place
 
 
 class _TrafficSense:
@@ -82,37 +131,112 @@ class _TrafficSense:
 
 
 class _LateralTrafficSense:
-    """Who follows whom among traffic when the attacker changes lanes (`maneuvers.LaneChange`, a road of
-    one edge): in every lane each car covers (from its lateral position, a car changing lanes covering
+    """Who follows whom among traffic when the attacker changes lanes (`maneuvers.LaneChange`): in every
+    lane each car covers (from its lateral position, a car changing lanes covering
     both), the nearest cars, a traffic car included (`lanes.lane_pairs`: the arithmetic of the
     maneuver alone, bit for bit, between cars of the platoon). The traffic cars that may be next to a car
     of the platoon are SUMO's: its leader and follower, and its leaders and followers in the lanes beside
-    it. Returns what `_TrafficSense` returns."""
+    it. A traffic car is placed along and across the road by its lane (`RouteLanes`); one on no lane of
+    the route (an on-ramp, a junction lane from it) is on none of the platoon's lanes, and is left out
+    (inside a junction, `junctions` sees it in 2D). Returns what `_TrafficSense` returns.
+
+    SUMO names only the nearest car of each lane beside a car. A traffic car farther on in that lane,
+    already edging into the car's own lane, covers it, and may be nearer than anything SUMO names there.
+    With ``traffic.edging_sensed`` (`_edging`), each lane beside a platoon car is walked, car by car, up
+    to the nearest car known in its own lanes, and every car edging across a line on the way is added.
+    Without it, as d4sumo 0.21 and before sensed the traffic, such a car is sensed once SUMO has it in
+    the lane (their stored campaigns replay so)."""
 
     def __init__(self, api, config: EpisodeConfig, ids: tuple[str, ...], lateral, road: Road):  # lateral: `sumo._Lateral`
         self.ids, self.index, self.lateral = ids, {vid: i for i, vid in enumerate(ids)}, lateral
         self.names = list(config.vehicle_ids)
         self.lengths = [v.length_m for v in config.car_vehicles]
-        self.width, self.base = road.lane_width_m, road.platoon_lane
+        self.width, self.route_lanes = road.lane_width_m, lateral.route_lanes
+        self.edging_sensed = config.traffic.edging_sensed
+        #: a car this far or farther from its lane's centre reaches across a line [m] (`lanes.occupied_lanes`)
+        self.edging_m = (road.lane_width_m - CAR_WIDTH_M) / 2.0
         call = lambda name: vehicle_call(api, name)  # noqa: E731
         self.get_leader, self.get_follower, self.get_neighbors = call("getLeader"), call("getFollower"), call("getNeighbors")
         self.get_position, self.get_speed, self.get_length = call("getLanePosition"), call("getSpeed"), call("getLength")
-        self.get_lane, self.get_lateral = call("getLaneIndex"), call("getLateralLanePosition")
+        self.get_lane, self.get_lateral = call("getLaneID"), call("getLateralLanePosition")
 
     def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
         lanes = self.lateral.sense()  # the platoon's cars' lanes (and the attacker's lateral position, recorded)
         near: set[str] = set()
-        for vid in self.ids:
+        beside: list[tuple[int, int, tuple]] = []  # (car, mode, SUMO's neighbours there)
+        for b, vid in enumerate(self.ids):
             for hit in (self.get_leader(vid, FREE_ROAD_GAP_M), self.get_follower(vid, FREE_ROAD_GAP_M)):
                 if hit and hit[0]:
                     near.add(hit[0])
             for mode in range(4):  # the lanes to its right and left, followers and leaders
-                near.update(other for other, _ in self.get_neighbors(vid, mode))
-        traffic = sorted(near - self.index.keys())
-        xs = list(x) + [self.get_position(t) for t in traffic]  # a road of one edge: the lane position is along it
+                found = self.get_neighbors(vid, mode)
+                near.update(other for other, _ in found)
+                beside.append((b, mode, found))
+        found = self._pairs(near, x, v, lanes)
+        if self.edging_sensed:
+            edging = self._edging(beside, found[0], near)
+            if edging:
+                found = self._pairs(near | edging, x, v, lanes)
+        return found
+
+    def _pairs(self, near: set[str], x: list[float], v: list[float],
+               lanes: list[tuple[int, ...]]) -> tuple[list[Pair], list[str], list[float], list[float]]:
+        placed = self.route_lanes.lanes
+        traffic, along, across = [], [], []
+        for t in sorted(near - self.index.keys()):
+            lane = placed.get(self.get_lane(t))
+            if lane is not None:
+                traffic.append(t)
+                along.append(lane[0] + self.get_position(t))  # on a road of one edge, 0 + the lane position
+                across.append(lane[1])
+        xs = list(x) + along
         vs = list(v) + [self.get_speed(t) for t in traffic]
         lengths = self.lengths + [self.get_length(t) for t in traffic]
-        covered = list(lanes) + [occupied_lanes((self.get_lane(t) - self.base + 0.5) * self.width + self.get_lateral(t), self.width)
-                                 for t in traffic]
+        covered = list(lanes) + [occupied_lanes((place + 0.5) * self.width + self.get_lateral(t), self.width)
+                                 for t, place in zip(traffic, across)]
         pairs = [p for p in lane_pairs(xs, covered, lengths, apart=len(self.ids)) if p[2] < FREE_ROAD_GAP_M or max(p[:2]) < len(self.ids)]
         return pairs, self.names + traffic, xs, vs
+
+    def _edging(self, beside: list[tuple[int, int, tuple]], pairs: list[Pair], near: set[str]) -> set[str]:
+        """The traffic cars edging across a line toward a platoon car's lane from the lane beside it, from
+        SUMO's nearest there up to the nearest car known in the platoon car's own lanes (ahead for leaders,
+        behind for followers). The walk goes from each car of that lane to the next: SUMO's leader (or
+        follower) of a car in it; of a car only reaching into it from farther off, its nearest in it. SUMO's
+        gaps along the walk leave out the cars' lengths: it walks a little farther, and a car it adds beyond
+        the nearest changes no pair."""
+        ahead = [FREE_ROAD_GAP_M] * len(self.ids)
+        behind = [FREE_ROAD_GAP_M] * len(self.ids)
+        for a, b, gap in pairs:
+            if b < len(self.ids):
+                ahead[b] = min(ahead[b], gap)
+            if a < len(self.ids):
+                behind[a] = min(behind[a], gap)
+        placed = self.route_lanes.lanes
+        edging: set[str] = set()
+        for b, mode, found in beside:
+            side = -1 if mode & 1 else 1  # SUMO's modes: bit 1 the lane to the right, bit 2 leaders
+            leaders = bool(mode & 2)
+            step, bound = (self.get_leader, ahead[b]) if leaders else (self.get_follower, behind[b])
+            own = placed.get(self.get_lane(self.ids[b]))
+            if own is None:
+                continue
+            lane = own[1] + side  # the lane beside, by its place across the road
+            for other, distance in found:
+                car = other
+                for _ in range(64):
+                    at = placed.get(self.get_lane(car))
+                    if at is None:
+                        break
+                    if at[1] == lane:
+                        if car not in near and car not in self.index and abs(self.get_lateral(car)) >= self.edging_m:
+                            edging.add(car)
+                        hit = step(car, FREE_ROAD_GAP_M)
+                    else:  # reaching into the lane from the one beyond: the lane's next car from it
+                        nearest = self.get_neighbors(car, (2 if leaders else 0) + (1 if lane < at[1] else 0))
+                        hit = nearest[0] if nearest else None
+                    if not hit or not hit[0]:
+                        break
+                    car, distance = hit[0], distance + hit[1]
+                    if distance > bound:
+                        break
+        return edging

@@ -39,16 +39,6 @@ __all__ = ["check_road", "check_episode", "simulate", "simulate_batch", "shares_
 def check_road(config: EpisodeConfig, road: Road) -> None:
     """Refuse episodes the road cannot hold: a target speed above the limit, or a road too short."""
     check_road_lanes(config, road.name, road.lanes)
-    if config.maneuver_class.lateral and road.lane_shifts:  # the attacker's lanes are read as SUMO's indices
-        shift = next(e for e, a, b in zip(road.route_edges[1:], road.lane_path, road.lane_path[1:]) if a != b)
-        raise ConfigError("scenario.maneuver", config.maneuver,
-                          f"a road whose platoon lane keeps its index along the route (on {road.name} it is lane "
-                          f"{' then '.join(str(i) for k, i in enumerate(road.lane_path) if k == 0 or road.lane_path[k - 1] != i)}, changing at edge {shift}), "
-                          "or maneuver inlane")
-    if config.maneuver_class.lateral and config.traffic is not None and not road.one_edge:  # traffic's positions: lane positions
-        raise ConfigError("scenario.maneuver", config.maneuver,
-                          f"a road of one edge for a lane-changing attacker among traffic ({road.name} has "
-                          f"{len(road.route_edges)}), or maneuver inlane")
     if config.maneuver_class.lateral and not road.even_lanes:  # who follows whom across lanes compares positions
         raise ConfigError("scenario.maneuver", config.maneuver,
                           f"a road whose lanes are as long as each other ({road.name}'s are not, on a curve or at a junction), "

@@ -31,7 +31,7 @@ from .command import (
     follower_types, sumo_command)
 from .junctions import JunctionCrossings
 from .lights import RouteLights, route_signals, signal_tracks
-from .neighbours import _LateralTrafficSense, _TrafficSense
+from .neighbours import RouteLanes, _LateralTrafficSense, _TrafficSense
 from .scenarios import Road
 from .warmup import traffic_state
 
@@ -127,26 +127,31 @@ def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> Callable[[str
 
 
 class _Lateral:
-    """The attacker's lane change, and where it is across the road at each step: the lanes it covers."""
+    """The attacker's lane change, and where it is across the road at each step: the lanes it covers.
 
-    def __init__(self, api, maneuver, road: Road, attacker: str = "v0"):
+    A maneuver counts lanes from the platoon's, which an on-ramp or an exit moves to another of SUMO's
+    indices from one edge to the next (`RouteLanes`): a change is asked for by the index of the attacker's
+    own edge. SUMO keeps the request's lane as the car passes onto the next edge (it shifts the requested
+    index with the car's own)."""
+
+    def __init__(self, api, maneuver, road: Road, attacker: str = "v0", copy: int = 0):
         self.api = api
         self.attacker = attacker
         self.width = road.lane_width_m
-        self.base = road.platoon_lane  # a maneuver counts lanes from the platoon's (it keeps its index: `check_road`)
+        self.route_lanes = RouteLanes(api, road.route(copy), road.platoon_path)
         lanes = maneuver.start_lanes()
         self.fixed = [(lane,) for lane in lanes[1:]]  # only the attacker changes lanes
         self.fixed_y = [(lane + 0.5) * self.width for lane in lanes[1:]]
         self.y: list[float] = []
-        self.get_lane = api.vehicle.getLaneIndex
+        self.get_lane = api.vehicle.getLaneID
         self.get_lateral = api.vehicle.getLateralLanePosition
 
     def change_lane(self, lane: int) -> None:
         # SUMO carries it out (over scenario.lane_change_s, or in one step); the request holds until the next
-        self.api.vehicle.changeLane(self.attacker, self.base + lane, 1e6)
+        self.api.vehicle.changeLane(self.attacker, self.route_lanes.index(self.get_lane(self.attacker), lane), 1e6)
 
     def sense(self) -> list[tuple[int, ...]]:
-        y = (self.get_lane(self.attacker) - self.base + 0.5) * self.width + self.get_lateral(self.attacker)
+        y = (self.route_lanes.place(self.get_lane(self.attacker)) + 0.5) * self.width + self.get_lateral(self.attacker)
         self.y.append(y)
         return [occupied_lanes(y, self.width), *self.fixed]
 
@@ -289,7 +294,7 @@ class SumoWorld:
         self.get_speed, self.set_speed = (vehicle_call(api, f) for f in ("getSpeed", "setSpeed"))
         self.get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
         maneuver = maneuver_of(config)
-        self.laterals = [_Lateral(api, maneuver, road, ids[0]) for ids in platoons] if maneuver.lateral else None
+        self.laterals = [_Lateral(api, maneuver, road, ids[0], e) for e, ids in enumerate(platoons)] if maneuver.lateral else None
         #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`, `_LateralTrafficSense`); None:
         #: the maneuver's pairs
         self.traffic = None

@@ -246,6 +246,8 @@ class EpisodeConfig:
                 raise ConfigError("traffic.warmup_s", self.traffic.warmup_s, f"a whole number of steps of {self.step_s:g} s")
             if not is_network_path(self.network) and not self.traffic.junction_collisions:  # one edge, no junction: one
                 fix("traffic", dataclasses.replace(self.traffic, junction_collisions=True))  # configuration, whatever it says
+            if not MANEUVER_CLASSES[self.maneuver].lateral and self.traffic.edging_sensed:  # in lane, cars are SUMO's
+                fix("traffic", dataclasses.replace(self.traffic, edging_sensed=False))  # leaders: one configuration, stored as before
         if self.v2v is not None and self.v2v.match_in_maneuvers and (self.traffic is not None
                                                                       or not MANEUVER_CLASSES[self.maneuver].lateral):
             fix("v2v", dataclasses.replace(self.v2v, match_in_maneuvers=False))  # no maneuver's, or traffic's: one configuration

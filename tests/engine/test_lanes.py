@@ -16,6 +16,8 @@ from sumolib.xml import parse_fast_nested
 from d4sumo.engine.scenarios import build_road
 from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.errors import ConfigError
+from d4sumo.model.attacks.maneuvers import attack_plan, lane_changes, maneuver_of
+from d4sumo.model.attacks.pedals import make_attack
 from d4sumo.model.config import EpisodeConfig
 from d4sumo.sumohome import sumo_home
 
@@ -87,7 +89,7 @@ def test_sumos_cars_drive_the_lane_path_where_lanes_are_added_and_dropped(tmp_pa
 def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path):
     """Issue 37: every motorway tried was refused at its first ramp. The Bremen motorway's main route
     (1.9 km) now plays: the platoon is in lane 0, then 1 where the ramp's lane joins, then 0; batches
-    equal episodes alone; and a lane change there is refused in one line."""
+    equal episodes alone; and a lane-changing attacker keeps its lane beside the platoon's through the ramp."""
     road = build_road(str(BREMEN), route=BREMEN_ROUTE, cache_dir=tmp_path / "cache", given=True)  # as SUMO runs the file
     assert road.lane_path == (0, 0, 1, 0) and road.lanes == 3 and 1850 < road.length_m < 1870
     config = EpisodeConfig(network=str(BREMEN), route=BREMEN_ROUTE, speed_mps=30.0, start="steady", duration_s=40.0,
@@ -100,9 +102,19 @@ def test_sumos_bremen_motorway_plays_its_main_route_through_the_on_ramp(tmp_path
     plans = random_plans(config, 4, seed=3)
     for batched, plan in zip(simulate_batch(config, plans), plans):
         assert_same_episode(batched, simulate(config, plan, road=road))
-    with pytest.raises(ConfigError, match=r"scenario.maneuver: got 'cutin'; allowed: a road whose platoon lane keeps its "
-                                          r"index along the route \(on .* it is lane 0 then 1 then 0, changing at edge E0\)"):
-        simulate(dataclasses.replace(config, maneuver="cutin"), np.full(config.steps, np.nan), road=road)
+    # a cut-in there (refused before: SUMO's index of the platoon's lane changes at the ramp): the attacker
+    # starts in the lane to the platoon's left, and keeps it through the ramp, SUMO's index 1, then 2, then 1
+    cutin = dataclasses.replace(config, maneuver="cutin", cutin_follower=2)
+    plan = attack_plan(maneuver_of(cutin).family(make_attack("knots")), [0.0] * 9 + [cutin.duration_s], cutin)
+    assert all(step >= cutin.steps for step, _ in lane_changes(plan, maneuver_of(cutin)))  # none within the episode
+    simulate(cutin, plan, road=road, fcd_path=fcd)
+    assert fcd_lanes(fcd)["v0"] == ["145354574_1", "189597495_1", "E0_2", "191842213_1"]
+    assert_drives_the_lane_path(fcd, road, {"v0": 1})
+    for maneuver in (cutin, dataclasses.replace(config, maneuver="swerve", swerve_lanes=3)):  # each copy's own lanes
+        plans = random_plans(maneuver, 4, seed=5)
+        assert sum(len(lane_changes(p, maneuver_of(maneuver))) for p in plans) >= 4
+        for batched, plan in zip(simulate_batch(maneuver, plans), plans):
+            assert_same_episode(batched, simulate(maneuver, plan, road=road))
 
 
 def test_sumos_osm_motorway_interchange_plays_a_route_past_two_on_ramps(tmp_path):

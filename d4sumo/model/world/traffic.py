@@ -84,6 +84,11 @@ class TrafficParams:
     #: collision, seen in 2D (`engine.junctions`); false: unseen, as d4sumo 0.18 and before played it (their
     #: stored campaigns replay so)
     junction_collisions: bool = True
+    #: with an attacker that changes lanes, a traffic car edging into a platoon car's lane from the one beside
+    #: it is sensed there from the moment its body crosses the line, however far past SUMO's nearest car of
+    #: that lane (`engine.neighbours`); false: once SUMO has it in the lane, as d4sumo 0.21 and before sensed
+    #: it (their stored campaigns replay so)
+    edging_sensed: bool = True
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen dataclass)
@@ -104,7 +109,7 @@ class TrafficParams:
         fix("warmup_s", check_number("traffic.warmup_s", self.warmup_s, 0.0, 3600.0, "seconds"))
         fix("clear_m", check_number("traffic.clear_m", self.clear_m, 0.0, 1000.0, "metres"))
         fix("seed", check_int("traffic.seed", self.seed, 0, 2**31 - 1))
-        for name in ("per_sample", "insertion_checks", "merge_by_departure", "junction_collisions"):
+        for name in ("per_sample", "insertion_checks", "merge_by_departure", "junction_collisions", "edging_sensed"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"traffic.{name}", getattr(self, name), "true or false")
         fix("types", _checked_types(self.types))

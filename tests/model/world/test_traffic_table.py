@@ -116,7 +116,8 @@ def test_a_user_demand_keeps_its_elements_its_vehicles_named_as_traffic_and_inse
     assert vehicle.get("id") == "traffic.v1" and vehicle.get("insertionChecks") == "none"  # the user's own choice
     assert params.to_dict() == {"warmup_s": 60.0, "clear_m": 50.0, "seed": 0, "demand": [str(demand)],
                                 "demand_sha256": params.demand_sha256, "insertion_checks": True,
-                                "junction_collisions": True}  # (left out by EpisodeConfig on d4sumo's own roads)
+                                "junction_collisions": True,  # (left out by EpisodeConfig on d4sumo's own roads)
+                                "edging_sensed": True}  # (and this one for an attacker that keeps its lane)
     both = TrafficParams(demand=str(demand), vehicles_per_hour=300)
     assert len(ET.fromstring(demand_xml(both, ["a", "b"], [0, 1], 100.0)).findall("flow")) == 3
     demand.write_text(demand.read_text().replace("900", "1800"))  # another demand: other traffic
@@ -148,3 +149,19 @@ def test_per_sample_traffic_gives_each_sample_its_own_seed_and_the_same_one_agai
     with pytest.raises(ConfigError) as info:
         TrafficParams(per_sample="yes")
     assert info.value.field == "traffic.per_sample"
+
+
+def test_edging_sensed_is_stored_only_where_the_attacker_changes_lanes_and_a_table_without_it_plays_as_0_21():
+    """A key of 0.22: a lane-changing attacker's campaign stores it; one in lane, where it changes nothing, stores
+    what 0.21 stored; a stored table without it is played as 0.21 sensed the traffic."""
+    from d4sumo import ledger
+    from d4sumo.model.config import EpisodeConfig
+
+    inlane = EpisodeConfig(start="steady", traffic={"vehicles_per_hour": 600})
+    swerve = EpisodeConfig(maneuver="swerve", start="steady", traffic={"vehicles_per_hour": 600})
+    assert "edging_sensed" not in inlane.to_dict()["traffic"] and not inlane.traffic.edging_sensed
+    assert swerve.to_dict()["traffic"]["edging_sensed"] is True and swerve.traffic.edging_sensed
+    stored = swerve.to_dict()["traffic"]
+    del stored["edging_sensed"]
+    assert ledger.restored("traffic", stored)["edging_sensed"] is False
+    assert EpisodeConfig.from_dict(swerve.to_dict()) == swerve
