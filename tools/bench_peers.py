@@ -18,7 +18,8 @@ one), mean and median; successes per 100 samples; distinct successes (attacks mo
 and kinds of crash); and the ratio of each to the default's (first success: the default's over the peer's, so
 that above 1 the peer is ahead in every column).
 
-Usage: python tools/bench_peers.py [--samples 100] [--seeds 8] [--problems default steady-30-10 cacc-lie]
+Usage: python tools/bench_peers.py [--samples 100] [--seeds 8] [--problems default steady-30-10 cacc-lie cutin
+                                    swerve-bremen insider-lie sumo-acc-steady]
                                    [--d4sumo auto random] [--psy-taliro uniform annealing]
                                    [--verifai bo ce halton random] [--verifai-python PATH]
 """
@@ -45,13 +46,29 @@ from d4sumo.search.runner import run_campaign
 from toolargs import Parser, run_main
 
 HERE = Path(__file__).resolve().parent
+def _bremen() -> str:
+    from d4sumo.sumohome import sumo_home
+
+    return str(Path(sumo_home()) / "tools" / "game" / "highway")
+
+
 #: the problems of the issue's table: the default scenario; steady state at 30 m/s, 10 m; the cooperative
-#: platoon at 5 m told a lie on the attacker's speed
+#: platoon at 5 m told a lie on the attacker's speed. Then the issue's others: a cut-in ahead of v2; a swerve
+#: through SUMO's Bremen motorway among its own demand (docs/lane-changes.md's); an insider (v2) lying about its
+#: acceleration to Ploeg's followers; SUMO's ACC from steady state
 PROBLEMS = {
     "default": {},
     "steady-30-10": {"scenario": {"start": "steady", "speed_mps": 30.0, "setpoint_m": 10.0}},
     "cacc-lie": {"scenario": {"start": "steady", "setpoint_m": 5.0}, "controller": {"class": "cacc"},
                  "attack": {"message": "offset", "message_field": "speed"}},
+    "cutin": {"scenario": {"maneuver": "cutin", "cutin_follower": 2}},
+    "swerve-bremen": {"scenario": {"network": f"{_bremen()}/highway.net.xml", "route": ["145354574", "189597495", "E0", "191842213"],
+                                   "join_m": 450.0, "maneuver": "swerve", "swerve_lanes": 3, "start": "steady",
+                                   "speed_mps": 30.0, "duration_s": 30.0},
+                      "controller": {"class": "timegap"}, "traffic": {"demand": f"{_bremen()}/highway.rou.xml"}},
+    "insider-lie": {"scenario": {"start": "steady", "setpoint_m": 5.0}, "controller": {"class": "ploeg"},
+                    "attack": {"family": "cruise", "message": "knots", "message_sender": 2}},
+    "sumo-acc-steady": {"scenario": {"start": "steady"}, "controller": {"class": "sumo:ACC"}},
 }
 PSY_TALIRO = ("uniform", "annealing")
 VERIFAI = ("bo", "ce", "halton", "random")
@@ -120,6 +137,11 @@ def verifai_run(problem: dict, sampler: str, samples: int, seed: int, python: st
     return episodes.results
 
 
+def _ratio(a: float, b: float) -> str:
+    """a / b, two decimals; where the default found none (b = 0): "inf" if the other did, "-" if neither."""
+    return f"{a / b:.2f}" if b else ("inf" if a else "-")
+
+
 def scores(results: list[SampleResult], family, samples: int) -> tuple[float, int, int, int]:
     """(first success, 1-based, or samples + 1; successes; distinct attacks; kinds of crash)."""
     wins = [r for r in results if r.outcome == "success"]
@@ -165,11 +187,10 @@ def main() -> None:
         for label, rows in table.items():
             first = [r[0] for r in rows]
             mean = [statistics.mean(r[i] for r in rows) for i in range(4)]
-            ratio = (statistics.mean(r[0] for r in base) / mean[0], mean[1] / max(statistics.mean(r[1] for r in base), 1e-9),
-                     mean[3] / max(statistics.mean(r[3] for r in base), 1e-9))
+            ratio = (_ratio(statistics.mean(r[0] for r in base), mean[0]), _ratio(mean[1], statistics.mean(r[1] for r in base)),
+                     _ratio(mean[3], statistics.mean(r[3] for r in base)))
             print(f"  {label:<22}{sum(f <= args.samples for f in first):>5}/{len(rows):<4}{mean[0]:>11.1f}{statistics.median(first):>8.1f}"
-                  f"{100 * mean[1] / args.samples:>11.1f}{mean[2]:>10.1f}{mean[3]:>7.1f}   "
-                  f"{ratio[0]:.2f} / {ratio[1]:.2f} / {ratio[2]:.2f}")
+                  f"{100 * mean[1] / args.samples:>11.1f}{mean[2]:>10.1f}{mean[3]:>7.1f}   {' / '.join(ratio)}")
         sys.stdout.flush()
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
 
