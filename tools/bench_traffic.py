@@ -10,6 +10,10 @@ Both sides are timed the same way, start to close, interleaved in one run so mac
            whoever is ahead (SUMO's leader, traffic included), their controllers, actuators and speed
            commands, the collision checks and the Trace, for an attack that never crashes
 
+A swerving attacker through an on-ramp among a network's own demand (on by default; --no-swerve): SUMO's Bremen
+motorway, the attacker changing lanes four times (sensing who follows whom in every lane each car covers, traffic
+edging in included). The target there: ratio <= 1.5.
+
 A real network with signals and its own demand (--corridor, on by default): SUMO's corridor example
 (tools/game/corridor, three signalised crossings, its flows given an end), its main route through them,
 an attack that crashes nothing; the episode there also measures its cars against the traffic crossing
@@ -18,7 +22,7 @@ each junction in 2D (`engine.junctions`). The target there: ratio <= 1.5.
 The memory: a falsify campaign on a straight 10 km, 3-lane motorway at 1800 vehicles per hour per lane
 (a few hundred vehicles on the road at once), its peak resident set size as the kernel counts it.
 
-Usage: python tools/bench_traffic.py [--repeats 10] [--densities 600 1800] [--no-corridor] [--no-memory]
+Usage: python tools/bench_traffic.py [--repeats 10] [--densities 600 1800] [--no-corridor] [--no-swerve] [--no-memory]
 """
 
 from __future__ import annotations
@@ -102,6 +106,28 @@ def corridor_case():
     return "corridor, signals, own demand", config, road, u
 
 
+#: a swerve through SUMO's Bremen motorway among its own demand that crashes nothing: the attacker changes lanes four
+#: times, through the on-ramp (sample 7 of docs/lane-changes.md's campaign)
+SWERVE_PARAMS = [-0.3355503286279433, 0.8270482295606412, -0.378711273867939, 0.7750934736991419, -0.8642329721845404,
+                 0.21589989894509176, -0.29937343136019934, -0.3395127810186547, -0.5243580349054529, 2.8101446115896187,
+                 0.8226207432445664, 0.6022549884190292, 1.6178362246396496, 1.9772874541113046, 2.1528750560297025]
+
+
+def swerve_case():
+    """A swerving attacker through SUMO's Bremen motorway among its own demand: (label, config, road, attack)."""
+    from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.attacks.pedals import make_attack
+    from d4sumo.model.config import ControllerConfig
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    config = EpisodeConfig(network=str(game / "highway.net.xml"), route=("145354574", "189597495", "E0", "191842213"),
+                           join_m=450.0, maneuver="swerve", swerve_lanes=3, start="steady", speed_mps=30.0, duration_s=30.0,
+                           controller=ControllerConfig("timegap"), traffic={"demand": str(game / "highway.rou.xml")})
+    plan = attack_plan(maneuver_of(config).family(make_attack("knots")), SWERVE_PARAMS, config)
+    return "Bremen, a swerve, own demand", config, config_road(config), plan
+
+
 def main() -> None:
     parser = Parser(__doc__)
     parser.add_argument("--repeats", type=int, default=10)
@@ -109,6 +135,7 @@ def main() -> None:
     parser.add_argument("--memory-samples", type=int, default=20)
     parser.add_argument("--no-memory", action="store_true")
     parser.add_argument("--no-corridor", action="store_true", help="leave out SUMO's corridor example")
+    parser.add_argument("--no-swerve", action="store_true", help="leave out the swerve through SUMO's Bremen motorway")
     args = parser.parse_args()
     parser.check_counts({"--repeats": (args.repeats, 1), "--memory-samples": (args.memory_samples, 1)})
     configs = [EpisodeConfig(network="highway_3lane_120kmh", start="steady", speed_mps=30.0, duration_s=40.0,
@@ -119,10 +146,11 @@ def main() -> None:
     for config in configs:
         bare(config, road), episode(config, road, attack_u)  # warm caches (and check SUMO's demand)
     cases = [(d, config, road, attack_u) for d, config in zip(args.densities, configs)]
-    if not args.no_corridor:
-        cases.append(corridor_case())
-        times[cases[-1][0]] = ([], [])
-        bare(*cases[-1][1:3]), episode(*cases[-1][1:])
+    for wanted, case in ((not args.no_corridor, corridor_case), (not args.no_swerve, swerve_case)):
+        if wanted:
+            cases.append(case())
+            times[cases[-1][0]] = ([], [])
+            bare(*cases[-1][1:3]), episode(*cases[-1][1:])
     for _ in range(args.repeats):
         for d, config, at, u in cases:
             times[d][0].append(bare(config, at))
