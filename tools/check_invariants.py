@@ -46,8 +46,8 @@ lag, V2V loss and latency, radar noise and controller gain) with the attack: eac
 checked as any other.
 
 With --ramps P, a share of the lane-changing episodes play through an on-ramp that moves the platoon's lane to
-another of SUMO's indices and back (SUMO's Bremen motorway, the example acceleration lane), half of them among
-traffic (Bremen's own demand, or a flow): who follows whom from the FCD then places each car across the road by its
+another of SUMO's indices and back (SUMO's Bremen motorway, the example acceleration lane) or through the example
+lane drop, half of them among traffic (Bremen's own demand, or a flow): who follows whom from the FCD then places each car across the road by its
 lane, counted from the platoon's on that edge, and its lateral position in it; along the route by where its lane's
 edge starts (sumolib's lengths).
 
@@ -274,13 +274,14 @@ TRAFFIC_LENGTHS = {"traffic_car": 5.0, "traffic_truck": 12.0, "traffic_idm": 5.0
 
 
 def through_a_ramp(config: EpisodeConfig, rng: np.random.Generator) -> EpisodeConfig:
-    """The lane-changing episode on a road whose on-ramp moves the platoon's lane to another of SUMO's
-    indices and back: SUMO's Bremen motorway (among its own demand, a flow, or alone) or the example
-    acceleration lane (among a flow, or alone), from steady state."""
+    """The lane-changing episode on a road of many edges: SUMO's Bremen motorway, whose on-ramp moves the
+    platoon's lane to another of SUMO's indices and back (among its own demand, a flow, or alone), the
+    example acceleration lane (the same shape, among a flow, or alone), or the example lane drop (a lane
+    ending on the left), from steady state."""
     from d4sumo.sumohome import sumo_home
 
     bremen = bremen_motorway()
-    network = str(rng.choice([bremen, ROADS[4]]))
+    network = str(rng.choice([bremen, ROADS[4], ROADS[2]]))  # and the example lane drop (a lane ends on the left)
     traffic = None
     if rng.random() < 0.5:
         traffic = (traffic_table(rng) if network != bremen or rng.random() < 0.5 else
@@ -288,7 +289,7 @@ def through_a_ramp(config: EpisodeConfig, rng: np.random.Generator) -> EpisodeCo
                     "seed": int(rng.integers(0, 1000)), "per_sample": bool(rng.random() < 0.3)})
     return dataclasses.replace(config, network=network, network_sha256=None, route=ROUTES.get(network, ()), lane=None,
                                rebuild=network != bremen, start="steady", speed_mps=float(rng.choice([25.0, 30.0])), traffic=traffic,
-                               duration_s=30.0 if network == bremen else 80.0)
+                               duration_s=30.0 if network == bremen else 80.0 if network == ROADS[4] else 60.0)
 
 
 def traffic_table(rng: np.random.Generator) -> dict:
@@ -680,8 +681,8 @@ def main(argv=None) -> int:
                              f"signalised crossings (checked in 2D) [{JUNCTION_SHARE[0]}]")
     parser.add_argument("--ramps", type=float, default=RAMP_SHARE[0],
                         help="the share of lane-changing episodes played through an on-ramp that moves the platoon's "
-                             f"lane index (SUMO's Bremen motorway, the example acceleration lane), half of them among "
-                             f"traffic [{RAMP_SHARE[0]}]")
+                             f"lane index (SUMO's Bremen motorway, the example acceleration lane) or the example lane "
+                             f"drop, half of them among traffic [{RAMP_SHARE[0]}]")
     parser.add_argument("--situation", type=float, default=SITUATION_SHARE[0],
                         help="the share of episodes whose campaign searches its setpoint (and, half of those without "
                              f"traffic, its speed): each sample plays its own [{SITUATION_SHARE[0]}]")
@@ -715,7 +716,7 @@ def main(argv=None) -> int:
                                                                traffic={"demand": corridor()[1]}))
     outcomes: Counter[str] = Counter()
     broken: Counter[str] = Counter()
-    ramps: Counter[str] = Counter()  # lane-changing episodes through an on-ramp that moves the platoon's lane index
+    ramps: Counter[str] = Counter()  # lane-changing episodes through an on-ramp (or the example lane drop)
     examples: dict[str, str] = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -737,7 +738,7 @@ def main(argv=None) -> int:
                     continue
             if only and index not in only:  # (its batch partners are drawn from a generator of its own index)
                 continue
-            if campaign.config.maneuver_class.lateral and road.lane_shifts:
+            if campaign.config.maneuver_class.lateral and (road.lane_shifts or road.name == ROADS[2]):
                 ramps["among traffic" if campaign.config.traffic is not None else "alone"] += 1
             cid = store.open_campaign(campaign.definition(), 1)
             problems = check(campaign, evaluator, params, store, cid, len(store.samples(cid)), fcd)
@@ -760,7 +761,7 @@ def main(argv=None) -> int:
         store.close()
     print(f"episodes: {args.n} (seed {args.seed}); outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     if ramps:
-        print("lane changes through an on-ramp: " + ", ".join(f"{k} {v}" for k, v in sorted(ramps.items())))
+        print("lane changes through an on-ramp or a lane drop: " + ", ".join(f"{k} {v}" for k, v in sorted(ramps.items())))
     print(f"disagreements: {sum(broken.values())}")
     for name, count in sorted(broken.items()):
         print(f"  {name}: {count}  e.g. {examples[name][:400]}")

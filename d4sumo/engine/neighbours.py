@@ -47,6 +47,12 @@ class RouteLanes:
                         start += api.lane.getLength(via)
             along = end + sum(api.lane.getLength(via) for via in
                               via_lanes(api, f"{edge}_{path[k]}", f"{route[k + 1]}_{path[k + 1]}"))
+        #: place across the road -> the lanes there along the route, in order: (start, end [m], lane id)
+        self.by_place: dict[int, list[tuple[float, float, str]]] = {}
+        for lane, (start, place, _) in self.lanes.items():
+            self.by_place.setdefault(place, []).append((start, start + api.lane.getLength(lane), lane))
+        for lanes in self.by_place.values():
+            lanes.sort()
 
     def place(self, lane: str) -> int:
         """The lane's place across the road (SumoError off the route: never a silent guess)."""
@@ -140,10 +146,11 @@ class _LateralTrafficSense:
     the route (an on-ramp, a junction lane from it) is on none of the platoon's lanes, and is left out
     (inside a junction, `junctions` sees it in 2D). Returns what `_TrafficSense` returns.
 
-    SUMO names only the nearest car of each lane beside a car. A traffic car farther on in that lane,
-    already edging into the car's own lane, covers it, and may be nearer than anything SUMO names there.
-    With ``traffic.edging_sensed`` (`_edging`), each lane beside a platoon car is walked, car by car, up
-    to the nearest car known in its own lanes, and every car edging across a line on the way is added.
+    SUMO names only the nearest car of each lane beside a car, and none past the car's own edge. A traffic
+    car farther on in that lane, already edging into the car's own lane, covers it, and may be nearer than
+    anything SUMO names there. With ``traffic.edging_sensed`` (`_edging`), each lane beside a platoon car
+    is walked, car by car, from SUMO's nearest and from the nearest past the car's edge, up to the nearest
+    car known in its own lanes, and every car edging across a line on the way is added.
     Without it, as d4sumo 0.21 and before sensed the traffic, such a car is sensed once SUMO has it in
     the lane (their stored campaigns replay so)."""
 
@@ -159,6 +166,9 @@ class _LateralTrafficSense:
         self.get_leader, self.get_follower, self.get_neighbors = call("getLeader"), call("getFollower"), call("getNeighbors")
         self.get_position, self.get_speed, self.get_length = call("getLanePosition"), call("getSpeed"), call("getLength")
         self.get_lane, self.get_lateral = call("getLaneID"), call("getLateralLanePosition")
+        self.get_vehicles = api.lane.getLastStepVehicleIDs
+        #: the longest vehicle type SUMO has [m]: how far behind its lane's start a car's rear may be
+        self.longest_m = max((api.vehicletype.getLength(t) for t in api.vehicletype.getIDList()), default=0.0)
 
     def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
         lanes = self.lateral.sense()  # the platoon's cars' lanes (and the attacker's lateral position, recorded)
@@ -174,7 +184,7 @@ class _LateralTrafficSense:
                 beside.append((b, mode, found))
         found = self._pairs(near, x, v, lanes)
         if self.edging_sensed:
-            edging = self._edging(beside, found[0], near)
+            edging = self._edging(beside, found[0], near, x)
             if edging:
                 found = self._pairs(near | edging, x, v, lanes)
         return found
@@ -197,13 +207,14 @@ class _LateralTrafficSense:
         pairs = [p for p in lane_pairs(xs, covered, lengths, apart=len(self.ids)) if p[2] < FREE_ROAD_GAP_M or max(p[:2]) < len(self.ids)]
         return pairs, self.names + traffic, xs, vs
 
-    def _edging(self, beside: list[tuple[int, int, tuple]], pairs: list[Pair], near: set[str]) -> set[str]:
-        """The traffic cars edging across a line toward a platoon car's lane from the lane beside it, from
-        SUMO's nearest there up to the nearest car known in the platoon car's own lanes (ahead for leaders,
-        behind for followers). The walk goes from each car of that lane to the next: SUMO's leader (or
-        follower) of a car in it; of a car only reaching into it from farther off, its nearest in it. SUMO's
-        gaps along the walk leave out the cars' lengths: it walks a little farther, and a car it adds beyond
-        the nearest changes no pair."""
+    def _edging(self, beside: list[tuple[int, int, tuple]], pairs: list[Pair], near: set[str], x: list[float]) -> set[str]:
+        """The traffic cars in a lane beside a platoon car, up to the nearest car known in the platoon car's
+        own lanes (ahead for leaders, behind for followers), that edge across a line toward it; and the
+        nearest car of that lane past the platoon car's edge, which SUMO's search of the lanes beside a car
+        leaves out (it stays on the car's edge). The walk goes from each car of that lane to the next: SUMO's
+        leader (or follower) of a car in it; of a car only reaching into it from farther off, its nearest in
+        it. SUMO's gaps along the walk leave out the cars' lengths: it walks a little farther, and a car it
+        adds beyond the nearest changes no pair."""
         ahead = [FREE_ROAD_GAP_M] * len(self.ids)
         behind = [FREE_ROAD_GAP_M] * len(self.ids)
         for a, b, gap in pairs:
@@ -221,7 +232,12 @@ class _LateralTrafficSense:
             if own is None:
                 continue
             lane = own[1] + side  # the lane beside, by its place across the road
-            for other, distance in found:
+            starts = list(found)
+            past = self._past_edge(own[0], lane, leaders, x[b] - (0.0 if leaders else self.lengths[b]), bound)
+            if past is not None:
+                edging.add(past[0])
+                starts.append(past)
+            for other, distance in starts:
                 car = other
                 for _ in range(64):
                     at = placed.get(self.get_lane(car))
@@ -239,4 +255,21 @@ class _LateralTrafficSense:
                     car, distance = hit[0], distance + hit[1]
                     if distance > bound:
                         break
+        edging.difference_update(self.index)
         return edging
+
+    def _past_edge(self, start: float, place: int, leaders: bool, at: float, bound: float) -> tuple[str, float] | None:
+        """The nearest car at ``place`` across the road on the lanes after (leaders) or before the one that
+        starts at ``start``, within ``bound`` of ``at`` (the platoon car's front, or rear), with its distance."""
+        lanes = self.route_lanes.by_place.get(place, ())
+        for lane_start, lane_end, lane in (lanes if leaders else reversed(lanes)):
+            if (lane_start <= start) if leaders else (lane_start >= start):
+                continue
+            if (lane_start - at - self.longest_m if leaders else at - lane_end) > bound:  # a car's rear may
+                return None  # still be on the lane before
+            cars = self.get_vehicles(lane)
+            if cars:  # SUMO lists a lane's cars from its rearmost
+                car = cars[0] if leaders else cars[-1]
+                front = lane_start + self.get_position(car)
+                return car, (front - self.get_length(car) - at) if leaders else (at - front)
+        return None

@@ -12,6 +12,7 @@ import pytest
 from sumolib.xml import parse_fast_nested
 
 from d4sumo.engine.scenarios import build_road, config_road
+from d4sumo.search.evaluator import Evaluator
 from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.engine.sumo import open_world
 from d4sumo.errors import ConfigError
@@ -316,26 +317,54 @@ def test_on_bremen_the_traffic_ahead_of_the_attacker_is_where_sumo_fcd_puts_it_e
     assert compared > 300 and len(edges) >= 3  # before, on and past the ramp's edge
 
 
-def _fcd_gaps_ahead(config: EpisodeConfig, episode, fcd: Path) -> tuple[np.ndarray, set[tuple[str, int]]]:
+def _edge_starts(road) -> dict[str, float]:
+    """Where each edge of the route, and each junction's edge of lanes between two of them, starts along the
+    route [m], from the network file (sumolib): the platoon's lanes' lengths, edge by edge."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(road.net_file), withInternal=True)
+    starts, along = {}, 0.0
+    path = road.platoon_path
+    for k, edge in enumerate(road.route_edges):
+        starts[edge] = along
+        lane = net.getLane(f"{edge}_{path[k]}")
+        along += lane.getLength()
+        for _ in range(8) if k + 1 < len(path) else ():  # through the junction along the platoon's lane
+            via = next((c.getViaLaneID() for c in lane.getOutgoing()
+                        if c.getToLane().getID() == f"{road.route_edges[k + 1]}_{path[k + 1]}"), "")
+            if not via:
+                break
+            starts.setdefault(via.rpartition("_")[0], along)
+            lane = net.getLane(via)
+            along += lane.getLength()
+    return starts
+
+
+def _fcd_gaps_ahead(config: EpisodeConfig, episode, fcd: Path,
+                    type_lengths: dict[str, float] | None = None) -> tuple[np.ndarray, set[tuple[str, int]]]:
     """Each car's gap to the nearest car ahead in the lanes it covers (1000 m: none), at every sample, from
-    SUMO's FCD alone: each car along the route from the edge it drives (each edge's start from the platoon's
-    odometers), across it from its lane, counted from v1's on that edge (a junction's lane: the one it came
-    from), and its lateral position in it. Also the (edge, lane) pairs the attacker covered."""
+    SUMO's FCD and the network file alone: the platoon's cars along the route by their odometers, a traffic car
+    by its lane position from where its edge starts (`_edge_starts`); across it from its lane, counted from the
+    platoon's on that edge (a junction's lane: the one it came from), and its lateral position in it. Also the
+    (edge, lane) pairs the attacker covered. ``type_lengths``: the traffic's lengths by vehicle type (else 5 m,
+    SUMO's passenger car)."""
     from d4sumo.model.world.lanes import lane_pairs, occupied_lanes
 
     steps: dict[float, dict] = {}
-    for step, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "pos", "lane", "odometer", "posLat"]):
+    kinds: dict[str, str] = {}
+    for step, v in parse_fast_nested(str(fcd), "timestep", ["time"], "vehicle", ["id", "type", "pos", "lane", "odometer", "posLat"]):
         steps.setdefault(float(step.time), {})[v.id] = (v.lane, float(v.pos), float(v.odometer), float(v.posLat))
+        kinds[v.id] = v.type
     times = [t for t in sorted(steps) if "v0" in steps[t]][:len(episode.trace)]
     ids, n, width = config.vehicle_ids, len(config.vehicle_ids), 3.2
     lengths = {vid: v.length_m for vid, v in zip(ids, config.car_vehicles)}
     first = {vid: steps[times[0]][vid][1] for vid in ids}
-    starts, platoon_lane = {}, {}  # each lane's edge: where it starts along the route, and v1's index on it
-    for t in times:
-        for vid in ids:
-            lane, pos, odometer, _ = steps[t][vid]
-            starts.setdefault(lane.rpartition("_")[0], first[vid] + odometer - pos)
-        platoon_lane.setdefault(steps[t]["v1"][0].rpartition("_")[0], int(steps[t]["v1"][0].rpartition("_")[2]))
+    road = config_road(config)
+    starts = _edge_starts(road)  # each lane's edge (a junction's too): where it starts along the route
+    platoon_lane = dict(zip(road.route_edges, road.platoon_path))  # the platoon's lane on each edge
+    for t in times:  # and v1's lane there, as SUMO drove it
+        lane, _, index = steps[t]["v1"][0].rpartition("_")
+        assert platoon_lane.get(lane, int(index)) == int(index) or lane.startswith(":")
     came: dict[str, int] = {}
     gaps, attacker = np.full((len(times), n), 1000.0), set()
     for k, t in enumerate(times):
@@ -354,7 +383,8 @@ def _fcd_gaps_ahead(config: EpisodeConfig, episode, fcd: Path) -> tuple[np.ndarr
         assert y[0] == pytest.approx(episode.trace["y_v0"][k], abs=1e-6), t
         lanes = [occupied_lanes(yi, width) for yi in y]
         attacker.update((steps[t]["v0"][0].rpartition("_")[0], lane) for lane in lanes[0])
-        for a, b, g in lane_pairs(along, lanes, [lengths.get(c, 5.0) for c in order], apart=n):
+        sizes = [lengths[c] if c in lengths else (type_lengths or {}).get(kinds[c], 5.0) for c in order]
+        for a, b, g in lane_pairs(along, lanes, sizes, apart=n):
             if b < n:
                 gaps[k, b] = min(gaps[k, b], g)
     return gaps, attacker
@@ -423,6 +453,43 @@ def test_a_traffic_car_edging_into_the_lane_past_sumos_nearest_is_sensed_there(t
     k = int(round(8.05 / config.step_s))
     assert gaps[k, lead] == pytest.approx(93.5638, abs=1e-3)
     assert episode.trace["gap_lead"][k] == (pytest.approx(gaps[k, lead], abs=2.5e-6) if edging_sensed else 1000.0)
+    if edging_sensed:
+        assert_sensed_as_the_fcd_shows(gaps, np.column_stack([episode.trace[f"gap_{vid}"] for vid in config.vehicle_ids]))
+
+
+@pytest.mark.parametrize("edging_sensed", [True, False])
+def test_the_nearest_car_of_the_lane_beside_past_the_cars_edge_is_sensed(tmp_path, edging_sensed):
+    """Regression: SUMO names no car of a lane beside past the car's own edge. The swerving attacker, changing
+    lanes toward Bremen's on-ramp, covered the lane to its right where a truck drove 85.2 m ahead on the next
+    edge; it sensed the car 382.8 m ahead in its own lane instead. With traffic.edging_sensed, the truck."""
+    from d4sumo.inputs import campaign_of
+    from d4sumo.sumohome import sumo_home
+
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    campaign = campaign_of({
+        "scenario": {"network": str(game / "highway.net.xml"), "route": ["145354574", "189597495", "E0", "191842213"],
+                     "followers": 6, "setpoint_m": 14.7, "speed_mps": 25.0, "start": "steady", "duration_s": 30.0,
+                     "maneuver": "swerve", "swerve_knots": 7, "swerve_lanes": 2},
+        "vehicle": {"actuator_lag_s": 0.5,
+                    "v1": {"length_m": 16.5, "max_accel_mps2": 1.9845750014311185, "max_decel_mps2": 8.407622788714432,
+                           "actuator_lag_s": 0.0, "vclass": "bus"},
+                    "v3": {"length_m": 3.0, "max_accel_mps2": 2.4537168523571804, "max_decel_mps2": 3.695480887363365,
+                           "actuator_lag_s": 0.0, "vclass": "truck"},
+                    "v5": {"length_m": 7.5, "max_accel_mps2": 1.1365259780615475, "max_decel_mps2": 6.934135372439975,
+                           "actuator_lag_s": 0.0, "vclass": "delivery"}},
+        "controller": {"class": "ploeg"},
+        "traffic": {"vehicles_per_hour": 1100.0, "warmup_s": 40.0, "clear_m": 10.0, "seed": 45, "edging_sensed": edging_sensed,
+                    "types": {"car": {"share": 0.8, "speedDev": 0.1},
+                              "truck": {"length": 12.0, "maxSpeed": 25.0, "share": 0.2, "vClass": "truck"}}},
+        "attack": {"family": "persistent-coded"}})
+    params = [0.9017792661135129, 4.8044056054660125, 9.281312522936645, 0.0594190842796436, 1.3163055893517215,
+              0.21842527860747385, 1.5266789427732017, 0.22872079997379124, 0.27124487697443334, 0.818936641507714]
+    config = campaign.config
+    episode = Evaluator(campaign).simulate(0, np.array(params), fcd_path=tmp_path / "fcd.xml")
+    gaps, _ = _fcd_gaps_ahead(config, episode, tmp_path / "fcd.xml", {"traffic_truck": 12.0})
+    k = 277  # the attacker half across the line to its right, 3.3 s before the ramp's edge
+    assert gaps[k, 0] == pytest.approx(85.2262, abs=1e-3)
+    assert episode.trace["gap_v0"][k] == pytest.approx(gaps[k, 0] if edging_sensed else 382.8408, abs=1e-3)
     if edging_sensed:
         assert_sensed_as_the_fcd_shows(gaps, np.column_stack([episode.trace[f"gap_{vid}"] for vid in config.vehicle_ids]))
 

@@ -86,8 +86,9 @@ class TrafficParams:
     junction_collisions: bool = True
     #: with an attacker that changes lanes, a traffic car edging into a platoon car's lane from the one beside
     #: it is sensed there from the moment its body crosses the line, however far past SUMO's nearest car of
-    #: that lane (`engine.neighbours`); false: once SUMO has it in the lane, as d4sumo 0.21 and before sensed
-    #: it (their stored campaigns replay so)
+    #: that lane, and a lane beside's nearest car past the platoon car's edge is sensed (`engine.neighbours`);
+    #: false: as d4sumo 0.21 and before sensed them, once SUMO had them in the lane or beside (their stored
+    #: campaigns replay so)
     edging_sensed: bool = True
 
     def __post_init__(self) -> None:
