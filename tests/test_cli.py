@@ -386,7 +386,7 @@ def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_doc
              "--grid", "--osm-files", "--specs", "--held", "--recheck-dt", "--first-seed", "--jobs", "--no-deps",
              "--there-python", "--there-env", "--here-env", "--traffic", "--fmu", "--systems", "--examples", "--only",
              "--opendrive-output", "--opendrive-files", "--python", "--cooperative", "--collision", "--figure",
-             "--proposals", "--clients", "--situation", "--seeds", "--verifai-python", "--ramps"}  # dask's, netgenerate's, netconvert's, SUMO's, tools/', pip's
+             "--proposals", "--clients", "--situation", "--seeds", "--verifai-python", "--ramps", "--problems"}  # dask's, netgenerate's, netconvert's, SUMO's, tools/', pip's
     assert mentioned - known - tools == set()
     main_flags = {"--config", "--network", "--followers", "--setpoint", "--speed", "--start", "--warmup", "--set", "--knots",
                   "--attack", "--params", "--optimizer", "--samples", "--seed", "--formula", "--d-safe", "--db", "--fcd",
