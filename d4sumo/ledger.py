@@ -70,7 +70,8 @@ LEDGER = (
     Added("traffic.insertion_checks", "0.17", False, "traffic entering after the warm-up unchecked"),
     Added("traffic.merge_by_departure", "0.19", False, "its demand files one after the other"),
     Added("traffic.junction_collisions", "0.19", False, "collisions inside junctions unseen"),
-    Added("traffic.edging_sensed", "0.22", False, "traffic edging into a lane sensed once SUMO had it in the lane"),
+    Added("traffic.edging_sensed", "0.22", False, "traffic edging into a lane sensed once SUMO had it in the lane, and none "
+                                                   "beside past a car's own edge"),
     # [v2v]
     Added("v2v.match_radar", "0.20", False, "cooperative followers reading the beacons whatever their radar saw"),
     # the optimisers' options

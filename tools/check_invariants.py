@@ -467,16 +467,12 @@ def fcd_lateral_traffic_pairs(config: EpisodeConfig, positions: np.ndarray, cros
 
 def fcd_gaps_differ(config: EpisodeConfig, episode, pairs: list[list[tuple]]) -> bool:
     """Whether some car's gap signal (to the nearest car ahead in the lanes it covers, whoever it is) is not
-    the FCD's at some sample: nearer than `SENSED_EXACTLY_M`, within the FCD's precision; farther, no less.
-    A standing car (a stopped obstacle) is held to the latter only: SUMO's search for its leader ends at the
-    next junction, which it would never reach."""
-    n = len(config.vehicle_ids)
+    the FCD's at some sample: nearer than `SENSED_EXACTLY_M`, within the FCD's precision; farther, no less."""
     for k, sample in enumerate(pairs[:len(episode.trace)]):
         for i, vid in enumerate(config.vehicle_ids):
             want = min((g for a, b, g in sample if b == i and g < 1000.0), default=1000.0)  # the trace's free road
             got = episode.trace[f"gap_{vid}"][k]
-            exact = want < SENSED_EXACTLY_M and episode.trace[f"speed_{vid}"][k] > 0.0
-            if (abs(want - got) > FCD_TOLERANCE_M) if exact else (got < want - FCD_TOLERANCE_M):
+            if (abs(want - got) > FCD_TOLERANCE_M) if want < SENSED_EXACTLY_M else (got < want - FCD_TOLERANCE_M):
                 return True
     return False
 
@@ -547,6 +543,8 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         return broken + fcd_bodies_differ(config, fcd, episode, c, crash)
     if config.traffic is not None and config.maneuver_class.lateral:
         pairs = fcd_lateral_traffic_pairs(config, positions, cross, traffic, road.lane_width_m)
+        if not road.one_edge:  # and in 2D: a body met inside a junction, off the lanes, is a collision there too
+            broken += [p for p in fcd_bodies_differ(config, fcd, episode, None, crash) if p == "FCD 2D collision before the end"]
     elif config.traffic is not None:
         pairs = fcd_traffic_pairs(config, positions, [lanes[vid][0] for vid in config.vehicle_ids], traffic)
     else:

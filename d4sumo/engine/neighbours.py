@@ -160,6 +160,8 @@ class _LateralTrafficSense:
         self.lengths = [v.length_m for v in config.car_vehicles]
         self.width, self.route_lanes = road.lane_width_m, lateral.route_lanes
         self.edging_sensed = config.traffic.edging_sensed
+        #: a campaign stored before (one edge then): every car SUMO names placed as 0.21 placed it, off the route too
+        self.as_0_21, self.platoon_lane = not self.edging_sensed and road.one_edge, road.platoon_lane
         #: a car this far or farther from its lane's centre reaches across a line [m] (`lanes.occupied_lanes`)
         self.edging_m = (road.lane_width_m - CAR_WIDTH_M) / 2.0
         call = lambda name: vehicle_call(api, name)  # noqa: E731
@@ -194,7 +196,10 @@ class _LateralTrafficSense:
         placed = self.route_lanes.lanes
         traffic, along, across = [], [], []
         for t in sorted(near - self.index.keys()):
-            lane = placed.get(self.get_lane(t))
+            lane_id = self.get_lane(t)
+            lane = placed.get(lane_id)
+            if lane is None and self.as_0_21:  # a car off the route's one edge, at its own lane's position, as 0.21 had it
+                lane = (0.0, int(lane_id.rpartition("_")[2]) - self.platoon_lane, 0)
             if lane is not None:
                 traffic.append(t)
                 along.append(lane[0] + self.get_position(t))  # on a road of one edge, 0 + the lane position
@@ -232,6 +237,11 @@ class _LateralTrafficSense:
             if own is None:
                 continue
             lane = own[1] + side  # the lane beside, by its place across the road
+            if mode == 2:  # once a car: its own lane past its edge, where SUMO's leader search may end at a junction
+                for leaders_own, at_own, bound_own in ((True, x[b], ahead[b]), (False, x[b] - self.lengths[b], behind[b])):
+                    own_past = self._past_edge(own[0], own[1], leaders_own, at_own, bound_own)
+                    if own_past is not None:
+                        edging.add(own_past[0])
             starts = list(found)
             past = self._past_edge(own[0], lane, leaders, x[b] - (0.0 if leaders else self.lengths[b]), bound)
             if past is not None:

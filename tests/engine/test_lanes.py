@@ -13,7 +13,7 @@ import pytest
 from conftest import assert_same_episode, random_plans
 from sumolib.xml import parse_fast_nested
 
-from d4sumo.engine.scenarios import build_road
+from d4sumo.engine.scenarios import batch_road, build_road
 from d4sumo.engine.simulation import simulate, simulate_batch
 from d4sumo.errors import ConfigError
 from d4sumo.model.attacks.maneuvers import attack_plan, lane_changes, maneuver_of
@@ -175,6 +175,13 @@ def test_the_example_acceleration_lane_shifts_the_platoons_lane_and_the_time_spa
     read = timespace.read_fcd(fcd, road.platoon_lanes)
     assert timespace.lanes(read) == ["0"]  # counted from the platoon's lane: one lane, one panel
     assert len(timespace.lanes(timespace.read_fcd(fcd))) == 2  # SUMO's indices: 0 and 1
+    # a swerve through it, batched on the road's copies (each copy's own lanes, their indices shifting) as alone
+    swerve = dataclasses.replace(config, maneuver="swerve", swerve_lanes=3)
+    plans = random_plans(swerve, 4, seed=2)
+    assert not batch_road(str(EXAMPLES / "acceleration_lane"), 4).copies_unlike
+    assert sum(len(lane_changes(p, maneuver_of(swerve))) for p in plans) >= 4
+    for batched, plan in zip(simulate_batch(swerve, plans), plans):
+        assert_same_episode(batched, simulate(swerve, plan, road=road))
 
 
 def test_a_roads_speed_limit_stays_what_stored_campaigns_were_played_with(tmp_path):
