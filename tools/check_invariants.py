@@ -543,8 +543,6 @@ def check(campaign: Campaign, evaluator: Evaluator, params: np.ndarray, store: S
         return broken + fcd_bodies_differ(config, fcd, episode, c, crash)
     if config.traffic is not None and config.maneuver_class.lateral:
         pairs = fcd_lateral_traffic_pairs(config, positions, cross, traffic, road.lane_width_m)
-        if not road.one_edge:  # and in 2D: a body met inside a junction, off the lanes, is a collision there too
-            broken += [p for p in fcd_bodies_differ(config, fcd, episode, None, crash) if p == "FCD 2D collision before the end"]
     elif config.traffic is not None:
         pairs = fcd_traffic_pairs(config, positions, [lanes[vid][0] for vid in config.vehicle_ids], traffic)
     else:
