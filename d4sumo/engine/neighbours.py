@@ -176,8 +176,11 @@ class _LateralTrafficSense:
         lanes = self.lateral.sense()  # the platoon's cars' lanes (and the attacker's lateral position, recorded)
         near: set[str] = set()
         beside: list[tuple[int, int, tuple]] = []  # (car, mode, SUMO's neighbours there)
+        unseen: list[tuple[bool, bool]] = []  # whether SUMO named no leader, no follower: its search may have ended early
         for b, vid in enumerate(self.ids):
-            for hit in (self.get_leader(vid, FREE_ROAD_GAP_M), self.get_follower(vid, FREE_ROAD_GAP_M)):
+            hits = (self.get_leader(vid, FREE_ROAD_GAP_M), self.get_follower(vid, FREE_ROAD_GAP_M))
+            unseen.append(tuple(not (hit and hit[0]) for hit in hits))
+            for hit in hits:
                 if hit and hit[0]:
                     near.add(hit[0])
             for mode in range(4):  # the lanes to its right and left, followers and leaders
@@ -186,7 +189,7 @@ class _LateralTrafficSense:
                 beside.append((b, mode, found))
         found = self._pairs(near, x, v, lanes)
         if self.edging_sensed:
-            edging = self._edging(beside, found[0], near, x)
+            edging = self._edging(beside, found[0], near, x, unseen)
             if edging:
                 found = self._pairs(near | edging, x, v, lanes)
         return found
@@ -212,7 +215,8 @@ class _LateralTrafficSense:
         pairs = [p for p in lane_pairs(xs, covered, lengths, apart=len(self.ids)) if p[2] < FREE_ROAD_GAP_M or max(p[:2]) < len(self.ids)]
         return pairs, self.names + traffic, xs, vs
 
-    def _edging(self, beside: list[tuple[int, int, tuple]], pairs: list[Pair], near: set[str], x: list[float]) -> set[str]:
+    def _edging(self, beside: list[tuple[int, int, tuple]], pairs: list[Pair], near: set[str], x: list[float],
+                unseen: list[tuple[bool, bool]]) -> set[str]:
         """The traffic cars in a lane beside a platoon car, up to the nearest car known in the platoon car's
         own lanes (ahead for leaders, behind for followers), that edge across a line toward it; and the
         nearest car of that lane past the platoon car's edge, which SUMO's search of the lanes beside a car
@@ -237,13 +241,15 @@ class _LateralTrafficSense:
             if own is None:
                 continue
             lane = own[1] + side  # the lane beside, by its place across the road
-            if mode == 2:  # once a car: its own lane past its edge, where SUMO's leader search may end at a junction
-                for leaders_own, at_own, bound_own in ((True, x[b], ahead[b]), (False, x[b] - self.lengths[b], behind[b])):
-                    own_past = self._past_edge(own[0], own[1], leaders_own, at_own, bound_own)
+            if mode == 2:  # once a car: its own lane past its edge, where SUMO's search, finding nobody, may have ended at a junction
+                for look, leaders_own, at_own, bound_own in ((unseen[b][0], True, x[b], ahead[b]),
+                                                             (unseen[b][1], False, x[b] - self.lengths[b], behind[b])):
+                    own_past = self._past_edge(own[0], own[1], leaders_own, at_own, bound_own) if look else None
                     if own_past is not None:
                         edging.add(own_past[0])
             starts = list(found)
-            past = self._past_edge(own[0], lane, leaders, x[b] - (0.0 if leaders else self.lengths[b]), bound)
+            # SUMO's nearest beside is on the car's edge, nearer than any past it: the walk goes on from it
+            past = None if found else self._past_edge(own[0], lane, leaders, x[b] - (0.0 if leaders else self.lengths[b]), bound)
             if past is not None:
                 edging.add(past[0])
                 starts.append(past)
