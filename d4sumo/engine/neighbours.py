@@ -9,7 +9,7 @@ from ..errors import SumoError
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import Pair
 from ..model.world.lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
-from .calls import vehicle_call, via_lanes
+from .calls import route_junctions, vehicle_call, via_lanes
 from .scenarios import Road
 
 
@@ -29,24 +29,21 @@ class RouteLanes:
         #: lane id -> (its start along the route [m], its place across the road, SUMO's index of the platoon's
         #: lane's place on its edge: the lane's own index minus its place)
         self.lanes: dict[str, tuple[float, int, int]] = {}
-        along = 0.0
+        junctions = [(end, end + length) for _, _, _, end, length in route_junctions(api, route, path)]
         for k, edge in enumerate(route):
             count = api.edge.getLaneNumber(edge)
             for i in range(count):
-                self.lanes[f"{edge}_{i}"] = (along, i - path[k], path[k])
+                self.lanes[f"{edge}_{i}"] = (junctions[k - 1][1] if k else 0.0, i - path[k], path[k])
             if k + 1 == len(route):
                 break
-            end = along + api.lane.getLength(f"{edge}_{path[k]}")
             for i in range(count):  # the junction lanes from each lane of the edge into the next one
                 for to_lane in sorted({link[0] for link in api.lane.getLinks(f"{edge}_{i}")
                                        if link[0].rpartition("_")[0] == route[k + 1]}):
-                    start = end
+                    start = junctions[k][0]
                     for via in via_lanes(api, f"{edge}_{i}", to_lane):
                         index = int(via.rpartition("_")[2])
                         self.lanes.setdefault(via, (start, i - path[k], index - (i - path[k])))
                         start += api.lane.getLength(via)
-            along = end + sum(api.lane.getLength(via) for via in
-                              via_lanes(api, f"{edge}_{path[k]}", f"{route[k + 1]}_{path[k + 1]}"))
         #: place across the road -> the lanes there along the route, in order: (start, end [m], lane id)
         self.by_place: dict[int, list[tuple[float, float, str]]] = {}
         for lane, (start, place, _) in self.lanes.items():
