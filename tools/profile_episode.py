@@ -40,12 +40,15 @@ PARTS = (
                                    "engine/scenarios.py", "engine/networks.py", "engine/netconvert.py",
                                    "engine/command.py", "engine/warmup.py", "subprocess.py", "sumolib")),
     ("libsumo calls", ("libsumo",)),  # (libsumo_call, and any other call into libsumo)
-    ("control laws", ("model/control.py", "model/cacc.py", "model/laws/", "model/vehicle.py", "model/arrays.py",
-                      "Followers", "model/compiled.py", "model/fmu.py")),
-    ("sensing and beacons", ("model/sensing.py", "model/v2v.py", "model/messages.py", "model/maneuvers.py",
-                             "model/lanes.py", "engine/neighbours.py")),
-    ("step loop and trace", ("engine/loop.py", "model/platoon.py", "model/batch.py", "model/recording.py",
-                             "model/trace.py", "engine/sumo.py", "engine/simulation.py", "engine/calls.py")),
+    ("control laws", ("model/controllers/control.py", "model/controllers/cacc.py", "model/controllers/laws/",
+                      "model/controllers/carfollowing.py", "model/controllers/commands.py", "model/world/vehicle.py",
+                      "model/controllers/arrays.py", "Followers", "model/controllers/compiled.py", "model/controllers/fmu.py")),
+    ("sensing and beacons", ("model/world/sensing.py", "model/world/v2v.py", "model/attacks/messages.py",
+                             "model/attacks/maneuvers.py", "model/world/lanes.py", "model/world/signals.py",
+                             "engine/neighbours.py")),
+    ("step loop and control laws in C", ("play_column",)),  # csrc/column.h: the laws and the loop, one C function
+    ("step loop and trace", ("engine/loop.py", "model/stepping/", "engine/sumo.py", "engine/simulation.py",
+                             "engine/calls.py")),
     ("specification scoring", ("search/spec.py", "rtamt", "antlr4")),
     ("optimiser proposals", ("search/optimizers", "skopt", "sklearn", "scipy", "cma")),
     ("storage", ("search/store.py", "sqlite3")),
@@ -61,6 +64,8 @@ def part_of(func: tuple) -> str | None:
             return next(p for p, keys in PARTS if any(k in name for k in keys))
         if "Followers" in name:
             return "control laws"
+        if "play_column" in name:
+            return "step loop and control laws in C"
         return None
     where = f"{filename}:{name}"
     return next((p for p, keys in PARTS if any(k in where for k in keys)), OTHER)

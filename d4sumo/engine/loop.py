@@ -23,16 +23,15 @@ import numpy as np
 from ..errors import WarmupCollision
 from ..model.stepping.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
+from ..model.controllers import compiled
 from ..model.attacks.maneuvers import AttackPlan, lane_changes, maneuver_of
 from ..model.stepping.platoon import Platoon, collisions_at
 from ..model.stepping.trace import Episode, rows_array
 
 #: episodes go on one at a time once this few are left: the arrays' fixed cost per step then exceeds
-#: what they save (measured with tools/bench_batch.py) ...
+#: what they save (measured with tools/bench_batch.py). Episodes the column's loop in C plays (`_Episodes.in_c`)
+#: never take the arrays: at 10, 30 and 60 episodes in one SUMO the loop costs 1.0-1.4 times less than they do
 DETACH_AT = 4
-#: ... and this few where each goes on in C (`model.compiled`: the paper's controller, an attacker that only
-#: attacks and cruises), cheaper alone than in Python (0.21, bench_batch: random +5 %, ce +14 % over 4)
-DETACH_AT_IN_C = 12
 
 
 class _Column:
@@ -91,7 +90,7 @@ class _Traffic(_Column):
 class _Alone:
     """An episode commanded on its own: its platoon, and its samples as lists from ``start`` on."""
 
-    __slots__ = ("e", "platoon", "ids", "commanded", "start", "xs", "vs", "x", "v", "pairs", "sensed")
+    __slots__ = ("e", "platoon", "ids", "commanded", "start", "xs", "vs", "x", "v", "pairs", "sensed", "rows")
 
     def __init__(self, e: int, platoon: Platoon, ids: tuple[str, ...], start: int, x: list, v: list, pairs: list,
                  sensed: tuple | None = None):
@@ -101,6 +100,8 @@ class _Alone:
         self.x, self.v, self.pairs = x, v, pairs
         #: with traffic: the ids, positions and speeds the pairs index, the traffic cars in them included
         self.sensed = sensed
+        #: played by the column's loop in C (`_Episodes.play_in_c`): its positions and speeds by step, in place of xs and vs
+        self.rows: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class _Episodes:
@@ -157,7 +158,10 @@ class _Episodes:
     def _alone_result(self, alone: _Alone, steps_done: int, collisions: tuple, lateral_m) -> "Episode | Exception":
         e, n = alone.e, len(self.names)
         alone.platoon.pairs = self.recorded[e]
-        x, v = rows_array(alone.xs, n), rows_array(alone.vs, n)
+        if alone.rows is not None:
+            x, v = (rows[alone.start:steps_done + 1] for rows in alone.rows)
+        else:
+            x, v = rows_array(alone.xs, n), rows_array(alone.vs, n)
         if alone.start:  # carried on from the arrays: the samples before are theirs
             x, v = self.arrays.before(e, alone.start, x, v)
         try:
@@ -167,6 +171,40 @@ class _Episodes:
                            self.world.signal_tracks(e) if self.lights else ())
         except Exception as exc:  # a user's controller's mode that is not a number
             return exc
+
+    def in_c(self) -> bool:
+        """Whether every episode left goes on in the column's step loop in C (`compiled.play_column`): each alone, in
+        the paper's column (no lane change, no traffic lights), its platoon stepped in C, its attacker too."""
+        return (compiled.play_column is not None and compiled.ENABLED and type(self.sensing) is _Column
+                and not self.lights and bool(self.solo) and len(self.maneuver.lengths_m) == len(self.names)
+                and all(alone.platoon._attacker_in_c for alone in self.solo))
+
+    def play_in_c(self, k: int) -> None:
+        """Steps k to the last of every episode left, in C: as command_alone and sense_alone play them, bit for bit
+        (tests/engine/test_loop.py), at a fraction of their cost."""
+        steps, n = self.steps, len(self.names)
+        played = []
+        for alone in self.solo:
+            platoon = alone.platoon
+            alone.rows = np.empty((steps + 1, n)), np.empty((steps + 1, n))
+            alone.rows[0][k], alone.rows[1][k] = alone.x, alone.v
+            commands = np.empty((steps, len(platoon.commanded)))
+            modes = np.empty((steps, len(platoon._with_mode))) if platoon._with_mode else None
+            platoon.played_in_c(k, commands, modes)
+            played.append((alone.e, platoon._compiled.__self__, alone.ids, tuple(self.maneuver.lengths_m[:-1]),
+                           *alone.rows, commands, modes, alone.xs[0][0]))
+        world = self.world
+        compiled.play_column(k, steps, world.step, world.set_speed, world.get_position, world.get_speed, played,
+                             self._ended_in_c, self.crash_m, float(self.end_m or 0.0))
+
+    def _ended_in_c(self, e: int, steps_done: int, error: Exception | None, collided: bool) -> None:
+        """Episode e, played in C, ends after ``steps_done`` steps: at a collision, its end distance or its error."""
+        collisions = ()
+        if collided:
+            alone = next(a for a in self.solo if a.e == e)
+            x, v = (rows[steps_done].tolist() for rows in alone.rows)
+            collisions = collisions_at(steps_done * self.dt, self.maneuver.pairs(x), x, v, self.names, self.crash_m)
+        self.end(e, steps_done, collisions, error)
 
     def command_alone(self, k: int) -> None:
         """Step k's commands of every episode commanded on its own, applied."""
@@ -301,15 +339,17 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
     configuration (all of one `batch.batch_key`); every result is the episode, or the exception a
     user's follower controller raised in it. ``on_episode(e, result)`` hears of each as it ends.
     ``detach_at``: the arrays command while more than this many are left (0: to the end; None: `DETACH_AT`, or
-    `DETACH_AT_IN_C` where the episodes alone would step in C);
+    never where the episodes would go on in the column's loop in C);
     ``detach_at_step``: from this step on, every episode goes on alone (tests of the array laws)."""
     episodes = _Episodes(world, configs, on_episode)
     config, m = configs[0], len(plans)
     if detach_at is None:
         detach_at = DETACH_AT
-        if (m > DETACH_AT and config.batch_arrays and all(p.motion is None for p in plans)  # would they go on in C? (asked
-                and all(c.cls in ("switching", "timegap") for c in config.controllers)):  # of d4sumo's laws: nobody's code runs)
-            detach_at = DETACH_AT_IN_C if Platoon(config, plans[0].u, world.attacker_max_speed_mps)._attacker_in_c else DETACH_AT
+        if (m > DETACH_AT and config.batch_arrays and all(p.motion is None for p in plans) and not episodes.lights
+                and type(episodes.sensing) is _Column and compiled.play_column is not None  # would they go on in C? (asked
+                and all(c.cls in ("switching", "timegap") or c.sumo_model for c in config.controllers)):  # of d4sumo's laws)
+            if Platoon(config, plans[0].u, world.attacker_max_speed_mps, beacons=plans[0].beacons)._attacker_in_c:
+                detach_at = m
     changes: dict[int, list[tuple[int, int]]] = {}  # step -> (episode, the lane its attacker changes to)
     for e, plan in enumerate(plans):
         for k, lane in lane_changes(plan, episodes.maneuver):
@@ -325,9 +365,15 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
                               lights=episodes.lights)
             episodes.solo.append(episodes.alone(e, platoon, 0, x, v))
     live = episodes.live
+    in_c = not changes  # the episodes left may go on in C, once none is the arrays' (`_Episodes.in_c`)
     for k in range(config.steps):
         if arrays is not None and arrays.arrayed and (len(arrays.arrayed) <= detach_at or k == detach_at_step):
             episodes.solo = sorted(episodes.solo + arrays.detach(k), key=lambda a: a.e)
+        if in_c and (arrays is None or not arrays.arrayed):
+            in_c = episodes.in_c()
+            if in_c:
+                episodes.play_in_c(k)
+                break
         for e, lane in changes.get(k, ()):
             if e in live:
                 world.change_lane(e, lane)

@@ -868,12 +868,17 @@ def _garbage_of_d4sumo(play) -> list[str]:
     return sorted(kinds)
 
 
-def test_a_batch_and_a_campaign_leave_nothing_for_the_cycle_collector(road):
+def test_a_batch_and_a_campaign_leave_nothing_for_the_cycle_collector(road, monkeypatch):
     from conftest import random_plans
 
+    from d4sumo.model.controllers import compiled
+
     config = dataclasses.replace(CONFIG, start="steady", duration_s=20.0)
-    plans = random_plans(config, 20, seed=3)  # more than go on alone from the start (loop.DETACH_AT_IN_C)
-    assert _garbage_of_d4sumo(lambda: simulate_batch(config, plans)) == []
+    plans = random_plans(config, 20, seed=3)
+    assert _garbage_of_d4sumo(lambda: simulate_batch(config, plans)) == []  # the column's loop in C
+    with monkeypatch.context() as m:
+        m.setattr(compiled, "play_column", None)  # more than loop.DETACH_AT: the arrays, then each alone
+        assert _garbage_of_d4sumo(lambda: simulate_batch(config, plans)) == []
     assert _garbage_of_d4sumo(lambda: simulate_batch(config, plans[:3])) == []  # alone, each its own platoon
     campaign = Campaign(config, optimizer="bo", samples=16, seed=1)
     assert _garbage_of_d4sumo(lambda: run_campaign(campaign, batch=8)) == []

@@ -15,7 +15,7 @@
  * d4sumo.model.controllers.compiled decides which platoons it may play and builds it from their Python objects.
  *
  * csrc/followers.h: the types; csrc/convert.h: numbers in and out; csrc/laws.h: the radar, the laws, the actuator;
- * csrc/channel.h: the beacons.
+ * csrc/channel.h: the beacons; csrc/column.h: the paper's column's step loop.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -31,7 +31,7 @@
 /* platoon.Platoon.advance's attacker without traffic, lights, a motion or the authors' options: its attack's pedal,
  * or where the attack is NaN its cruise control (control.CruiseControl, afresh at each new cruise window) through
  * vehicle.acceleration_to_command; its speed at the step's end through its actuator */
-static int attacker_step(Followers *self, long k, PyObject *commands, PyObject *new_speeds) {
+static int attacker_step(Followers *self, long k, double *command_out, double *speed_out) {
     Follower *a = &self->f[0];
     if (k < 0 || k >= self->attack_steps) {
         PyErr_Format(PyExc_IndexError, "step %ld of an attack of %zd steps", k, self->attack_steps);
@@ -48,7 +48,50 @@ static int attacker_step(Followers *self, long k, PyObject *commands, PyObject *
     } else {
         self->attacking = 1;
     }
-    return append_float(commands, u) < 0 || append_float(new_speeds, apply(a, u, speed)) < 0 ? -1 : 0;
+    *command_out = u;
+    *speed_out = apply(a, u, speed);
+    return 0;
+}
+
+/* Step k from this step's positions, speeds and gaps (self->x, v, gap): the step's beacons, then each car's command
+ * and its speed at the step's end (the attacker's first, where it is stepped here) into commands and new_speeds, and
+ * the modes of the followers that record one into modes; returns how many commands, -1 with an error set. */
+static int followers_step(Followers *self, long k, double *commands, double *new_speeds, double *modes) {
+    int n = self->cars, out = 0;
+    double now = 0.0;
+    if (self->channel) { /* Platoon._accelerations (0 at the first step), then the step's beacons */
+        const double *last = self->has_last ? self->last : self->v;
+        for (int j = 0; j < n; j++)
+            self->acc[j] = (self->v[j] - last[j]) / self->step_s;
+        memcpy(self->last, self->v, n * sizeof(double));
+        self->has_last = 1;
+        now = k * self->step_s;
+        if (send(self, k) < 0)
+            return -1;
+    }
+    if (self->has_attacker && attacker_step(self, k, &commands[0], &new_speeds[0]) < 0)
+        return -1;
+    out = self->has_attacker;
+    for (int i = 1; i < n; i++) {
+        double gap = self->gap[i];
+        Follower *f = &self->f[i];
+        if (f->law == LAW_SUMO)
+            continue;
+        Reading r = {gap, self->v[i - 1], gap < FREE_ROAD_GAP_M};
+        if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
+            return -1;
+        double c = command(self, i, r, now);
+        if (!(c >= -1.0 && c <= 1.0)) { /* not a command (NaN): its error, as the Python says it */
+            if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
+                return -1;
+        }
+        new_speeds[out] = apply(f, c, self->v[i]);
+        commands[out++] = c;
+    }
+    for (int i = 1, m = 0; i < n; i++)
+        if (self->f[i].has_mode)
+            modes[m++] = self->f[i].mode;
+    return out;
 }
 
 /* advance(k, positions, speeds, pairs, commands, new_speeds, modes): step k's beacons, then each follower's
@@ -94,39 +137,19 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
     Py_DECREF(pairs);
     if (status < 0)
         return NULL;
-    double now = 0.0;
-    if (self->channel) { /* Platoon._accelerations (0 at the first step), then the step's beacons */
-        const double *last = self->has_last ? self->last : self->v;
-        for (int j = 0; j < n; j++)
-            self->acc[j] = (self->v[j] - last[j]) / self->step_s;
-        memcpy(self->last, self->v, n * sizeof(double));
-        self->has_last = 1;
-        now = k * self->step_s;
-        if (send(self, k) < 0)
-            return NULL;
-    }
-    if (self->has_attacker && attacker_step(self, k, commands, new_speeds) < 0)
+    double *out = self->out; /* commands, new speeds, modes */
+    int count = followers_step(self, k, out, out + n, out + 2 * n);
+    if (count < 0)
         return NULL;
-    for (int i = 1; i < n; i++) {
-        double gap = self->gap[i];
-        Follower *f = &self->f[i];
-        Reading r = {gap, self->v[i - 1], gap < FREE_ROAD_GAP_M};
-        if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
+    for (int j = 0; j < count; j++)
+        if (append_float(commands, out[j]) < 0 || append_float(new_speeds, out[n + j]) < 0)
             return NULL;
-        double c = command(self, i, r, now);
-        if (!(c >= -1.0 && c <= 1.0)) { /* not a command (NaN): its error, as the Python says it */
-            if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
-                return NULL;
-        }
-        if (append_float(commands, c) < 0 || append_float(new_speeds, apply(f, c, self->v[i])) < 0)
-            return NULL;
-    }
     if (self->with_mode) {
         PyObject *row = PyList_New(0);
         if (row == NULL)
             return NULL;
-        for (int i = 1; i < n; i++) {
-            if (self->f[i].has_mode && append_float(row, self->f[i].mode) < 0) {
+        for (int m = 0; m < self->with_mode; m++) {
+            if (append_float(row, out[2 * n + m]) < 0) {
                 Py_DECREF(row);
                 return NULL;
             }
@@ -238,7 +261,7 @@ static int init_attacker(Followers *self, PyObject *attacker) {
  *   randoms  each link's generator's random(), in that order (with loss), else []
  *   lie      (falsify, liar, Message, Channel.sent), or None
  *   attacker None (the Python plays it), or what `init_attacker` reads
- *   laws     each follower's, from v1: (law, whether its mode is recorded, (setpoint_m, target_mps, step_s,
+ *   laws     each follower's, from v1: (law (0: SUMO drives it, its numbers zeros), whether its mode is recorded, (setpoint_m, target_mps, step_s,
  *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
  *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
  *            speed_noise_mps, delay steps, normal)) */
@@ -267,7 +290,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     self->cars = n;
     self->direct = self->delay == 0 && self->loss == 0.0;
-    self->last = PyMem_Calloc(6 * (size_t)n, sizeof(double));
+    self->last = PyMem_Calloc(9 * (size_t)n, sizeof(double));
     self->sources = PyMem_Calloc(2 * (size_t)n * n + 3 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now */
     self->inbox = PyMem_Calloc((size_t)n * (n + 1), sizeof(Beacon));
     self->f = PyMem_Calloc((size_t)n, sizeof(Follower));
@@ -282,6 +305,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     double *d = self->last;
     self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n, self->gap = d + 5 * n;
+    self->out = d + 6 * n;
     self->n_sources = self->sources + n * n, self->is_sender = self->n_sources + n, self->heard = self->is_sender + n;
     self->sent_now = self->heard + n * n;
     self->step_beacons = self->inbox + n * n;
@@ -336,7 +360,11 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
                               &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar, &state))
             return -1;
         int switching = f->law == LAW_SWITCHING || f->law == LAW_TIMEGAP;
-        if (f->law < LAW_CACC || f->law > LAW_TIMEGAP || (!switching && !self->channel)) {
+        if (f->law == LAW_SUMO && (self->channel || attacker == Py_None)) {
+            PyErr_SetString(PyExc_ValueError, "a follower SUMO drives: with the attacker stepped here, without a channel");
+            return -1;
+        }
+        if (f->law < LAW_SUMO || f->law > LAW_TIMEGAP || (!switching && f->law != LAW_SUMO && !self->channel)) {
             PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
             return -1;
         }
@@ -408,8 +436,17 @@ static PyTypeObject FollowersType = {
     .tp_methods = Followers_methods,
 };
 
+#include "column.h" /* the column's step loop */
+
+static PyMethodDef module_methods[] = {
+    {"play_column", (PyCFunction)(void (*)(void))play_column, METH_FASTCALL,
+     "play_column(k, steps, step, set_speed, get_position, get_speed, episodes, on_end, collision_gap_m, end_m): "
+     "the column's step loop (csrc/column.h)"},
+    {NULL, NULL, 0, NULL},
+};
+
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_followers", "A platoon's followers, stepped in C.", -1, NULL, NULL, NULL, NULL, NULL,
+    PyModuleDef_HEAD_INIT, "_followers", "A platoon's followers, stepped in C.", -1, module_methods, NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__followers(void) {

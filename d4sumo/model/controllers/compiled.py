@@ -4,13 +4,15 @@ cost (docs/v2v.md, docs/benchmarks.md).
 
 It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
 `timegap`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
-the mitigation, in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
+the mitigation (and, beside an attacker stepped here without a channel, followers SUMO's models drive: nothing of theirs), in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
 noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
 Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
 switching law in C is the one the FMUs d4sumo ships run (`fmus/switching.h`). The attacker too, where it only
 plays its attack and cruises (no traffic, no motion, none of the authors' options). Everything else the Python
 plays, as it does everywhere when the extension could not be built (no C compiler at install: the same
-episodes, slower).
+episodes, slower). Where every episode left in a SUMO (or the ballistic world) is such a platoon in the paper's
+column, the step loop itself goes on in C (`play_column`, `engine.loop`): each step's commands, the world's calls and
+the collision checks, as the Python's loop makes them.
 """
 
 from __future__ import annotations
@@ -26,12 +28,15 @@ from ..world.sensing import Radar
 from ..world.v2v import Message
 
 try:
-    from ._followers import Followers
+    from ._followers import Followers, play_column
 except ImportError:  # not built: the Python plays every platoon
-    Followers = None
+    Followers = play_column = None
 
 #: whether the platoons it may play are stepped in C (tests turn it off to compare with the Python)
 ENABLED = True
+
+#: a follower SUMO drives, as the extension reads it: law 0, no mode, its numbers zeros
+SUMO_DRIVES = (0, False, (0.0,) * 5, (0.0,) * 5, 0.0, (0.0, 0.0), (0.0,) * 7, None)
 
 #: each controller's law, as the extension numbers them
 LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4, TimeGapController: 5}
@@ -46,13 +51,19 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
     batch's arrays: `batch.PlatoonBatch.detach`). With ``attacker`` (one that plays its attack and
     cruises, nothing else: `platoon.Platoon`) the attacker is stepped in C too, its command and speed first."""
     channel, config = platoon.channel, platoon.config
-    if (Followers is None or not ENABLED or not platoon._one_ahead or len(platoon._python) != config.followers
+    # followers SUMO drives (its models) with the attacker stepped here: nothing of theirs is, no beacon for them
+    sumo_driven = attacker and channel is None and not platoon._sumo_listening
+    if (Followers is None or not ENABLED or not platoon._one_ahead
+            or len(platoon._python) != config.followers and not sumo_driven
             or (channel is not None and channel.falsify is not None
                 and (type(channel.falsify) is not BeaconFalsifier  # d4sumo's lies: none renames its sender
                      or channel.liar not in channel.senders))):
         return None
     laws = []
     for i, follower in enumerate(platoon.followers, start=1):
+        if follower.sumo_driven:
+            laws.append(SUMO_DRIVES)
+            continue
         controller = follower.controller
         law = LAWS.get(type(controller))
         if law is None or (law < 4 and channel is None):

@@ -275,6 +275,7 @@ class Platoon:
                        # a numpy float32 top speed (from the Python API) computes in float32 in the Python
                        and type(self.attacker_actuator.max_speed_mps) in (float, int))
         self._compiled, self._attacker_in_c = None, False
+        self._in_c: tuple | None = None  # from which step the column's loop in C records its commands (`played_in_c`)
         if followers is None and not lights:
             self.compile()
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
@@ -300,6 +301,11 @@ class Platoon:
         self._compiled = compiled_followers(self, attacker=self._plain)
         #: whether the attacker is stepped in C with them: the whole step is then the C's
         self._attacker_in_c = self._compiled is not None and self._plain
+
+    def played_in_c(self, k: int, commands: np.ndarray, modes: np.ndarray | None) -> None:
+        """From step k on, its commands (and modes) are the rows of ``commands`` (``modes``) the column's loop in C fills
+        (`engine.loop`), after those it recorded before."""
+        self._in_c = (k, commands, modes)
 
     def _obeying(self, i: int, command):
         """Follower ``i``'s command, which its driver holds below what the signal ahead allows (`signals`)."""
@@ -437,7 +443,14 @@ class Platoon:
         lane-changing maneuver, the recorded pairs and each car's lateral position); with it the minimum
         gaps (`assemble_trace`)."""
         commands = rows_array(self.commands, len(self.commanded))
-        modes = np.array(self.modes, dtype=float) if self._with_mode and self.modes else None
+        modes = np.array(self.modes, dtype=float).reshape(-1, len(self._with_mode)) if self._with_mode else None
+        if self._in_c is not None:  # the rows the loop in C filled, up to the last sample
+            k, in_c, modes_in_c = self._in_c
+            commands = np.concatenate([commands, in_c[k:times_s.size - 1]])
+            if modes is not None:
+                modes = np.concatenate([modes, modes_in_c[k:times_s.size - 1]])
+        if modes is not None and not modes.size:
+            modes = None
         trace, min_gaps, warmup_min_gaps = assemble_trace(self.config, self.followers, self.commanded, times_s, positions,
                                                           speeds, commands, modes, self.pairs, lateral_m)
         if self.channel is not None and self.channel.falsify is not None:

@@ -1,6 +1,6 @@
 /* The followers' types (part of _followers.c, included once from it) and the Python's draws. */
 
-enum { LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5 };
+enum { LAW_SUMO = 0, LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5 };
 
 #define FREE_ROAD_GAP_M 1000.0 /* maneuvers.FREE_ROAD_GAP_M: nobody ahead */
 #define CC_KP 1.0              /* control.CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2: Plexe's cruise control */
@@ -24,7 +24,7 @@ typedef struct { /* a radar's reading: gap, speed ahead, whether a car is ahead 
 } Reading;
 
 typedef struct {
-    int law;
+    int law; /* LAW_SUMO: SUMO drives it, nothing here */
     double setpoint_m, target_mps, step_s, max_accel, max_decel; /* the controller's */
     /* CACC: a1..a5; Ploeg: h_s, kp, kd; consensus: b, k_leader_v1, k_leader, k_front, h_s; switching: its
      * SwitchingParams' cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2, acc_kp,
@@ -56,6 +56,7 @@ typedef struct {
     int has_last;
     double *last, *x, *v, *acc, *gap, *length; /* each car's speed a step ago; this step's position, speed, acceleration,
                                                 gap to the car ahead; length */
+    double *out;    /* a step's commands, new speeds and modes (3 n) */
     int *sources;   /* receiver i's sources: sources[i * cars + j], j < n_sources[i] */
     int *n_sources;
     PyObject **random; /* each link's generator's random() (with loss), in the order of `sources` */
