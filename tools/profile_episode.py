@@ -163,7 +163,8 @@ def figure(results: dict[str, tuple[dict[str, float], float]], path: Path) -> No
 
     names = [p for p, _ in PARTS] + [OTHER]
     labels = list(results)
-    colours = plt.get_cmap("tab10")(np.arange(len(names)) % 10)
+    # tab10, then Dark2's: a colour of its own for each part (tab10 alone repeats after ten)
+    colours = np.concatenate([plt.get_cmap("tab10")(np.arange(10)), plt.get_cmap("Dark2")(np.arange(8))])[:len(names)]
     fig, ax = plt.subplots(figsize=(9.0, 0.75 * len(labels) + 2.2), layout="constrained")
     for row, label in enumerate(labels):
         parts, total = results[label]
