@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import shutil
+import sys
 import threading
 
 import numpy as np
@@ -293,3 +295,9 @@ def dask_elsewhere(tmp_path, workers: int = 1):
                 os.killpg(p.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+#: whether libsumo's own C++ calls (`engine.calls.native_calls`) must be had here: on Linux, where a C++ compiler built
+#: them at install (without one, pip goes on without them and the loop in C calls libsumo as the Python does)
+NATIVE_CALLS_EXPECTED = sys.platform.startswith("linux") and any(shutil.which(c) for c in ("c++", "g++", "clang++"))
+

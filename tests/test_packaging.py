@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import made_ahead, side_by_side
+from conftest import NATIVE_CALLS_EXPECTED, made_ahead, side_by_side
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -51,6 +51,8 @@ def test_the_wheel_ships_every_scenario_variant(wheel):
     assert not any(n.startswith("tests/") for n in names)
     # the followers stepped in C (d4sumo.model.controllers.compiled), built for this platform
     assert [n for n in names if n.startswith("d4sumo/model/controllers/_followers.") and n.endswith(".so")], names
+    # and libsumo's own C++ calls for the loop in C (d4sumo/engine/_sumo_calls.cpp), where a C++ compiler built them
+    assert [n for n in names if n.startswith("d4sumo/engine/_sumo_calls.") and n.endswith(".so")] or not NATIVE_CALLS_EXPECTED, names
 
 
 @pytest.mark.sumo
@@ -77,6 +79,8 @@ def test_the_installed_wheel_runs_an_episode_from_an_unrelated_folder(wheel, tmp
     ])
     assert where.returncode == 0, where.stderr
     assert all(line.startswith(str(site)) for line in where.stdout.split()), where.stdout  # not the checkout
+    native = run("-c", "import libsumo; from d4sumo.engine.calls import native_calls; print(native_calls(libsumo) is not None)")
+    assert native.stdout.strip() == str(NATIVE_CALLS_EXPECTED), native.stderr  # the loop in C takes libsumo's own functions
     assert listed.returncode == 0 and "highway_3lane_120kmh" in listed.stdout, listed.stderr
     assert episode.returncode == 0, episode.stderr
     assert json.loads(episode.stdout)["outcome"] == "attacker_crash"
@@ -116,7 +120,9 @@ def test_the_source_distribution_holds_every_file_the_extension_is_built_from(tm
     (archive,) = (tmp_path / "dist").glob("d4sumo-*.tar.gz")
     names = {n.split("/", 1)[1] for n in tarfile.open(archive).getnames() if "/" in n}
     setup = (ROOT / "setup.py").read_text()
-    needed = {"d4sumo/model/controllers/_followers.c", *(part for part in names if part.startswith("d4sumo/model/controllers/csrc/"))}
+    needed = {"d4sumo/model/controllers/_followers.c", "d4sumo/engine/_sumo_calls.cpp",
+              *(part for part in names if part.startswith("d4sumo/model/controllers/csrc/"))}
     assert {"d4sumo/model/controllers/csrc/followers.h", "d4sumo/model/controllers/csrc/laws.h", "d4sumo/model/controllers/csrc/channel.h",
+            "d4sumo/model/controllers/csrc/column.h", "d4sumo/model/controllers/csrc/world_calls.h",
             "d4sumo/fmus/switching.h"} <= names and needed <= names
     assert all(f'"{part}"' in setup for part in needed if part.endswith(".h"))  # each a dependency of the build

@@ -5,7 +5,9 @@ optimiser proposals, storage and start-up (SUMO's, the road's), and a figure of 
 Each part is the self time (cProfile's tottime) of the functions of its modules; the time of a built-in call
 (a list's append, a numpy ufunc) goes to the part of the function that called it. The step loop calls SUMO's C
 functions without a Python frame (bound, mapped over the cars), which a profiler does not see: here each goes
-through a one-line Python function (`sumo_step`, `libsumo_call`), so that it is seen, at the cost of that frame.
+through a one-line Python function (`sumo_step`, `libsumo_call`), so that it is seen, at the cost of that frame;
+the step loop in C likewise calls them, not libsumo's C++ functions it calls unprofiled (`engine.calls.native_calls`,
+which cost about a tenth of libsumo's Python calls: bench_episode measures them).
 The profiler adds a cost to every Python call, so the Python parts weigh more here than they do unprofiled:
 the totals to hold against targets are bench_episode's. Both ways are profiled in one run: the followers as they play by default (the
 paper's controller stepped in C, `model.compiled`) and stepped by the Python (--python's, as d4sumo 0.20
@@ -105,7 +107,7 @@ def seen_by_the_profiler() -> None:
     """The step loop's bound SUMO calls (`engine.calls`), each through a Python function."""
     import functools
 
-    from d4sumo.engine import calls, sumo
+    from d4sumo.engine import calls, loop, sumo
 
     def api_call(api, domain, name, _raw=calls.api_call):
         return functools.partial(libsumo_call, _raw(api, domain, name))
@@ -116,6 +118,7 @@ def seen_by_the_profiler() -> None:
 
     calls.api_call = api_call
     sumo.simulation_step = simulation_step
+    loop.NATIVE_CALLS = False  # the loop in C calls libsumo's Python (through these frames), not its C++ functions
 
 
 def profiled(job) -> tuple[dict[str, float], float]:

@@ -42,6 +42,26 @@ def vehicle_call(api, name: str):
     return api_call(api, "vehicle", name)
 
 
+_NATIVE: dict = {}  # SUMO's calls in C, bound once a process (None: not to be had)
+
+
+def native_calls(api):
+    """libsumo's own C++ functions (step, each car's position, odometer and speed, its commanded speed) for the step
+    loop in C, as a capsule (`_sumo_calls`, `model/controllers/csrc/world_calls.h`); None where they cannot be had: TraCI,
+    an install without the extension, a libsumo that names them otherwise. The same functions libsumo's Python calls."""
+    raw = getattr(api, "_libsumo", None)
+    if raw is None:
+        return None
+    if "calls" not in _NATIVE:
+        try:
+            from ._sumo_calls import bind
+        except ImportError:  # built without a C++ compiler: the loop calls libsumo as the Python does
+            _NATIVE["calls"] = None
+        else:
+            _NATIVE["calls"] = bind(raw.__file__, api.TraCIException)
+    return _NATIVE["calls"]
+
+
 def simulation_step(api):
     """``api.simulationStep``; for libsumo its C function (d4sumo registers no step listeners)."""
     raw = getattr(getattr(api, "_libsumo", None), "simulation_step", None)

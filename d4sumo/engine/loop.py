@@ -32,6 +32,9 @@ from ..model.stepping.trace import Episode, rows_array
 #: what they save (measured with tools/bench_batch.py). Episodes the column's loop in C plays (`_Episodes.in_c`)
 #: never take the arrays: at 10, 30 and 60 episodes in one SUMO the loop costs 1.0-1.4 times less than they do
 DETACH_AT = 4
+#: whether the loop in C calls SUMO's C++ functions themselves where the world gives them (tests turn it off to
+#: compare with libsumo's Python calls)
+NATIVE_CALLS = True
 
 
 class _Column:
@@ -182,7 +185,9 @@ class _Episodes:
     def play_in_c(self, k: int) -> None:
         """Steps k to the last of every episode left, in C: as command_alone and sense_alone play them, bit for bit
         (tests/engine/test_loop.py), at a fraction of their cost."""
-        steps, n = self.steps, len(self.names)
+        steps, n, world = self.steps, len(self.names), self.world
+        own_calls = getattr(world, "own_calls", None)  # SUMO's own calls in C (`SumoWorld.own_calls`)
+        calls = own_calls() if NATIVE_CALLS and own_calls is not None else None
         played = []
         for alone in self.solo:
             platoon = alone.platoon
@@ -192,10 +197,9 @@ class _Episodes:
             modes = np.empty((steps, len(platoon._with_mode))) if platoon._with_mode else None
             platoon.played_in_c(k, commands, modes)
             played.append((alone.e, platoon._compiled.__self__, alone.ids, tuple(self.maneuver.lengths_m[:-1]),
-                           *alone.rows, commands, modes, alone.xs[0][0]))
-        world = self.world
+                           *alone.rows, commands, modes, alone.xs[0][0], calls and world.offsets(alone.e)))
         compiled.play_column(k, steps, world.step, world.set_speed, world.get_position, world.get_speed, played,
-                             self._ended_in_c, self.crash_m, float(self.end_m or 0.0))
+                             self._ended_in_c, self.crash_m, float(self.end_m or 0.0), calls)
 
     def _ended_in_c(self, e: int, steps_done: int, error: Exception | None, collided: bool) -> None:
         """Episode e, played in C, ends after ``steps_done`` steps: at a collision, its end distance or its error."""

@@ -25,7 +25,7 @@ from ..model.controllers.carfollowing import beacon_parameters, vehicle_data
 from ..model.stepping.platoon import followers_of
 from ..model.world.vehicle import VehicleParams
 from ..sumohome import sumo_binary
-from .calls import simulation_step, vehicle_call
+from .calls import native_calls, simulation_step, vehicle_call
 from .command import (
     ATTACKER_VTYPE_ID, LANE_CHANGE_MODE_OFF, LANE_CHANGE_MODE_SUMO, ROUTE_ID, SPEED_MODE_PYTHON, VTYPE_ID,
     follower_types, sumo_command)
@@ -109,8 +109,9 @@ def _define_type(api, type_id: str, v: VehicleParams) -> None:
     api.vehicletype.setSpeedDeviation(type_id, 0.0)
 
 
-def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> Callable[[str], float]:
-    """A reader of each car's position along its route [m], its front bumper.
+def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> tuple[Callable[[str], float], dict[str, float] | None]:
+    """A reader of each car's position along its route [m], its front bumper, and where it was inserted (None: the
+    reader is SUMO's lane position).
 
     On a road of one edge that is SUMO's lane position. On a route of many edges the lane position
     starts again at 0 on each edge (and on each junction's internal lane), so the position is where the
@@ -119,10 +120,10 @@ def route_position(api, road: Road, vehicle_ids: Sequence[str]) -> Callable[[str
     """
     get_position = vehicle_call(api, "getLanePosition")
     if road.one_edge:
-        return get_position
+        return get_position, None
     departed = {vid: get_position(vid) for vid in vehicle_ids}  # every car starts on the route's first edge
     get_distance = vehicle_call(api, "getDistance")
-    return lambda vid: departed[vid] + get_distance(vid)
+    return (lambda vid: departed[vid] + get_distance(vid)), departed
 
 
 
@@ -292,7 +293,7 @@ class SumoWorld:
         self.platoons = platoons
         self.attacker_max_speed_mps = road.speed_limit_mps
         self.get_speed, self.set_speed = (vehicle_call(api, f) for f in ("getSpeed", "setSpeed"))
-        self.get_position = route_position(api, road, [vid for ids in platoons for vid in ids])
+        self.get_position, self._departed = route_position(api, road, [vid for ids in platoons for vid in ids])
         maneuver = maneuver_of(config)
         self.laterals = [_Lateral(api, maneuver, road, ids[0], e) for e, ids in enumerate(platoons)] if maneuver.lateral else None
         #: with traffic, each platoon's sensing of who is ahead (`_TrafficSense`, `_LateralTrafficSense`); None:
@@ -317,6 +318,7 @@ class SumoWorld:
             self.traffic = [_LateralTrafficSense(api, config, ids, self.laterals[e], road) if self.laterals
                             else _TrafficSense(api, config, ids) for e, ids in enumerate(platoons)]
         step = simulation_step(api)
+        self._calls = None  # SUMO's own calls in C (`native_calls`), where its step is SUMO's alone
         if road.forks:  # SUMO may take another lane than the path at a fork: each step checks it did not
             check = _LanePathCheck(api, config, road, platoons, maneuver)
             self.removed = check.removed
@@ -324,6 +326,20 @@ class SumoWorld:
         else:
             self.removed = set()
             self.step = step
+            self._calls = native_calls(api)
+        self._own = (self.step, self.set_speed, self.get_speed, self.get_position)
+
+    def own_calls(self):
+        """SUMO's own calls in C for the step loop in C (`calls.native_calls`), the same as this world's step, set_speed,
+        get_speed and get_position; None where there are none, or where those were replaced (a test's or a tool's
+        wrapper: the loop in C then calls those)."""
+        own = (self.step, self.set_speed, self.get_speed, self.get_position)
+        return self._calls if all(a is b for a, b in zip(own, self._own)) else None
+
+    def offsets(self, e: int) -> tuple[float, ...] | None:
+        """Where episode e's cars were inserted along the route, which their odometers add to (`route_position`); None:
+        their positions are SUMO's lane positions."""
+        return None if self._departed is None else tuple(self._departed[vid] for vid in self.platoons[e])
 
     def lanes(self, e: int) -> list[tuple[int, ...]]:
         """The lanes each car of episode ``e`` covers now (lane-changing maneuvers)."""

@@ -4,11 +4,13 @@ loop itself goes on in C (`compiled.play_column`); every episode is then the Pyt
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
-from conftest import assert_same_episode, random_plans
+from conftest import NATIVE_CALLS_EXPECTED, assert_same_episode, random_plans
 from d4sumo.engine.ballistic import BallisticWorld
+from d4sumo.engine import loop
 from d4sumo.engine.loop import play
 from d4sumo.model.attacks.maneuvers import AttackPlan
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
@@ -17,6 +19,7 @@ from d4sumo.model.world.v2v import ChannelParams
 from d4sumo.model.controllers import compiled
 
 pytestmark = pytest.mark.skipif(compiled.play_column is None, reason="the C extension is not built")
+ROADS = Path(__file__).resolve().parents[2] / "examples" / "roads"
 
 
 @pytest.fixture
@@ -34,10 +37,13 @@ def in_c_counted(monkeypatch):
 
 
 def _both(monkeypatch, calls, run):
-    """run() with the loop in C, then with the Python loop (the same followers in C)."""
+    """run() with the loop in C, then with the Python loop (the same followers in C); in C, also through libsumo's
+    Python calls where it took SUMO's own (`calls.native_calls`): the same episodes."""
     in_c = run()
     assert calls, "the loop did not go on in C"
     with monkeypatch.context() as m:
+        m.setattr(loop, "NATIVE_CALLS", False)
+        _assert_same(run(), in_c)
         m.setattr(compiled, "play_column", None)
         python = run()
     return in_c, python
@@ -78,12 +84,54 @@ def test_the_column_played_in_c_in_sumo_is_the_python_loop_bit_for_bit(case, mon
     in_c, python = _both(monkeypatch, in_c_counted,
                          lambda: simulate_batch(config, plans, on_episode=lambda e, r: heard.append(e)))
     _assert_same(in_c, python)
-    assert heard[:m] == heard[m:]  # each heard of as it ended, in the same order
+    assert heard[:m] == heard[m:2 * m] == heard[2 * m:]  # each heard of as it ended, in the same order, each way
     ends = {(r.outcome, len(r.trace)) for r in in_c}
     if m > 4:
         assert len(ends) > 1, f"every episode ends alike {ends}: the ends are barely compared"
     if config.end_distance_m:
         assert any(len(r.trace) < config.steps + 1 for r in in_c)  # ended at the distance, before the last step
+
+
+@pytest.mark.sumo
+def test_a_route_of_three_edges_played_in_c_with_sumos_own_calls_is_the_python_loops(monkeypatch, in_c_counted):
+    """Along a route of many edges a car's position is where it was inserted plus its odometer, in C as in the Python."""
+    from d4sumo.engine.calls import native_calls
+    from d4sumo.engine.simulation import simulate_batch
+
+    import libsumo
+
+    if NATIVE_CALLS_EXPECTED:
+        assert native_calls(libsumo) is not None, "libsumo's own calls were not built (d4sumo/engine/_sumo_calls.cpp)"
+    config = EpisodeConfig(network=str(ROADS / "three_edges"), setpoint_m=4.0)
+    plans = random_plans(config, 6, seed=2)
+    _assert_same(*_both(monkeypatch, in_c_counted, lambda: simulate_batch(config, plans)))
+
+
+@pytest.mark.sumo
+def test_an_error_of_sumos_in_the_loop_in_c_is_libsumos_own(monkeypatch):
+    """A car SUMO no longer knows: SUMO's own calls raise what libsumo's Python calls raise (libsumo.TraCIException,
+    which the world says as a SumoError), SUMO's message."""
+    from d4sumo.engine.simulation import simulate_batch
+    from d4sumo.errors import SumoError
+
+    import libsumo
+
+    config = EpisodeConfig(setpoint_m=3.0)
+    plans = random_plans(config, 4, seed=1)
+
+    def removes_another(e, result):  # the first episode to end takes another's attacker out of SUMO
+        if not removes_another.done:
+            removes_another.done = True
+            libsumo.vehicle.remove(f"{(e + 1) % 4}.{config.vehicle_ids[0]}")
+
+    said = []
+    for native in (True, False):
+        removes_another.done = False
+        monkeypatch.setattr(loop, "NATIVE_CALLS", native)
+        with pytest.raises(SumoError) as error:
+            simulate_batch(config, plans, on_episode=removes_another)
+        said.append(str(error.value))
+    assert said[0] == said[1] and "is not known" in said[0], said
 
 
 @pytest.mark.sumo
@@ -127,5 +175,5 @@ def test_the_ballistic_world_played_in_c_is_the_python_loops(monkeypatch, in_c_c
     plans = [AttackPlan(p.u) for p in random_plans(config, 16, seed=3)]
     in_c, python = _both(monkeypatch, in_c_counted, lambda: play(BallisticWorld([config] * 16), [config] * 16, plans))
     _assert_same(in_c, python)
-    assert in_c_counted == [16]  # all in C from the start: the loop costs less than the arrays
+    assert in_c_counted == [16, 16]  # all in C from the start (the loop costs less than the arrays), twice: no SUMO calls to take
     assert len({r.outcome for r in in_c}) > 1, "one outcome: the ends are barely compared"

@@ -6,10 +6,13 @@
  * what the Python's command_alone and sense_alone do, in their order, on the same doubles: every episode's
  * commands (followers_step) and their speeds set; the world's step; every episode's cars read, its gaps
  * (maneuvers.Maneuver.pairs: the leader's position less its length less the follower's), a collision (a gap below
- * the collision gap: platoon.collisions_at) or its end distance. The world's own calls (a SUMO's or the ballistic
- * world's set_speed, step, get_position, get_speed) are called as the Python calls them. An episode that ends is
+ * the collision gap: platoon.collisions_at) or its end distance. The world's calls (a SUMO's or the ballistic
+ * world's set_speed, step, get_position, get_speed) are called as the Python calls them, or where the world gives
+ * its own calls in C (world_calls.h: SUMO's C++ functions, d4sumo/engine/_sumo_calls.cpp), those. An episode that ends is
  * handed to on_end, which ends it as the Python does (its cars removed, its result made) before the next is sensed.
  */
+
+#include "world_calls.h"
 
 typedef struct { /* an episode the loop plays */
     long e;
@@ -23,6 +26,8 @@ typedef struct { /* an episode the loop plays */
     int has_modes;
     double x0;        /* the attacker's position where it was first sensed alone: its end distance's origin */
     int live;
+    void **handles;   /* with a world's own calls: each car's handle */
+    double *offsets;  /* ... and where its position is offset + distance driven (None: the lane position), the offsets */
 } Played;
 
 static int row_buffer(PyObject *array, Py_buffer *view, Py_ssize_t rows, Py_ssize_t width, const char *what) {
@@ -38,8 +43,13 @@ static int row_buffer(PyObject *array, Py_buffer *view, Py_ssize_t rows, Py_ssiz
     return 0;
 }
 
-static void release_played(Played *p, Py_ssize_t count, int n) {
+static void release_played(Played *p, Py_ssize_t count, int n, const WorldCalls *calls) {
     for (Py_ssize_t j = 0; j < count; j++) {
+        for (int i = 0; p[j].handles != NULL && i < n; i++)
+            if (p[j].handles[i] != NULL)
+                calls->free_id(p[j].handles[i]);
+        PyMem_Free(p[j].handles);
+        PyMem_Free(p[j].offsets);
         PyBuffer_Release(&p[j].x), PyBuffer_Release(&p[j].v), PyBuffer_Release(&p[j].commands);
         if (p[j].has_modes)
             PyBuffer_Release(&p[j].modes);
@@ -52,11 +62,11 @@ static void release_played(Played *p, Py_ssize_t count, int n) {
     PyMem_Free(p);
 }
 
-/* (e, followers, ids, lengths, x, v, commands, modes or None, x0) */
-static int take_played(PyObject *item, Played *p, int n, Py_ssize_t steps) {
-    PyObject *x, *v, *commands, *modes, *lengths;
-    if (!PyArg_ParseTuple(item, "lO!O!O!OOOOd", &p->e, &FollowersType, &p->f, &PyTuple_Type, &p->ids, &PyTuple_Type,
-                          &lengths, &x, &v, &commands, &modes, &p->x0))
+/* (e, followers, ids, lengths, x, v, commands, modes or None, x0, offsets or None) */
+static int take_played(PyObject *item, Played *p, int n, Py_ssize_t steps, const WorldCalls *calls) {
+    PyObject *x, *v, *commands, *modes, *lengths, *offsets;
+    if (!PyArg_ParseTuple(item, "lO!O!O!OOOOdO", &p->e, &FollowersType, &p->f, &PyTuple_Type, &p->ids, &PyTuple_Type,
+                          &lengths, &x, &v, &commands, &modes, &p->x0, &offsets))
         return -1;
     Followers *f = p->f;
     if (f->cars != n || !f->has_attacker || PyTuple_GET_SIZE(p->ids) != n || PyTuple_GET_SIZE(lengths) != n - 1) {
@@ -79,6 +89,27 @@ static int take_played(PyObject *item, Played *p, int n, Py_ssize_t steps) {
     for (int i = 0; i < n; i++)
         if ((p->args[i] = PyTuple_Pack(1, PyTuple_GET_ITEM(p->ids, i))) == NULL)
             return -1;
+    if (calls != NULL) {
+        p->handles = PyMem_Calloc((size_t)n, sizeof(void *));
+        if (p->handles == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        for (int i = 0; i < n; i++) {
+            const char *id = PyUnicode_AsUTF8(PyTuple_GET_ITEM(p->ids, i));
+            if (id == NULL || (p->handles[i] = calls->make_id(id)) == NULL)
+                return -1;
+        }
+        if (offsets != Py_None) {
+            p->offsets = PyMem_Calloc((size_t)n, sizeof(double));
+            if (p->offsets == NULL) {
+                PyErr_NoMemory();
+                return -1;
+            }
+            if (read_tuple(offsets, p->offsets, n, "offsets") < 0)
+                return -1;
+        }
+    }
     if (row_buffer(x, &p->x, steps + 1, n, "x") < 0 || row_buffer(v, &p->v, steps + 1, n, "v") < 0
         || row_buffer(commands, &p->commands, steps, p->ncommanded, "commands") < 0)
         return -1;
@@ -97,6 +128,18 @@ static int read_car(PyObject *getter, PyObject *args, double *out) {
     return take_double(PyObject_Call(getter, args, NULL), out);
 }
 
+/* car i's position and speed: through the world's own calls where it gave them, else its Python calls */
+static int sense_car(const WorldCalls *calls, Played *p, int i, PyObject *get_position, PyObject *get_speed, double *x,
+                     double *v) {
+    if (calls == NULL)
+        return read_car(get_position, p->args[i], x) < 0 || read_car(get_speed, p->args[i], v) < 0 ? -1 : 0;
+    double d;
+    if (calls->get(p->offsets ? WORLD_DISTANCE : WORLD_LANE_POSITION, p->handles[i], &d) < 0)
+        return -1;
+    *x = p->offsets ? p->offsets[i] + d : d; /* as route_position's departed[vid] + get_distance(vid) */
+    return calls->get(WORLD_SPEED, p->handles[i], v);
+}
+
 /* ends an episode: on_end(e, steps_done, error or None, collided) */
 static int end_played(PyObject *on_end, Played *p, long steps_done, PyObject *error, int collided) {
     p->live = 0;
@@ -106,24 +149,28 @@ static int end_played(PyObject *on_end, Played *p, long steps_done, PyObject *er
     return r == NULL ? -1 : 0;
 }
 
-/* play_column(k, steps, step, set_speed, get_position, get_speed, episodes, on_end, collision_gap_m, end_m): steps k
- * to steps of the episodes (each `take_played`'s, in the Python's order), from their rows at k; returns the step
- * reached (steps, or where none is left). end_m 0: no end distance. */
+/* play_column(k, steps, step, set_speed, get_position, get_speed, episodes, on_end, collision_gap_m, end_m, calls):
+ * steps k to steps of the episodes (each `take_played`'s, in the Python's order), from their rows at k; returns the
+ * step reached (steps, or where none is left). end_m 0: no end distance. calls: the world's own (a capsule of
+ * `WorldCalls`, in place of step, set_speed, get_position and get_speed), or None. */
 static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t nargs) {
     (void)module;
     long k, steps;
     double crash_m, end_m;
-    if (nargs != 10 || (k = PyLong_AsLong(args[0])) < 0 || (steps = PyLong_AsLong(args[1])) < k
+    if (nargs != 11 || (k = PyLong_AsLong(args[0])) < 0 || (steps = PyLong_AsLong(args[1])) < k
         || !PyList_Check(args[6]) || PyList_GET_SIZE(args[6]) < 1) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_TypeError, "play_column(k, steps, step, set_speed, get_position, get_speed, episodes, "
-                                             "on_end, collision_gap_m, end_m): 0 <= k <= steps, a list of episodes");
+                                             "on_end, collision_gap_m, end_m, calls): 0 <= k <= steps, a list of episodes");
         return NULL;
     }
     if (as_double(args[8], &crash_m, "collision_gap_m") < 0 || as_double(args[9], &end_m, "end_m") < 0)
         return NULL;
     PyObject *step = args[2], *set_speed = args[3], *get_position = args[4], *get_speed = args[5], *on_end = args[7];
     PyObject *list = args[6];
+    const WorldCalls *calls = NULL;
+    if (args[10] != Py_None && (calls = PyCapsule_GetPointer(args[10], WORLD_CALLS_CAPSULE)) == NULL)
+        return NULL;
     Py_ssize_t count = PyList_GET_SIZE(list);
     int n = ((Followers *)PyTuple_GET_ITEM(PyList_GET_ITEM(list, 0), 1))->cars;
     Played *played = PyMem_Calloc((size_t)count, sizeof(Played));
@@ -132,18 +179,19 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
     Py_ssize_t taken = 0, live = 0;
     for (; taken < count; taken++) {
         PyObject *item = PyList_GET_ITEM(list, taken);
-        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 9 || !PyObject_TypeCheck(PyTuple_GET_ITEM(item, 1), &FollowersType)
+        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 10 || !PyObject_TypeCheck(PyTuple_GET_ITEM(item, 1), &FollowersType)
             || ((Followers *)PyTuple_GET_ITEM(item, 1))->cars != n) {
-            PyErr_SetString(PyExc_TypeError, "an episode: (e, followers, ids, lengths, x, v, commands, modes, x0), as many cars each");
+            PyErr_SetString(PyExc_TypeError, "an episode: (e, followers, ids, lengths, x, v, commands, modes, x0, offsets), "
+                                             "as many cars each");
             break;
         }
-        if (take_played(item, &played[taken], n, steps) < 0) {
+        if (take_played(item, &played[taken], n, steps, calls) < 0) {
             taken++; /* its buffers taken so far are released below */
             break;
         }
     }
     if (PyErr_Occurred()) {
-        release_played(played, taken, n);
+        release_played(played, taken, n, calls);
         return NULL;
     }
     live = count;
@@ -172,6 +220,10 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
                 continue;
             }
             for (int j = 0; j < p->ncommanded && !failed; j++) {
+                if (calls != NULL) {
+                    failed = calls->set_speed(p->handles[p->commanded[j]], speeds[j]) < 0;
+                    continue;
+                }
                 PyObject *r = PyObject_CallFunction(set_speed, "Od", PyTuple_GET_ITEM(p->ids, p->commanded[j]), speeds[j]);
                 failed = r == NULL;
                 Py_XDECREF(r);
@@ -179,18 +231,20 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
         }
         if (failed || live == 0)
             break;
-        PyObject *r = PyObject_CallNoArgs(step);
-        failed = r == NULL || PyErr_CheckSignals() < 0;
-        Py_XDECREF(r);
+        if (calls != NULL) {
+            failed = calls->step() < 0 || PyErr_CheckSignals() < 0;
+        } else {
+            PyObject *r = PyObject_CallNoArgs(step);
+            failed = r == NULL || PyErr_CheckSignals() < 0;
+            Py_XDECREF(r);
+        }
         for (Py_ssize_t j = 0; j < count && !failed; j++) { /* sense_alone */
             Played *p = &played[j];
             if (!p->live)
                 continue;
             double *x = (double *)p->x.buf + (k + 1) * n, *v = (double *)p->v.buf + (k + 1) * n;
             for (int i = 0; i < n && !failed; i++)
-                failed = read_car(get_position, p->args[i], &x[i]) < 0;
-            for (int i = 0; i < n && !failed; i++)
-                failed = read_car(get_speed, p->args[i], &v[i]) < 0;
+                failed = sense_car(calls, p, i, get_position, get_speed, &x[i], &v[i]) < 0;
             if (failed)
                 break;
             int collided = 0;
@@ -202,6 +256,6 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
             }
         }
     }
-    release_played(played, count, n);
+    release_played(played, count, n, calls);
     return failed ? NULL : PyLong_FromLong(k);
 }

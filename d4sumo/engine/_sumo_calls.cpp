@@ -1,0 +1,136 @@
+/* SUMO's own calls for the column's step loop in C (model/controllers/csrc/column.h): libsumo's C++ functions
+ * (Simulation::step, Vehicle::getLanePosition, getDistance, getSpeed, setSpeed), found in the very library the
+ * Python module libsumo runs (so on its one simulation), called without Python's wrapping of each call: a car's
+ * position or speed costs about 15 ns where the Python call costs about 150 ns. The same functions the Python
+ * wrappers call, so the same doubles.
+ *
+ * bind(path of libsumo's _libsumo.so, libsumo.TraCIException) returns a capsule of `WorldCalls` (csrc/world_calls.h),
+ * or None where this libsumo does not expose them as this build names them (another compiler's C++ library, another
+ * platform): the loop then calls libsumo as the Python does. An error of SUMO's is raised as the Python call would
+ * raise it, libsumo.TraCIException with SUMO's message.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include "world_calls.h" /* d4sumo/model/controllers/csrc: what the loop reads */
+
+#if defined(__linux__) && defined(_GLIBCXX_USE_CXX11_ABI) && _GLIBCXX_USE_CXX11_ABI
+#define DIRECT 1
+#include <dlfcn.h>
+#include <exception>
+#include <string>
+
+namespace {
+
+typedef double (*Getter)(const std::string &);
+typedef void (*Setter)(const std::string &, double);
+typedef void (*Stepper)(double);
+
+Getter getters[3]; /* WORLD_LANE_POSITION, WORLD_DISTANCE, WORLD_SPEED */
+Setter set_speed_;
+Stepper step_;
+PyObject *traci_exception; /* libsumo.TraCIException */
+
+/* libsumo's names as g++ mangles them with the C++11 string (libstdc++'s __cxx11 ABI, which libsumo's wheels use) */
+const char *const GETTER_NAMES[3] = {
+    "_ZN7libsumo7Vehicle15getLanePositionERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE",
+    "_ZN7libsumo7Vehicle11getDistanceERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE",
+    "_ZN7libsumo7Vehicle8getSpeedERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE",
+};
+const char *const SET_SPEED_NAME = "_ZN7libsumo7Vehicle8setSpeedERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
+const char *const STEP_NAME = "_ZN7libsumo10Simulation4stepEd";
+
+int raised(const char *what) {
+    PyErr_SetString(traci_exception, what);
+    return -1;
+}
+
+extern "C" {
+
+static void *make_id(const char *id) {
+    try {
+        return new std::string(id);
+    } catch (...) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+}
+
+static void free_id(void *id) { delete static_cast<std::string *>(id); }
+
+static int get(int what, void *id, double *out) {
+    try {
+        *out = getters[what](*static_cast<std::string *>(id));
+        return 0;
+    } catch (const std::exception &e) {
+        return raised(e.what());
+    } catch (...) {
+        return raised("an error in SUMO");
+    }
+}
+
+static int set_speed(void *id, double speed) {
+    try {
+        set_speed_(*static_cast<std::string *>(id), speed);
+        return 0;
+    } catch (const std::exception &e) {
+        return raised(e.what());
+    } catch (...) {
+        return raised("an error in SUMO");
+    }
+}
+
+static int step(void) {
+    try {
+        step_(0.0);
+        return 0;
+    } catch (const std::exception &e) {
+        return raised(e.what());
+    } catch (...) {
+        return raised("an error in SUMO");
+    }
+}
+
+} /* extern "C" */
+
+WorldCalls calls = {make_id, free_id, get, set_speed, step};
+
+} /* namespace */
+#endif
+
+static PyObject *bind(PyObject *module, PyObject *args) {
+    (void)module;
+    const char *path;
+    PyObject *exception;
+    if (!PyArg_ParseTuple(args, "sO", &path, &exception))
+        return NULL;
+#ifdef DIRECT
+    void *library = dlopen(path, RTLD_NOW | RTLD_NOLOAD); /* the one Python loaded: its simulation */
+    if (library == NULL)
+        Py_RETURN_NONE;
+    for (int i = 0; i < 3; i++)
+        getters[i] = (Getter)dlsym(library, GETTER_NAMES[i]);
+    set_speed_ = (Setter)dlsym(library, SET_SPEED_NAME);
+    step_ = (Stepper)dlsym(library, STEP_NAME);
+    dlclose(library); /* it stays loaded: Python holds it */
+    if (!getters[0] || !getters[1] || !getters[2] || !set_speed_ || !step_)
+        Py_RETURN_NONE;
+    Py_INCREF(exception);
+    Py_XSETREF(traci_exception, exception);
+    return PyCapsule_New(&calls, WORLD_CALLS_CAPSULE, NULL);
+#else
+    (void)path, (void)exception;
+    Py_RETURN_NONE;
+#endif
+}
+
+static PyMethodDef methods[] = {
+    {"bind", bind, METH_VARARGS, "bind(path of libsumo's _libsumo.so, libsumo.TraCIException): SUMO's calls, or None"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_sumo_calls", "libsumo's C++ calls for the step loop in C.", -1, methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__sumo_calls(void) { return PyModule_Create(&module); }
