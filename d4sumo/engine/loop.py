@@ -351,7 +351,7 @@ def play(world, configs: Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *
         detach_at = DETACH_AT
         if (m > DETACH_AT and config.batch_arrays and all(p.motion is None for p in plans) and not episodes.lights
                 and type(episodes.sensing) is _Column and compiled.play_column is not None  # would they go on in C? (asked
-                and all(c.cls in ("switching", "timegap") or c.sumo_model for c in config.controllers)):  # of d4sumo's laws)
+                and all(c.cls in ("switching", "timegap", "idm") or c.sumo_model for c in config.controllers)):  # of d4sumo's laws)
             if Platoon(config, plans[0].u, world.attacker_max_speed_mps, beacons=plans[0].beacons)._attacker_in_c:
                 detach_at = m
     changes: dict[int, list[tuple[int, int]]] = {}  # step -> (episode, the lane its attacker changes to)

@@ -66,6 +66,7 @@ CASES = {  # each configuration, and how many episodes share one SUMO
     "cacc over a lossy channel": (EpisodeConfig(controller=ControllerConfig("cacc"), setpoint_m=5.0, start="steady",
                                                 v2v=ChannelParams(loss=0.2, latency_s=0.1)), 6),
     "an end distance": (EpisodeConfig(setpoint_m=6.0, start="steady", end_distance_m=400.0), 5),
+    "the IDM, an end distance": (EpisodeConfig(controller=ControllerConfig("idm"), setpoint_m=2.0, end_distance_m=300.0), 8),
     "SUMO's ACC, an end distance": (EpisodeConfig(controller=ControllerConfig("sumo:ACC"), setpoint_m=4.0, end_distance_m=300.0), 8),
     "SUMO's ACC, a switching follower and SUMO's IDM": (EpisodeConfig(controller=(
         ControllerConfig("sumo:ACC"), ControllerConfig("switching", where="controller.v2"),

@@ -189,3 +189,61 @@ def test_campaigns_of_one_formula_share_one_parsed_specification_which_scores_as
     finally:
         sys.setswitchinterval(interval)
     assert all(got[k] == expected for k in range(4)) and len(set(expected)) > 10
+
+
+def _stock(formula: str, names, trace) -> float:
+    """Stock rtamt's robustness at t = 0 (its own predicates, no array path)."""
+    stock = rtamt.StlDiscreteTimeSpecification()
+    for name in names:
+        stock.declare_var(name, "float")
+    stock.spec = formula
+    stock.set_sampling_period(50, "ms", 0.1)
+    stock.parse()
+    return stock.evaluate({"time": trace.times_s.tolist(), **{n: trace[n].tolist() for n in names}})[0][1]
+
+
+def _random_formula(rng, names, depth=0) -> str:
+    """A formula of the operators scored over whole arrays: comparisons, not, and, or, eventually, always."""
+    if depth >= 3 or rng.random() < 0.3:
+        a, b = rng.choice(names), rng.choice([*names, "0.0", "-0.0", "1.5", "2"])
+        return f"({a} {rng.choice(['<=', '<', '>=', '>', '==', '!=='])} {b})"
+    kind = rng.choice(["not", "and", "or", "eventually", "always"])
+    if kind in ("and", "or"):
+        return f"({_random_formula(rng, names, depth + 1)} {kind} {_random_formula(rng, names, depth + 1)})"
+    return f"{kind}({_random_formula(rng, names, depth + 1)})"
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_formulas_scored_over_whole_arrays_give_rtamts_robustness_bit_for_bit(seed):
+    """The formula's operators over whole arrays (`spec._elementwise`): rtamt's robustness to the bit, its sign of zero
+    too, on signals that tie (rounded to 0.5 m, zeros of both signs among them)."""
+    rng = np.random.default_rng(seed)
+    names = ("gap_0", "gap_1", "gap_2")
+    checked = 0
+    for _ in range(40):
+        n = int(rng.integers(2, 60))  # rtamt fails on one sample
+        signals = {name: np.round(rng.uniform(-3, 3, n) * 2) / 2 for name in trace_signals(3)}
+        for name in names:
+            signals[name][rng.random(n) < 0.3] = -0.0
+        trace = Trace(np.arange(n) * 0.05, signals, 3)
+        formula = _random_formula(rng, names)
+        spec = Specification(followers=3, step_s=0.05, formula=formula)
+        assert spec._arrays is not None, formula
+        ours, stock = spec.robustness(trace), _stock(formula, names, trace)
+        assert np.float64(ours).tobytes() == np.float64(stock).tobytes(), (formula, ours, stock)
+        checked += ours == 0.0
+    assert checked, "no robustness of zero: the sign of zero is not compared"
+
+
+def test_the_paper_formula_scored_over_whole_arrays_is_rtamts_on_every_follower_count():
+    for followers in (2, 3, 6):
+        trace = random_trace(followers, followers=followers)
+        spec = Specification(followers=followers, step_s=0.05)
+        assert spec._arrays is not None
+        names = [f"gap_{i}" for i in range(followers)]
+        assert np.float64(spec.robustness(trace)).tobytes() == np.float64(_stock(spec.formula, names, trace)).tobytes()
+
+
+def test_a_time_bound_or_arithmetic_is_rtamts_alone():
+    for formula in ("eventually[0:1](gap_1 <= 0)", "always(gap_1 - gap_2 > 0)", "(gap_1 <= 0) until (gap_2 <= 0)"):
+        assert Specification(followers=3, step_s=0.05, formula=formula)._arrays is None, formula

@@ -1,6 +1,7 @@
 /* A platoon's followers, one step at a time, out of the interpreter: each follower's radar (range, noise,
  * latency), the V2V channel (beacon interval, latency, loss, a liar's beacons), the paper's switching ACC
- * (its printed form) and its time-gap variant, Rajamani's CACC (PATH), Ploeg's CACC and the consensus controller, the mitigation, and
+ * (its printed form) and its time-gap variant, the IDM, Rajamani's CACC (PATH), Ploeg's CACC and the consensus controller, the
+ * mitigation, and
  * each car's actuator.
  *
  * The reference is the Python of d4sumo.model (sensing.Radar.observe, v2v.Channel.send,
@@ -364,7 +365,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
             PyErr_SetString(PyExc_ValueError, "a follower SUMO drives: with the attacker stepped here, without a channel");
             return -1;
         }
-        if (f->law < LAW_SUMO || f->law > LAW_TIMEGAP || (!switching && f->law != LAW_SUMO && !self->channel)) {
+        int alone = switching || f->law == LAW_IDM || f->law == LAW_SUMO; /* needs no channel */
+        if (f->law < LAW_SUMO || f->law > LAW_IDM || (!alone && !self->channel)) {
             PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
             return -1;
         }

@@ -3,7 +3,7 @@ same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for b
 cost (docs/v2v.md, docs/benchmarks.md).
 
 It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
-`timegap`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
+`timegap`, `idm`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
 the mitigation (and, beside an attacker stepped here without a channel, followers SUMO's models drive: nothing of theirs), in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
 noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
 Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
@@ -23,6 +23,7 @@ from typing import Callable
 from .commands import checked_command  # the Python's error for a command that is not one
 from .cacc import ConsensusCACC, PathCACC, PloegCACC
 from .control import SwitchingController, TimeGapController
+from .laws.idm import IDMController
 from ..attacks.messages import BeaconFalsifier
 from ..world.sensing import Radar
 from ..world.v2v import Message
@@ -39,7 +40,7 @@ ENABLED = True
 SUMO_DRIVES = (0, False, (0.0,) * 5, (0.0,) * 5, 0.0, (0.0, 0.0), (0.0,) * 7, None)
 
 #: each controller's law, as the extension numbers them
-LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4, TimeGapController: 5}
+LAWS = {PathCACC: 1, PloegCACC: 2, ConsensusCACC: 3, SwitchingController: 4, TimeGapController: 5, IDMController: 6}
 if sys.version_info >= (3, 12):  # the consensus law sums with sum(), which is compensated from Python 3.12 on
     del LAWS[ConsensusCACC]
 
@@ -68,7 +69,11 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
         law = LAWS.get(type(controller))
         if law is None or (law < 4 and channel is None):
             return None
-        if law >= 4:  # the paper's controller as printed, or its time-gap variant (the authors' code's options are the Python's)
+        switching = law in (4, 5)
+        if law == 6:  # the IDM: as its constructor made it
+            p = controller.params
+            gains = (p.time_gap_s, p.accel_mps2, p.delta, controller._root_ab, 2.0)  # (gap wanted / gap) ** 2
+        elif switching:  # the paper's controller as printed, or its time-gap variant (the authors' code's options are the Python's)
             if controller._as_run:
                 return None
             p = controller.params
@@ -89,14 +94,17 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
             r = Radar(config.radar, config.step_s, i)
             radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
         vehicle, actuator = controller.vehicle, follower.actuator
-        step_s = controller.cruise.step_s if law >= 4 else controller.step_s  # the step its cruise PID integrates over
-        own = (controller.setpoint_m, controller.target_speed_mps, step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+        if law == 6:  # its standstill gap and target speed (no step of its own)
+            own = (controller.s0_m, controller.v0_mps, 0.0, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+        else:
+            step_s = controller.cruise.step_s if switching else controller.step_s  # the step its cruise PID integrates over
+            own = (controller.setpoint_m, controller.target_speed_mps, step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
         drive = (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
                  actuator.accel_mps2, actuator.coast)
         numbers = (*own, *gains, *mitigation, *drive, *(radar[:3] if radar else ()))
         if not all(type(x) is float or type(x) is int for x in numbers):  # a numpy float32 computes otherwise in the Python
             return None
-        if law >= 4:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
+        if switching:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
             state = (float(controller.cruise.integral), controller.cruise.prev_error, float(controller.mode),
                      bool(controller._mode_known))
             if state[1] is not None and type(state[1]) is not float:

@@ -18,7 +18,7 @@ from d4sumo.model.stepping.platoon import Platoon
 from d4sumo.model.world.sensing import RadarParams
 from d4sumo.model.world.v2v import ChannelParams
 
-LAWS = ("switching", "timegap", "cacc", "ploeg", "consensus", "mixed")  # mixed: switching and cooperative followers in one platoon
+LAWS = ("switching", "timegap", "idm", "cacc", "ploeg", "consensus", "mixed")  # mixed: switching and cooperative followers in one platoon
 COOPERATIVE = ("cacc", "ploeg", "consensus")
 LIES = (("offset", {"msg_value": -4.0}), ("scaling", {"msg_factor": 1.5}), ("sinusoid", {"msg_amplitude": 3.0, "msg_frequency_hz": 0.5}),
         ("jam", {"msg_duration_s": 3.0}), ("delay", {"msg_delay_s": 1.0}), ("replay", {"msg_window_s": 2.0}), ("knots", {}))
@@ -54,7 +54,9 @@ def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: 
                  ("cruise_kp", float(rng.uniform(0.1, 1.0))), ("cruise_integral_clamp", float(rng.choice([20.0, 2.0]))))
     params = {"cacc": (("c1", float(rng.uniform(0.2, 0.8))),), "ploeg": (("h_s", headway),), "consensus": (("h_s", headway),),
               "switching": switching if rng.random() < 0.7 else (),
-              "timegap": switching + (("time_gap_s", float(rng.choice([0.0, 0.5, 1.5]))),)}
+              "timegap": switching + (("time_gap_s", float(rng.choice([0.0, 0.5, 1.5]))),),
+              "idm": (("time_gap_s", headway), ("accel_mps2", float(rng.uniform(0.5, 3.0))),
+                      ("comfortable_decel_mps2", float(rng.uniform(1.0, 4.0))), ("delta", float(rng.choice([4.0, 2.5, 1.0]))))}
     if imperfect and rng.random() < 0.5:  # the cooperative laws' mitigation
         mitigation = (("fallback_mps", float(rng.uniform(0.5, 3.0))), ("fallback_headway_s", float(rng.uniform(0.8, 1.5))))
         params.update({kind: params[kind] + mitigation for kind in COOPERATIVE})
@@ -76,7 +78,7 @@ def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: 
     setpoint = float((rng.uniform(6.0, 30.0) if law in ("switching", "timegap") else rng.uniform(2.0, 5.0)) if tight else rng.uniform(3.0, 25.0))
     return EpisodeConfig(followers=followers, setpoint_m=setpoint, speed_mps=float(rng.uniform(15.0, 33.0)),
                          start=str(rng.choice(["rest", "steady"])), step_s=step, duration_s=20.0, vehicles=vehicles,
-                         controller=controller, radar=radar, v2v=None if law in ("switching", "timegap") else ChannelParams(**channel))
+                         controller=controller, radar=radar, v2v=None if law in ("switching", "timegap", "idm") else ChannelParams(**channel))
 
 
 def _liars(rng: np.random.Generator, config: EpisodeConfig) -> tuple:
@@ -166,7 +168,6 @@ class _OwnCACC(PathCACC):
 
 @pytest.mark.parametrize("change", [
     {"controller": (ControllerConfig("cacc"), ControllerConfig("sumo:ACC"))},
-    {"controller": (ControllerConfig("cacc"), ControllerConfig("idm"))},
     {"controller": ControllerConfig("switching", (("switching_rule", "code"),))},  # the authors' code's options
     {"controller": ControllerConfig("switching", (("control_period_s", 0.1),))},
     {"maneuver": "cutin"},
@@ -175,8 +176,8 @@ class _OwnCACC(PathCACC):
 def test_the_python_plays_what_the_compiled_followers_do_not(change):
     config = EpisodeConfig(followers=2, **{"controller": ControllerConfig("cacc"), **change})
     assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is None
-    for plain in (ControllerConfig("cacc"), ControllerConfig("switching"), ControllerConfig("timegap"),
-                  (ControllerConfig("cacc"), ControllerConfig("switching"))):
+    for plain in (ControllerConfig("cacc"), ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("idm"),
+                  (ControllerConfig("cacc"), ControllerConfig("switching")), (ControllerConfig("cacc"), ControllerConfig("idm"))):
         config = EpisodeConfig(followers=2, controller=plain)
         assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"))

@@ -1,6 +1,6 @@
 /* The followers' types (part of _followers.c, included once from it) and the Python's draws. */
 
-enum { LAW_SUMO = 0, LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5 };
+enum { LAW_SUMO = 0, LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5, LAW_IDM = 6 };
 
 #define FREE_ROAD_GAP_M 1000.0 /* maneuvers.FREE_ROAD_GAP_M: nobody ahead */
 #define CC_KP 1.0              /* control.CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2: Plexe's cruise control */
@@ -26,7 +26,8 @@ typedef struct { /* a radar's reading: gap, speed ahead, whether a car is ahead 
 typedef struct {
     int law; /* LAW_SUMO: SUMO drives it, nothing here */
     double setpoint_m, target_mps, step_s, max_accel, max_decel; /* the controller's */
-    /* CACC: a1..a5; Ploeg: h_s, kp, kd; consensus: b, k_leader_v1, k_leader, k_front, h_s; switching: its
+    /* CACC: a1..a5; Ploeg: h_s, kp, kd; consensus: b, k_leader_v1, k_leader, k_front, h_s; IDM: time_gap_s, accel_mps2,
+     * delta, 2 sqrt(a b) (as its constructor computed it), 2 (the gap term's exponent); switching: its
      * SwitchingParams' cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2, acc_kp,
      * acc_kv, eps_x_m, eps_v_mps; time gap: those, and time_gap_s */
     double c[10];

@@ -121,6 +121,16 @@ static double command(Followers *self, int i, Reading r, double now) {
         f->u = below_target(f->u, speed, f);
         return to_command(f->u, f->max_accel, f->max_decel);
     }
+    case LAW_IDM: { /* laws/idm.py's observe: pow() is what Python's ** calls; a speed is never below 0 */
+        double free = f->target_mps > 0.0 ? 1.0 - pow(speed / f->target_mps, f->c[2]) : -1.0;
+        if (!seen)
+            return to_command(f->c[1] * free, f->max_accel, f->max_decel);
+        double closing = speed * f->c[0] - speed * (lead - speed) / f->c[3];
+        double wanted = f->setpoint_m + (closing > 0.0 ? closing : 0.0); /* max(0.0, closing) */
+        double touching = 1e-3 > gap ? 1e-3 : gap;                    /* max(gap, 1e-3) */
+        /* c[4] is 2, read at run time: a constant 2.0 lets the compiler square without pow(), an ulp off it at times */
+        return to_command(f->c[1] * (free - pow(wanted / touching, f->c[4])), f->max_accel, f->max_decel);
+    }
     case LAW_CONSENSUS: {
         if (f->fallback_mps != 0.0 && fallback(f, ahead, gap, speed, lead, seen, &a))
             return to_command(below_target(a, speed, f), f->max_accel, f->max_decel);

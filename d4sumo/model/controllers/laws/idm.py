@@ -7,7 +7,8 @@ a = a_max (1 - (v / v0)^delta - (s* / s)^2),  s* = s0 + max(0, v T + v (v - v_le
 with s the bumper gap its radar measures, v0 the scenario's target speed and s0 its setpoint (the gap at
 standstill, as the time-gap controller has it). Where its radar sees nobody, the free-road term alone. The
 wanted acceleration becomes the pedal through the car's own limits (`vehicle.acceleration_to_command`).
-SUMO's own IDM, which SUMO drives, is ``sumo:IDM`` (`carfollowing`).
+SUMO's own IDM, which SUMO drives, is ``sumo:IDM`` (`carfollowing`). Where the paper's controller steps in C, so
+does this law (`compiled`, csrc/laws.h: the same operations on the same doubles; tests/model/controllers/test_compiled.py).
 """
 
 from __future__ import annotations
