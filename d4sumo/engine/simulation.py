@@ -33,7 +33,7 @@ from .warmup import traffic_state
 
 log = logging.getLogger(__name__)
 
-__all__ = ["check_road", "check_episode", "simulate", "simulate_batch", "shares_sumo", "sumo_command", "load_platoon",
+__all__ = ["check_road", "check_episode", "drives_one_lane", "simulate", "simulate_batch", "shares_sumo", "sumo_command", "load_platoon",
            "DETACH_AT"]
 
 def check_road(config: EpisodeConfig, road: Road) -> None:
@@ -236,6 +236,11 @@ def _one_at_a_time(config: EpisodeConfig, plans: Sequence[AttackPlan], road: Roa
     return results
 
 
+def drives_one_lane(config: EpisodeConfig) -> bool:
+    """Whether an episode drives the platoon's lane alone: in the paper's column (no lane change), among no traffic."""
+    return not config.maneuver_class.lateral and config.traffic is None
+
+
 def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Sequence[AttackPlan], *,
                    road: Road | None = None,
                    on_episode: Callable[[int, "Episode | Exception"], None] | None = None) -> list["Episode | Exception"]:
@@ -262,7 +267,7 @@ def simulate_batch(config: EpisodeConfig | Sequence[EpisodeConfig], plans: Seque
     batched = shares_sumo(config)
     if batched and (road is None or road.copies < len(plans) and not road.copies_unlike):
         road = batch_road(config.network, len(plans), route=config.route, lane=config.lane,  # alone where copies differ
-                          given=config.network_given)
+                          given=config.network_given, one_lane=drives_one_lane(config))
     if not batched or road.copies < len(plans):
         alone = road if road is not None and road.copies == 1 else None
         if len(distinct) == 1:

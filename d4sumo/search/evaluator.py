@@ -15,7 +15,7 @@ import numpy as np
 
 from ..engine.networks import keep_road
 from ..engine.scenarios import NetworkSource, Road, batch_road, build_road, network_source
-from ..engine.simulation import check_episode, shares_sumo, simulate, simulate_batch
+from ..engine.simulation import check_episode, drives_one_lane, shares_sumo, simulate, simulate_batch
 from ..errors import SumoError
 from ..model.stepping.batch import PER_EPISODE, batch_key, known_key
 from ..model.config import EpisodeConfig
@@ -133,7 +133,7 @@ class Evaluator:
         if self._batch_road is None or self._batch_road.copies < episodes and not self._batch_road.copies_unlike:
             config = self.campaign.config  # (a network whole is driven along the route; else the route is all of it)
             self._batch_road = batch_road(self.network, episodes, lane=config.lane, given=config.network_given,
-                                          route=config.route if config.whole_network else ())
+                                          route=config.route if config.whole_network else (), one_lane=drives_one_lane(config))
         return self._batch_road
 
     def _scored(self, index: int, x: tuple[float, ...], episode, t0: float) -> SampleResult:
