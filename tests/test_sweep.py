@@ -161,7 +161,7 @@ def test_a_database_of_another_sweep_is_refused_untouched(tmp_path):
     assert outcomes(db) == before
 
 
-KILLED_WHOLE = TINY.replace("samples = 6", "samples = 40")
+KILLED_WHOLE = TINY.replace("samples = 6", "samples = 150")  # 600 samples: about a second on 2 cores, killed midway
 
 
 @made_ahead()
@@ -178,7 +178,7 @@ def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path, killed_whol
     deadline = time.time() + 60
     stored = 0
     while time.time() < deadline and stored < 30:
-        time.sleep(0.2)
+        time.sleep(0.02)
         if db.exists():
             try:
                 stored = sqlite3.connect(db, timeout=5).execute("SELECT COUNT(*) FROM sample").fetchone()[0]
@@ -186,10 +186,10 @@ def test_kill_9_loses_nothing_and_the_same_command_resumes(tmp_path, killed_whol
                 stored = 0
     os.killpg(proc.pid, signal.SIGKILL)  # the whole sweep: parent and workers
     proc.wait()
-    assert 30 <= stored < 160, "the sweep should have been killed midway"
+    assert 30 <= stored < 600, "the sweep should have been killed midway"
     assert subprocess.run(cmd, timeout=300).returncode == 0
     rows = outcomes(db)
-    assert len(rows) == 160 and len({(r[0], r[1]) for r in rows}) == 160  # every sample exactly once
+    assert len(rows) == 600 and len({(r[0], r[1]) for r in rows}) == 600  # every sample exactly once
     assert rows == killed_whole_alone
 
 
@@ -363,11 +363,11 @@ def wait_for_samples(db, n, timeout=90):
     while time.time() < deadline:
         if count_samples(db) >= n:
             return
-        time.sleep(0.2)
+        time.sleep(0.02)
     raise AssertionError(f"fewer than {n} samples in {timeout} s")
 
 
-LONG = TINY.replace("samples = 6", "samples = 100")  # about 5 s on 2 cores: long enough to kill midway
+LONG = TINY.replace("samples = 6", "samples = 400")  # 1,600 samples, about 3 s on 2 cores: long enough to kill midway
 
 
 @made_ahead()
@@ -406,12 +406,12 @@ def test_killing_a_sweep_leaves_no_worker_behind_and_resume_completes_it(tmp_pat
     else:  # regression: multiprocessing's resource tracker warned of "5 leaked semaphore objects", often amid the next run
         assert err == "", err
     stored = count_samples(db)
-    assert stored < 400, "the sweep ended before it was killed"
+    assert stored < 1600, "the sweep ended before it was killed"
     time.sleep(1.5)
     assert count_samples(db) == stored, "samples were written after the sweep was killed"
     assert subprocess.run(cmd, timeout=300, capture_output=True).returncode == 0
     rows = outcomes(db)
-    assert len(rows) == 400 and len({(r[0], r[1]) for r in rows}) == 400
+    assert len(rows) == 1600 and len({(r[0], r[1]) for r in rows}) == 1600
     assert rows == long_reference
 
 
@@ -437,7 +437,7 @@ def test_a_second_run_on_the_same_database_is_refused_while_the_first_writes(tmp
     assert "another d4sumo command is writing to it" in second.stderr
     assert first.wait(timeout=300) == 0
     rows = outcomes(db)
-    assert len(rows) == 400 and len({(r[0], r[1]) for r in rows}) == 400
+    assert len(rows) == 1600 and len({(r[0], r[1]) for r in rows}) == 1600
 
 
 @pytest.mark.sumo

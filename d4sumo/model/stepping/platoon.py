@@ -271,7 +271,7 @@ class Platoon:
         self._attacking = False  # whether the attacker attacked at the last step (a new cruise window starts its PID afresh)
         #: an attacker that only attacks and cruises, which the C may step
         self._plain = (self._attacker_driver is None and self._attacker_as_run is None and self._motion is None
-                       and not self._others and all(type(u) is float for u in self.attack_u)
+                       and not self._others  # (its attack is plain floats: attack_u above)
                        # a numpy float32 top speed (from the Python API) computes in float32 in the Python
                        and type(self.attacker_actuator.max_speed_mps) in (float, int))
         self._compiled, self._attacker_in_c = None, False
