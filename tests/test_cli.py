@@ -375,7 +375,7 @@ def test_every_flag_in_the_readme_and_the_guide_exists_and_the_main_ones_are_doc
     from d4sumo.cli.parser import build_parser
 
     parser = build_parser()
-    known = set()
+    known = {o for action in parser._actions for o in action.option_strings}  # the command's own: --version
     for action in parser._actions:
         for name, sub in getattr(action, "choices", None).items() if isinstance(getattr(action, "choices", None), dict) else []:
             for a in sub._actions:
@@ -792,3 +792,23 @@ def test_the_controller_flag_names_every_registered_controller(capsys):
     said = " ".join(capsys.readouterr().out.split())
     own = [name for name in registered_controllers() if resolve_controller(name).__module__.startswith("d4sumo.")]
     assert len(own) >= 6 and all(re.search(rf"\b{name}\b", said) for name in own), said  # (tests register others)
+
+
+def test_version_says_which_speed_ups_this_install_has(capsys, monkeypatch):
+    """A machine without a C or C++ compiler installs without the extensions and plays the same episodes, slower:
+    --version says so, and how to have them."""
+    from conftest import NATIVE_CALLS_EXPECTED
+
+    from d4sumo import __version__
+    from d4sumo.engine import calls
+    from d4sumo.model.controllers import compiled
+
+    assert main(["--version"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"d4sumo {__version__}\n")
+    assert "stepped in C: yes" in out and ("C++ calls: yes" in out) == NATIVE_CALLS_EXPECTED, out
+    monkeypatch.setattr(compiled, "play_column", None)
+    monkeypatch.setattr(calls, "_NATIVE", {"calls": None})
+    assert main(["--version"]) == 0
+    out = capsys.readouterr().out
+    assert "stepped in C: no (install with a C compiler" in out and "C++ calls: no (on Linux, install with a C++ compiler" in out

@@ -76,10 +76,24 @@ def _add_batch_option(p) -> None:
                         f"time; the results are the same, bit for bit) [{DEFAULT_BATCH}]")
 
 
+class _Version(argparse.Action):
+    """--version: the version, and which optional speed-ups this install has (looked up only when asked)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, **kwargs):
+        super().__init__(option_strings, dest=dest, default=argparse.SUPPRESS, nargs=0,
+                         help="show the version and the speed-ups this install has, and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from ..engine.calls import fast_paths
+
+        print(f"d4sumo {__version__}\n{fast_paths()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command line: one subcommand each, its options in its own function below."""
     parser = Parser(prog="d4sumo", description="Adversarial driving maneuvers against ACC platoons, on SUMO.")
-    parser.add_argument("--version", action="version", version=f"d4sumo {__version__}")
+    parser.add_argument("--version", action=_Version)
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     _add_scenarios(sub)

@@ -62,6 +62,18 @@ def native_calls(api):
     return _NATIVE["calls"]
 
 
+def fast_paths() -> str:
+    """Which of its optional speed-ups this install has (each built at install where a compiler was found; without
+    one, the same episodes, slower): said by ``d4sumo --version``."""
+    import libsumo
+
+    from ..model.controllers import compiled
+
+    in_c = "yes" if compiled.play_column is not None else "no (install with a C compiler to have it)"
+    native = "yes" if native_calls(libsumo) is not None else "no (on Linux, install with a C++ compiler to have it)"
+    return f"followers and the paper's column stepped in C: {in_c}; libsumo's own C++ calls: {native}"
+
+
 def simulation_step(api):
     """``api.simulationStep``; for libsumo its C function (d4sumo registers no step listeners)."""
     raw = getattr(getattr(api, "_libsumo", None), "simulation_step", None)
