@@ -4,10 +4,10 @@
  * position or speed costs about 15 ns where the Python call costs about 150 ns. The same functions the Python
  * wrappers call, so the same doubles.
  *
- * bind(path of libsumo's _libsumo.so, libsumo.TraCIException) returns a capsule of `WorldCalls` (csrc/world_calls.h),
+ * bind(path of libsumo's _libsumo.so, libsumo.TraCIException, libsumo.FatalTraCIError) returns a capsule of `WorldCalls` (csrc/world_calls.h),
  * or None where this libsumo does not expose them as this build names them (another compiler's C++ library, another
- * platform): the loop then calls libsumo as the Python does. An error of SUMO's is raised as the Python call would
- * raise it, libsumo.TraCIException with SUMO's message.
+ * platform): the loop then calls libsumo as the Python does. An error of SUMO's is raised as libsumo's Python wrapper
+ * raises it: libsumo.TraCIException for libsumo's own, libsumo.FatalTraCIError for any other, SUMO's message.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -16,9 +16,12 @@
 
 #if defined(__linux__) && defined(_GLIBCXX_USE_CXX11_ABI) && _GLIBCXX_USE_CXX11_ABI
 #define DIRECT 1
+#include <cxxabi.h>
 #include <dlfcn.h>
+#include <cstring>
 #include <exception>
 #include <string>
+#include <typeinfo>
 
 namespace {
 
@@ -29,7 +32,8 @@ typedef void (*Stepper)(double);
 Getter getters[3]; /* WORLD_LANE_POSITION, WORLD_DISTANCE, WORLD_SPEED */
 Setter set_speed_;
 Stepper step_;
-PyObject *traci_exception; /* libsumo.TraCIException */
+PyObject *traci_exception; /* libsumo.TraCIException: SUMO's answer to a call it refuses (a car it does not know) */
+PyObject *fatal_error;     /* libsumo.FatalTraCIError: any other error of SUMO's, as libsumo's wrappers raise it */
 
 /* libsumo's names as g++ mangles them with the C++11 string (libstdc++'s __cxx11 ABI, which libsumo's wheels use) */
 const char *const GETTER_NAMES[3] = {
@@ -40,8 +44,12 @@ const char *const GETTER_NAMES[3] = {
 const char *const SET_SPEED_NAME = "_ZN7libsumo7Vehicle8setSpeedERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
 const char *const STEP_NAME = "_ZN7libsumo10Simulation4stepEd";
 
+/* the error libsumo's Python wrapper raises for the exception being handled: TraCIException for libsumo's own, else
+ * FatalTraCIError; what libsumo's wrappers say of one that is no std::exception */
 int raised(const char *what) {
-    PyErr_SetString(traci_exception, what);
+    const std::type_info *type = abi::__cxa_current_exception_type();
+    int traci = type != NULL && std::strcmp(type->name(), "N7libsumo14TraCIExceptionE") == 0;
+    PyErr_SetString(traci ? traci_exception : fatal_error, what);
     return -1;
 }
 
@@ -65,7 +73,7 @@ static int get(int what, void *id, double *out) {
     } catch (const std::exception &e) {
         return raised(e.what());
     } catch (...) {
-        return raised("an error in SUMO");
+        return raised("unknown exception");
     }
 }
 
@@ -76,7 +84,7 @@ static int set_speed(void *id, double speed) {
     } catch (const std::exception &e) {
         return raised(e.what());
     } catch (...) {
-        return raised("an error in SUMO");
+        return raised("unknown exception");
     }
 }
 
@@ -87,7 +95,7 @@ static int step(void) {
     } catch (const std::exception &e) {
         return raised(e.what());
     } catch (...) {
-        return raised("an error in SUMO");
+        return raised("unknown exception");
     }
 }
 
@@ -101,8 +109,8 @@ WorldCalls calls = {make_id, free_id, get, set_speed, step};
 static PyObject *bind(PyObject *module, PyObject *args) {
     (void)module;
     const char *path;
-    PyObject *exception;
-    if (!PyArg_ParseTuple(args, "sO", &path, &exception))
+    PyObject *exception, *fatal;
+    if (!PyArg_ParseTuple(args, "sOO", &path, &exception, &fatal))
         return NULL;
 #ifdef DIRECT
     void *library = dlopen(path, RTLD_NOW | RTLD_NOLOAD); /* the one Python loaded: its simulation */
@@ -117,15 +125,18 @@ static PyObject *bind(PyObject *module, PyObject *args) {
         Py_RETURN_NONE;
     Py_INCREF(exception);
     Py_XSETREF(traci_exception, exception);
+    Py_INCREF(fatal);
+    Py_XSETREF(fatal_error, fatal);
     return PyCapsule_New(&calls, WORLD_CALLS_CAPSULE, NULL);
 #else
-    (void)path, (void)exception;
+    (void)path, (void)exception, (void)fatal;
     Py_RETURN_NONE;
 #endif
 }
 
 static PyMethodDef methods[] = {
-    {"bind", bind, METH_VARARGS, "bind(path of libsumo's _libsumo.so, libsumo.TraCIException): SUMO's calls, or None"},
+    {"bind", bind, METH_VARARGS,
+     "bind(path of libsumo's _libsumo.so, libsumo.TraCIException, libsumo.FatalTraCIError): SUMO's calls, or None"},
     {NULL, NULL, 0, NULL},
 };
 

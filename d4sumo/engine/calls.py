@@ -58,7 +58,7 @@ def native_calls(api):
         except ImportError:  # built without a C++ compiler: the loop calls libsumo as the Python does
             _NATIVE["calls"] = None
         else:
-            _NATIVE["calls"] = bind(raw.__file__, api.TraCIException)
+            _NATIVE["calls"] = bind(raw.__file__, api.TraCIException, api.FatalTraCIError)
     return _NATIVE["calls"]
 
 

@@ -58,6 +58,8 @@ class Road:
     through_lanes: tuple[int, ...] = (0,)
     #: a network file SUMO runs as it is (`EpisodeConfig.network_given`), not rebuilt from plain XML
     given: bool = False
+    #: each copy is the platoon's lane alone, as SUMO's lane 0 (`batch_road`'s one_lane)
+    lane_copies: bool = False
 
     @property
     def platoon_lane(self) -> int:
@@ -238,8 +240,9 @@ def _one_lane_copies(source: NetworkSource, road: Road, copies: int) -> Road | N
         _build(copied, net_file)
     if not one_lane_alike(road.net_file, net_file, copies, edge, lane):
         return None
-    return dataclasses.replace(road, net_file=net_file, copies=copies, lanes=1, lane_path=(), through_lanes=(0,),
-                               closed_to=road.closed_to[lane:lane + 1])
+    # closed_to counts from the platoon's lane; lanes stays the road's (SUMO's Plexe models are told it)
+    return dataclasses.replace(road, net_file=net_file, copies=copies, lane_path=(), through_lanes=(0,),
+                               closed_to=road.closed_to[:1], lane_copies=True)
 
 
 def _read_info(path: Path) -> dict | None:

@@ -178,3 +178,46 @@ def test_the_ballistic_world_played_in_c_is_the_python_loops(monkeypatch, in_c_c
     _assert_same(in_c, python)
     assert in_c_counted == [16, 16]  # all in C from the start (the loop costs less than the arrays), twice: no SUMO calls to take
     assert len({r.outcome for r in in_c}) > 1, "one outcome: the ends are barely compared"
+
+
+def test_a_ctrl_c_inside_a_followers_command_stops_the_loop_in_c_as_the_python_loop(monkeypatch, in_c_counted):
+    """Found by review: the loop in C took a KeyboardInterrupt raised in the Python it calls (a lie, a command's check)
+    for the episode's error, stored it and went on; the Python loop stops there."""
+    def interrupted(c, i, k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(compiled, "checked_command", interrupted)
+    config = EpisodeConfig(setpoint_m=5.0, start="steady")
+    plans = [AttackPlan(u.u) for u in random_plans(config, 3, seed=5)]
+    for c_loop in (compiled.play_column, None):
+        monkeypatch.setattr(compiled, "play_column", c_loop)
+        with pytest.raises(KeyboardInterrupt):
+            play(_Blinded([config] * 3, at=40), [config] * 3, plans)
+    assert in_c_counted == [3]
+
+
+def test_the_loop_in_c_refuses_what_is_not_an_episode_in_one_error():
+    """Found by review: a first episode that was no tuple crashed the process."""
+    f = lambda *a: None  # noqa: E731
+    for episodes in ([1], [(1, 2)], [tuple(range(10))]):
+        with pytest.raises(TypeError, match="an episode"):
+            compiled.play_column(0, 10, f, f, f, f, episodes, f, 0.0, 0.0, None)
+
+
+@pytest.mark.sumo
+def test_an_error_of_sumo_that_is_no_traci_refusal_is_libsumos_own_too(monkeypatch):
+    """Found by review: the loop in C raised every error of SUMO's as libsumo.TraCIException, where libsumo raises
+    FatalTraCIError for any but its own refusals (here: SUMO closed under the loop)."""
+    from d4sumo.engine.simulation import simulate_batch
+
+    import libsumo
+
+    config = EpisodeConfig(setpoint_m=3.0)
+    plans = random_plans(config, 4, seed=1)
+    said = []
+    for native in (True, False):
+        monkeypatch.setattr(loop, "NATIVE_CALLS", native)
+        with pytest.raises(Exception) as error:
+            simulate_batch(config, plans, on_episode=lambda e, r: libsumo.close())
+        said.append((type(error.value), str(error.value)))
+    assert said[0] == said[1], said

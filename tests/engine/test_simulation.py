@@ -650,17 +650,30 @@ def test_a_batch_in_the_platoons_lane_plays_on_copies_of_that_lane_alone_each_ep
     from d4sumo.engine.scenarios import batch_road
     from d4sumo.engine.simulation import drives_one_lane
 
-    assert batch_road("highway_4lane", 8, one_lane=True).lanes == 1
-    assert batch_road("highway_4lane", 8).lanes == 4
+    assert batch_road("highway_4lane", 8, one_lane=True).lane_copies
+    assert not batch_road("highway_4lane", 8).lane_copies
     curved = str(_curved_one_edge(tmp_path / "bend"))
-    assert batch_road(curved, 4, one_lane=True).lanes == 4 and batch_road(curved, 4, one_lane=True).copies == 4
-    assert batch_road(str(ROADS / "three_edges"), 4, one_lane=True).lanes == 4
+    assert not batch_road(curved, 4, one_lane=True).lane_copies and batch_road(curved, 4, one_lane=True).copies == 4
+    assert not batch_road(str(ROADS / "three_edges"), 4, one_lane=True).lane_copies
     for config in (EpisodeConfig(lane=2, setpoint_m=4.0), EpisodeConfig(controller=ControllerConfig("sumo:ACC"), setpoint_m=3.0),
                    EpisodeConfig(vehicles={"v1": TRUCK}, setpoint_m=6.0, start="steady")):
         plans = random_plans(config, 6, seed=3)
         for plan, result in zip(plans, simulate_batch(config, plans)):
             assert_same_episode(result, simulate(config, plan))
     assert drives_one_lane(EpisodeConfig()) and not drives_one_lane(EpisodeConfig(maneuver="cutin"))
+    # found by review: the lane closed to a class is the platoon's, counted from it, on its copies as on the road
+    banned = tmp_path / "banned"
+    banned.mkdir()
+    (banned / "road.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="5000" y="0"/></nodes>')
+    (banned / "road.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="3" speed="36">'
+                                         '<lane index="2" disallow="truck"/></edge></edges>')
+    config = EpisodeConfig(network=str(banned), lane=1, vehicles={"v1": TRUCK}, setpoint_m=6.0, start="steady", duration_s=20.0)
+    assert batch_road(str(banned), 4, lane=1, one_lane=True).lane_copies
+    plans = random_plans(config, 4, seed=3)
+    for plan, result in zip(plans, simulate_batch(config, plans)):
+        assert_same_episode(result, simulate(config, plan))
+    with pytest.raises(ConfigError, match="closes it to truck"):  # the closed lane itself: refused alone and batched
+        simulate_batch(dataclasses.replace(config, lane=2), plans)
 
 
 # --- the paper as its authors ran it ------------------------------------------------------------------

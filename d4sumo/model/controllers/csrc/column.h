@@ -172,7 +172,12 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
     if (args[10] != Py_None && (calls = PyCapsule_GetPointer(args[10], WORLD_CALLS_CAPSULE)) == NULL)
         return NULL;
     Py_ssize_t count = PyList_GET_SIZE(list);
-    int n = ((Followers *)PyTuple_GET_ITEM(PyList_GET_ITEM(list, 0), 1))->cars;
+    PyObject *first = PyList_GET_ITEM(list, 0);
+    if (!PyTuple_Check(first) || PyTuple_GET_SIZE(first) != 10 || !PyObject_TypeCheck(PyTuple_GET_ITEM(first, 1), &FollowersType)) {
+        PyErr_SetString(PyExc_TypeError, "an episode: (e, followers, ids, lengths, x, v, commands, modes, x0, offsets)");
+        return NULL;
+    }
+    int n = ((Followers *)PyTuple_GET_ITEM(first, 1))->cars;
     Played *played = PyMem_Calloc((size_t)count, sizeof(Played));
     if (played == NULL)
         return PyErr_NoMemory();
@@ -209,6 +214,10 @@ static PyObject *play_column(PyObject *module, PyObject *const *args, Py_ssize_t
                 f->gap[i] = x[i - 1] - p->lengths[i - 1] - x[i];
             double *commands = (double *)p->commands.buf + k * p->ncommanded, *speeds = f->out + n;
             if (followers_step(f, k, commands, speeds, p->has_modes ? (double *)p->modes.buf + k * f->with_mode : f->out) < 0) {
+                if (!PyErr_ExceptionMatches(PyExc_Exception)) { /* a Ctrl-C (KeyboardInterrupt) stops the run, as in the Python */
+                    failed = 1;
+                    continue;
+                }
                 PyObject *type, *value, *tb; /* its error ends it, as alone in the Python */
                 PyErr_Fetch(&type, &value, &tb);
                 PyErr_NormalizeException(&type, &value, &tb);
