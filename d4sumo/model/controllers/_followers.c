@@ -21,6 +21,8 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
 #include <string.h>
 
 #include "switching.h" /* the paper's law, as the FMUs run it */
@@ -82,6 +84,8 @@ static int followers_step(Followers *self, long k, double *commands, double *new
         if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
             return -1;
         double c = command(self, i, r, now);
+        if (f->law == LAW_FMU && PyErr_Occurred()) /* its call failed */
+            return -1;
         if (!(c >= -1.0 && c <= 1.0)) { /* not a command (NaN): its error, as the Python says it */
             if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
                 return -1;
@@ -171,8 +175,10 @@ static int Followers_traverse(Followers *self, visitproc visit, void *arg) {
     Py_VISIT(self->checked);
     for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
         Py_VISIT(self->random[j]);
-    for (int i = 1; self->f != NULL && i < self->cars; i++)
+    for (int i = 1; self->f != NULL && i < self->cars; i++) {
         Py_VISIT(self->f[i].normal);
+        Py_VISIT(self->f[i].fmu_fail);
+    }
     return 0;
 }
 
@@ -183,8 +189,10 @@ static int Followers_clear(Followers *self) {
     Py_CLEAR(self->checked);
     for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
         Py_CLEAR(self->random[j]);
-    for (int i = 1; self->f != NULL && i < self->cars; i++)
+    for (int i = 1; self->f != NULL && i < self->cars; i++) {
         Py_CLEAR(self->f[i].normal);
+        Py_CLEAR(self->f[i].fmu_fail);
+    }
     return 0;
 }
 
@@ -216,6 +224,35 @@ static int cruise_state(PyObject *state, Switching *sw, double *flag, int *known
         return -1;
     if (known != NULL)
         *known = mode_known;
+    return 0;
+}
+
+/* an FMU follower's instance: (FMI version, instance, its SetReal/SetFloat64, DoStep and GetReal/GetFloat64 as addresses,
+ * its inputs' references (3), its outputs' (1 or 2), whether its first output is an acceleration, its clock, fail) */
+static int init_fmu(Follower *f, PyObject *fmu) {
+    unsigned long long instance, set_real, do_step, get_real;
+    PyObject *in_vr, *out_vr;
+    PyObject *fail;
+    if (!PyArg_ParseTuple(fmu, "iKKKKO!O!pdO", &f->fmi, &instance, &set_real, &do_step, &get_real, &PyTuple_Type, &in_vr,
+                          &PyTuple_Type, &out_vr, &f->fmu_acceleration, &f->fmu_time, &fail))
+        return -1;
+    Py_INCREF(fail);
+    Py_XSETREF(f->fmu_fail, fail);
+    f->n_out = (int)PyTuple_GET_SIZE(out_vr);
+    if ((f->fmi != 2 && f->fmi != 3) || !instance || !set_real || !do_step || !get_real || PyTuple_GET_SIZE(in_vr) != 3
+        || f->n_out < 1 || f->n_out > 2 || f->has_mode != (f->n_out == 2)) {
+        PyErr_SetString(PyExc_ValueError, "an FMU: version 2 or 3, its instance and functions, 3 inputs, 1 or 2 outputs");
+        return -1;
+    }
+    f->instance = (void *)(uintptr_t)instance, f->set_real = (void *)(uintptr_t)set_real;
+    f->do_step = (void *)(uintptr_t)do_step, f->get_real = (void *)(uintptr_t)get_real;
+    for (int j = 0; j < 3 + f->n_out; j++) {
+        PyObject *ref = j < 3 ? PyTuple_GET_ITEM(in_vr, j) : PyTuple_GET_ITEM(out_vr, j - 3);
+        unsigned long value = PyLong_AsUnsignedLong(ref);
+        if (value == (unsigned long)-1 && PyErr_Occurred())
+            return -1;
+        (j < 3 ? f->in_vr : f->out_vr)[j < 3 ? j : j - 3] = (unsigned int)value;
+    }
     return 0;
 }
 
@@ -365,8 +402,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
             PyErr_SetString(PyExc_ValueError, "a follower SUMO drives: with the attacker stepped here, without a channel");
             return -1;
         }
-        int alone = switching || f->law == LAW_IDM || f->law == LAW_SUMO; /* needs no channel */
-        if (f->law < LAW_SUMO || f->law > LAW_IDM || (!alone && !self->channel)) {
+        int alone = switching || f->law == LAW_IDM || f->law == LAW_FMU || f->law == LAW_SUMO; /* needs no channel */
+        if (f->law < LAW_SUMO || f->law > LAW_FMU || (!alone && !self->channel)) {
             PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
             return -1;
         }
@@ -391,6 +428,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
                 return -1;
             f->mode = v[VR_MODE];
         }
+        if (f->law == LAW_FMU && init_fmu(f, state) < 0)
+            return -1;
         f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
         f->accel_mps2 = a[5], f->coast = a[6];
         f->perfect = radar == Py_None;

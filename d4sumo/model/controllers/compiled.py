@@ -3,7 +3,7 @@ same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for b
 cost (docs/v2v.md, docs/benchmarks.md).
 
 It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
-`timegap`, `idm`, `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
+`timegap`, `idm`, an FMU (`fmu:PATH`: its FMI calls made from C, on the instance fmpy made), `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
 the mitigation (and, beside an attacker stepped here without a channel, followers SUMO's models drive: nothing of theirs), in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
 noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
 Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
@@ -17,12 +17,14 @@ the collision checks, as the Python's loop makes them.
 
 from __future__ import annotations
 
+import ctypes
 import sys
 from typing import Callable
 
-from .commands import checked_command  # the Python's error for a command that is not one
+from .commands import ControllerError, checked_command  # the Python's error for a command that is not one
 from .cacc import ConsensusCACC, PathCACC, PloegCACC
 from .control import SwitchingController, TimeGapController
+from .fmu import FmuController
 from .laws.idm import IDMController
 from ..attacks.messages import BeaconFalsifier
 from ..world.sensing import Radar
@@ -66,11 +68,13 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
             laws.append(SUMO_DRIVES)
             continue
         controller = follower.controller
-        law = LAWS.get(type(controller))
+        law = 7 if isinstance(controller, FmuController) else LAWS.get(type(controller))
         if law is None or (law < 4 and channel is None):
             return None
         switching = law in (4, 5)
-        if law == 6:  # the IDM: as its constructor made it
+        if law == 7:  # an FMU: nothing of its own but its instance (`_fmu`)
+            gains = (0.0,) * 5
+        elif law == 6:  # the IDM: as its constructor made it
             p = controller.params
             gains = (p.time_gap_s, p.accel_mps2, p.delta, controller._root_ab, 2.0)  # (gap wanted / gap) ** 2
         elif switching:  # the paper's controller as printed, or its time-gap variant (the authors' code's options are the Python's)
@@ -94,7 +98,9 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
             r = Radar(config.radar, config.step_s, i)
             radar = (r.params.range_m, r.params.gap_noise_m, r.params.speed_noise_mps, r.readings.maxlen - 1, r.rng.normal)
         vehicle, actuator = controller.vehicle, follower.actuator
-        if law == 6:  # its standstill gap and target speed (no step of its own)
+        if law == 7:  # its step
+            own = (0.0, 0.0, controller.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
+        elif law == 6:  # its standstill gap and target speed (no step of its own)
             own = (controller.s0_m, controller.v0_mps, 0.0, vehicle.max_accel_mps2, vehicle.max_decel_mps2)
         else:
             step_s = controller.cruise.step_s if switching else controller.step_s  # the step its cruise PID integrates over
@@ -104,7 +110,9 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
         numbers = (*own, *gains, *mitigation, *drive, *(radar[:3] if radar else ()))
         if not all(type(x) is float or type(x) is int for x in numbers):  # a numpy float32 computes otherwise in the Python
             return None
-        if switching:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
+        if law == 7:
+            state = _fmu(controller, i, follower.config.cls)
+        elif switching:  # its state (carried on from a batch, or as it starts): its cruise's, its mode
             state = (float(controller.cruise.integral), controller.cruise.prev_error, float(controller.mode),
                      bool(controller._mode_known))
             if state[1] is not None and type(state[1]) is not float:
@@ -122,6 +130,22 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
     lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None
     return Followers((channel.step_s, channel.every, channel.delay, float(channel.params.loss)), list(channel.lengths), sources,
                      randoms, lie, laws, checked_command, ours).advance
+
+
+def _fmu(controller: FmuController, car: int, name: str) -> tuple:
+    """What the C reads of an FMU follower: its FMI version, its instance and the three functions fmpy loaded, its inputs'
+    and outputs' references, whether it answers an acceleration, its clock; and how a failed call is said, as the Python
+    says a user's controller's error (`platoon._named_errors`)."""
+    def fail(message: str):
+        try:
+            raise RuntimeError(message)
+        except RuntimeError as exc:
+            raise ControllerError(f"the controller of v{car} ({name}) raised RuntimeError: {exc}") from exc
+
+    address = lambda f: ctypes.cast(f, ctypes.c_void_p).value  # noqa: E731
+    return (controller.fmu.version, controller._handle if isinstance(controller._handle, int) else controller._handle.value,
+            address(controller._set_real), address(controller._do_step), address(controller._get_real),
+            tuple(controller._in_vr), tuple(controller._out_vr), controller._acceleration, float(controller.time_s), fail)
 
 
 def _attacker(platoon) -> tuple:

@@ -265,3 +265,40 @@ def test_an_fmu_followers_exported_scenario_names_each_controller_property_once(
     for controller in controllers:
         names = [p.get("name") for p in controller.iter("Property")]
         assert len(names) == len(set(names)) and "fmu.setpoint_m" in names, names
+
+
+@pytest.mark.parametrize("kind", ["sound", "fails", "nan", "fails3"])
+def test_an_fmu_stepped_in_c_is_the_fmu_stepped_by_the_python_bit_for_bit_its_errors_too(tmp_path, monkeypatch, kind):
+    """Its FMI calls made from the loop in C (`compiled`, law 7) where the Python made them through ctypes: the same
+    episodes, and a failed call the same error, named as a user's controller's."""
+    from conftest import assert_same_episode
+
+    from d4sumo.model.controllers import compiled
+
+    step2 = "    switching_step(&((Instance *)c)->law, communicationStepSize);\n    return fmi2OK;"
+    if kind == "sound":
+        fmu = variant(tmp_path, monkeypatch, kind)
+    elif kind == "fails3":  # FMI 3.0: its DoStep fails at 2 s
+        fmu = variant(tmp_path, monkeypatch, kind, version=3, patch=(
+            "    switching_step(&s->law, communicationStepSize);\n",
+            "    switching_step(&s->law, communicationStepSize);\n    if (currentCommunicationPoint >= 2.0) return fmi3Error;\n"))
+    else:
+        broken = {"fails": step2.replace("return fmi2OK;", "return currentCommunicationPoint >= 2.0 ? fmi2Error : fmi2OK;"),
+                  "nan": step2.replace("return fmi2OK;", "if (currentCommunicationPoint >= 2.0) ((Instance *)c)->law.v[VR_COMMAND] = "
+                                                         "0.0 / 0.0;\n    return fmi2OK;")}[kind]
+        fmu = variant(tmp_path, monkeypatch, kind, patch=(step2, broken))
+    config = EpisodeConfig(controller=ControllerConfig(f"fmu:{fmu}"), start="steady", setpoint_m=5.0, followers=3)
+    plans = random_plans(config, 4, seed=2)
+    calls = []
+    c_loop = compiled.play_column
+    monkeypatch.setattr(compiled, "play_column", lambda *a: (calls.append(1), c_loop(*a))[1])
+    in_c = simulate_batch(config, plans)
+    assert calls, "the FMU's followers did not go on in C"
+    monkeypatch.setattr(compiled, "ENABLED", False)
+    python = simulate_batch(config, plans)
+    for a, b in zip(in_c, python):
+        if isinstance(b, Exception):
+            assert type(a) is type(b) and str(a) == str(b) and "v1" in str(a), (a, b)
+        else:
+            assert_same_episode(a, b)
+    assert all(isinstance(r, Exception) for r in in_c) == (kind != "sound")

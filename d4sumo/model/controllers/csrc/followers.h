@@ -1,6 +1,6 @@
 /* The followers' types (part of _followers.c, included once from it) and the Python's draws. */
 
-enum { LAW_SUMO = 0, LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5, LAW_IDM = 6 };
+enum { LAW_SUMO = 0, LAW_CACC = 1, LAW_PLOEG = 2, LAW_CONSENSUS = 3, LAW_SWITCHING = 4, LAW_TIMEGAP = 5, LAW_IDM = 6, LAW_FMU = 7 };
 
 #define FREE_ROAD_GAP_M 1000.0 /* maneuvers.FREE_ROAD_GAP_M: nobody ahead */
 #define CC_KP 1.0              /* control.CC_KP, CC_ACCEL_MPS2, CC_DECEL_MPS2: Plexe's cruise control */
@@ -37,6 +37,13 @@ typedef struct {
     double fallback_mps, fallback_headway_s, mode; /* the mitigation (fallback_mps 0: none), its mode */
     /* its actuator (vehicle.Actuator) */
     double act_accel_max, act_decel_max, alpha, act_step_s, max_speed_mps, accel_mps2, coast;
+    /* an FMU's instance (LAW_FMU: fmu.FmuController, its library loaded by fmpy): FMI 2 or 3, its functions, the
+     * references of its inputs (gap, own speed, speed ahead) and outputs (command or acceleration, then mode), its clock */
+    int fmi, n_out, fmu_acceleration;
+    void *instance, *set_real, *do_step, *get_real;
+    unsigned int in_vr[3], out_vr[2];
+    double fmu_time;
+    PyObject *fmu_fail; /* fail(message): raises its error as the Python names it (`compiled`) */
     /* its radar (sensing.Radar; perfect: none of it) */
     int perfect;
     double range_m, gap_noise_m, speed_noise_mps;

@@ -79,6 +79,52 @@ static const Beacon *newest(Followers *self, int i, int s) {
     return self->heard[i * self->cars + s] ? &self->inbox[i * self->cars + s] : NULL;
 }
 
+/* fmu.FmuController.observe: the FMU's step on what the radar measured, through the functions fmpy loaded; a failed
+ * call is the Python's error, raised by fail() (then NaN, with the error set) */
+static const char *said_at(const char *format, double t, int status, const char *word) {
+    static char text[160];
+    char at[64];
+    PyOS_snprintf(at, sizeof at, "%g", t); /* Python's f"{t:g}" */
+    PyOS_snprintf(text, sizeof text, format, at, status, word);
+    return text;
+}
+
+typedef int (*Fmi2Real)(void *, const unsigned int *, size_t, double *);
+typedef int (*Fmi2Step)(void *, double, double, int);
+typedef int (*Fmi3Float64)(void *, const unsigned int *, size_t, double *, size_t);
+typedef int (*Fmi3Step)(void *, double, double, bool, bool *, bool *, bool *, double *);
+
+static double fmu_command(Follower *f, double gap, double speed, double lead) {
+    double in[3] = {gap, speed, lead}, out[2] = {0.0, 0.0}, t = f->fmu_time, last = 0.0;
+    int status;
+    if (f->fmi == 2) {
+        status = ((Fmi2Real)f->set_real)(f->instance, f->in_vr, 3, in);
+        status = status > 1 ? status : ((Fmi2Step)f->do_step)(f->instance, t, f->step_s, 1);
+        status = status > 1 ? status : ((Fmi2Real)f->get_real)(f->instance, f->out_vr, (size_t)f->n_out, out);
+    } else {
+        status = ((Fmi3Float64)f->set_real)(f->instance, f->in_vr, 3, in, 3);
+        if (status <= 1) {
+            bool event = false, terminate = false, early = false;
+            status = ((Fmi3Step)f->do_step)(f->instance, t, f->step_s, true, &event, &terminate, &early, &last);
+            if (status <= 1 && terminate) {
+                Py_XDECREF(PyObject_CallFunction(f->fmu_fail, "s", said_at("the FMU asked to terminate the simulation at %s s", t, 0, "")));
+                return NAN;
+            }
+        }
+        status = status > 1 ? status : ((Fmi3Float64)f->get_real)(f->instance, f->out_vr, (size_t)f->n_out, out, (size_t)f->n_out);
+    }
+    if (status > 1) {
+        static const char *const said[] = {"ok", "warning", "discard", "error", "fatal", "pending"};
+        Py_XDECREF(PyObject_CallFunction(f->fmu_fail, "s", said_at("an FMI call failed at %s s (status %d: %s)", t, status,
+                                                                   said[status < 5 ? status : 5])));
+        return NAN;
+    }
+    f->fmu_time = t + f->step_s;
+    if (f->has_mode)
+        f->mode = out[1];
+    return f->fmu_acceleration ? to_command(out[0], f->max_accel, f->max_decel) : out[0];
+}
+
 static double command(Followers *self, int i, Reading r, double now) {
     Follower *f = &self->f[i];
     double speed = self->v[i], gap = r.gap, lead = r.lead, a;
@@ -121,6 +167,8 @@ static double command(Followers *self, int i, Reading r, double now) {
         f->u = below_target(f->u, speed, f);
         return to_command(f->u, f->max_accel, f->max_decel);
     }
+    case LAW_FMU:
+        return fmu_command(f, gap, speed, lead);
     case LAW_IDM: { /* laws/idm.py's observe: pow() is what Python's ** calls; a speed is never below 0 */
         double free = f->target_mps > 0.0 ? 1.0 - pow(speed / f->target_mps, f->c[2]) : -1.0;
         if (!seen)
