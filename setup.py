@@ -19,8 +19,10 @@ class ExactBuild(build_ext):
         super().build_extensions()
 
 
-PARTS = ["d4sumo/model/controllers/csrc/world_calls.h", "d4sumo/model/controllers/csrc/followers.h", "d4sumo/model/controllers/csrc/convert.h", "d4sumo/model/controllers/csrc/laws.h",
-         "d4sumo/model/controllers/csrc/channel.h", "d4sumo/model/controllers/csrc/column.h", "d4sumo/fmus/switching.h"]
+PARTS = ["d4sumo/model/controllers/csrc/world_calls.h", "d4sumo/model/controllers/csrc/followers.h",
+         "d4sumo/model/controllers/csrc/convert.h", "d4sumo/model/controllers/csrc/laws.h",
+         "d4sumo/model/controllers/csrc/channel.h", "d4sumo/model/controllers/csrc/making.h",
+         "d4sumo/model/controllers/csrc/column.h", "d4sumo/fmus/switching.h"]
 
 setup(ext_modules=[Extension("d4sumo.model.controllers._followers", ["d4sumo/model/controllers/_followers.c"], depends=PARTS,
                              include_dirs=["d4sumo/model/controllers/csrc", "d4sumo/fmus"], optional=True),
