@@ -179,8 +179,7 @@ class _Episodes:
         """Whether every episode left goes on in the column's step loop in C (`compiled.play_column`): each alone, in
         the paper's column (no lane change, no traffic lights), its platoon stepped in C, its attacker too."""
         return (compiled.play_column is not None and compiled.ENABLED and type(self.sensing) is _Column
-                and not self.lights and bool(self.solo) and len(self.maneuver.lengths_m) == len(self.names)
-                and all(alone.platoon._attacker_in_c for alone in self.solo))
+                and not self.lights and bool(self.solo) and all(alone.platoon._attacker_in_c for alone in self.solo))
 
     def play_in_c(self, k: int) -> None:
         """Steps k to the last of every episode left, in C: as command_alone and sense_alone play them, bit for bit

@@ -221,23 +221,26 @@ def batch_road(name: str | NetworkSource, copies: int, *, root: Path | None = No
         narrow = _one_lane_copies(source, road, copies)
         if narrow is not None:
             return narrow
-    copied = side_by_side(source, copies)
-    net_file = road.net_file.parent / f"{copied.stem}-{copied.digest}.net.xml"
-    if not net_file.is_file():
-        _build(copied, net_file)
+    net_file = _copies_built(source, road, copies)
     if not copies_alike(road.net_file, net_file, copies):
         return dataclasses.replace(road, copies_unlike=True)
     return dataclasses.replace(road, net_file=net_file, copies=copies)
+
+
+def _copies_built(source: NetworkSource, road: Road, copies: int, lane: int | None = None) -> Path:
+    """The network file of the road's copies side by side (`copies.side_by_side`), built once beside the road's."""
+    copied = side_by_side(source, copies, lane)
+    net_file = road.net_file.parent / f"{copied.stem}-{copied.digest}.net.xml"
+    if not net_file.is_file():
+        _build(copied, net_file)
+    return net_file
 
 
 def _one_lane_copies(source: NetworkSource, road: Road, copies: int) -> Road | None:
     """``copies`` copies of the platoon's lane of a road of one edge, as a road; None where netconvert builds the lane
     otherwise alone than on the road (a curve's lanes differ in length)."""
     lane, (edge,) = road.platoon_lane, road.route_edges
-    copied = side_by_side(source, copies, lane)
-    net_file = road.net_file.parent / f"{copied.stem}-{copied.digest}.net.xml"
-    if not net_file.is_file():
-        _build(copied, net_file)
+    net_file = _copies_built(source, road, copies, lane)
     if not one_lane_alike(road.net_file, net_file, copies, edge, lane):
         return None
     # closed_to counts from the platoon's lane; lanes stays the road's (SUMO's Plexe models are told it)
