@@ -21,6 +21,7 @@ class ExactBuild(build_ext):
 
 PARTS = ["d4sumo/model/controllers/csrc/world_calls.h", "d4sumo/model/controllers/csrc/followers.h",
          "d4sumo/model/controllers/csrc/convert.h", "d4sumo/model/controllers/csrc/laws.h",
+         "d4sumo/model/controllers/csrc/as_run.h",
          "d4sumo/model/controllers/csrc/channel.h", "d4sumo/model/controllers/csrc/making.h",
          "d4sumo/model/controllers/csrc/column.h", "d4sumo/fmus/switching.h"]
 

@@ -1,7 +1,7 @@
 """Episode cost against bare libsumo stepping of the same steps and cars (the target: ratio <= 1.3 for every
 system, a cooperative platoon with beacons each step included), for followers commanded by the paper's
 controller and for followers driven by SUMO's ACC model (or any systems given, e.g. --systems timegap idm cacc
-ploeg consensus).
+ploeg consensus paper-as-run; paper-as-run: the preset, its authors' controllers and attacker, in the same scenario).
 
 Both sides are timed the same way, start to close, interleaved in one run so machine noise hits both:
   bare     libsumo start, the same cars (and vehicle types) inserted, `steps` calls of simulationStep, close
@@ -20,6 +20,7 @@ Usage: python tools/bench_episode.py [--repeats 30] [--followers 3] [--systems s
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 import tempfile
 import time
@@ -32,11 +33,13 @@ from d4sumo.engine.simulation import check_episode, simulate
 from d4sumo.engine.command import sumo_command
 from d4sumo.engine.sumo import load_platoon
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
+from d4sumo.presets import apply_preset
 from toolargs import Parser, run_main
 
 
 TARGET = 1.3  # an episode at most this many times bare libsumo stepping of the same steps and cars
 COOPERATIVE_TARGET = 1.3  # the same for a platoon that exchanges V2V beacons
+AS_RUN = "paper-as-run"  # a system: the paper as its authors' code ran it (`presets`)
 FMU_TARGET = 2.0  # an episode with the shipped FMU at most this many times the same with the Python controller
 
 def bare(config: EpisodeConfig, road) -> float:
@@ -55,6 +58,17 @@ def episode(config: EpisodeConfig, road, attack_u: np.ndarray) -> float:
     elapsed = time.perf_counter() - t0
     assert len(result.trace) == config.steps + 1, "the benchmark attack must not crash"
     return elapsed
+
+
+def system_config(name: str, followers: int) -> EpisodeConfig:
+    """The episode a system plays: its followers' controller, from steady state; ``paper-as-run``: the preset (the
+    authors' controllers and attacker), in the same scenario as the others (steady state, no end distance), so that
+    every step runs."""
+    if name == AS_RUN:
+        doc = apply_preset({"preset": AS_RUN, "attack": {"family": "knots"}})
+        doc["scenario"].update(start="steady", duration_s=EpisodeConfig.duration_s, end_distance_m=0.0)
+        return dataclasses.replace(EpisodeConfig.from_dict(doc), followers=followers)
+    return EpisodeConfig(followers=followers, start="steady", controller=ControllerConfig(name))
 
 
 def main() -> None:
@@ -82,7 +96,7 @@ def main() -> None:
 
 def measure(args, fmus: dict) -> None:
     """Time each system's episodes against bare stepping, interleaved, and print the ratios."""
-    configs = [EpisodeConfig(followers=args.followers, start="steady", controller=ControllerConfig(name)) for name in args.systems]
+    configs = [system_config(name, args.followers) for name in args.systems]
     road = build_road(configs[0].network)
     attack_u = np.full(configs[0].steps, np.nan)  # the attacker cruises: no crash, full length
     times: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in args.systems}

@@ -65,12 +65,10 @@ static double cruise_acceleration(Switching *s, double speed, double step) {
     return a > limit ? limit : (a < -limit ? -limit : a);
 }
 
-/* SwitchingController.command over one step of ``step`` seconds: the mode (Eq. 1, with hysteresis), the
- * law it selects, the pedal that asks for that acceleration */
-static void switching_step(Switching *s, double step) {
+/* SwitchingController.select_mode: the mode Eq. 1 selects for this gap and speed (with hysteresis), its cruise PID
+ * re-engaging without a kick where it hands over to the ACC */
+static double switching_mode(Switching *s, double gap, double speed, double desired) {
     double *v = s->v;
-    double gap = v[VR_GAP_M], speed = v[VR_SPEED_MPS], lead = v[VR_LEAD_SPEED_MPS];
-    double desired = s->time_gap ? v[VR_SETPOINT_M] + s->time_gap_s * speed : v[VR_SETPOINT_M];
     double cc_speed = v[VR_TARGET_SPEED_MPS] + v[VR_EPS_V_MPS] - SPEED_TOLERANCE_MPS;
     double acc_speed = v[VR_TARGET_SPEED_MPS] + SPEED_TOLERANCE_MPS;
     double mode;
@@ -86,8 +84,22 @@ static void switching_step(Switching *s, double step) {
     if (mode != v[VR_MODE] && mode == MODE_ACC) s->has_prev = 0;  /* the cruise PID re-engages without a kick */
     v[VR_MODE] = mode;
     s->mode_known = 1;
-    double a = mode == MODE_CC ? cruise_acceleration(s, speed, step)
-                               : v[VR_ACC_KP] * (gap - desired) + v[VR_ACC_KV] * (lead - speed);
+    return mode;
+}
+
+/* the gap the ACC keeps: the setpoint d (Eq. 1), or s0 + h v for the time-gap variant */
+static double switching_desired(const Switching *s, double speed) {
+    return s->time_gap ? s->v[VR_SETPOINT_M] + s->time_gap_s * speed : s->v[VR_SETPOINT_M];
+}
+
+/* SwitchingController.command over one step of ``step`` seconds: the mode (Eq. 1, with hysteresis), the
+ * law it selects, the pedal that asks for that acceleration */
+static void switching_step(Switching *s, double step) {
+    double *v = s->v;
+    double gap = v[VR_GAP_M], speed = v[VR_SPEED_MPS], lead = v[VR_LEAD_SPEED_MPS];
+    double desired = switching_desired(s, speed);
+    double a = switching_mode(s, gap, speed, desired) == MODE_CC ? cruise_acceleration(s, speed, step)
+               : v[VR_ACC_KP] * (gap - desired) + v[VR_ACC_KV] * (lead - speed);
     double u = a >= 0.0 ? a / v[VR_MAX_ACCEL_MPS2] : a / v[VR_MAX_DECEL_MPS2];
     v[VR_COMMAND] = u > 1.0 ? 1.0 : (u < -1.0 ? -1.0 : u);
 }

@@ -17,6 +17,7 @@ from d4sumo.model.config import ControllerConfig, EpisodeConfig
 from d4sumo.model.world.sensing import RadarParams
 from d4sumo.model.world.v2v import ChannelParams
 from d4sumo.model.controllers import compiled
+from d4sumo.presets import apply_preset
 
 pytestmark = pytest.mark.skipif(compiled.play_column is None, reason="the C extension is not built")
 ROADS = Path(__file__).resolve().parents[2] / "examples" / "roads"
@@ -71,6 +72,8 @@ CASES = {  # each configuration, and how many episodes share one SUMO
     "SUMO's ACC, a switching follower and SUMO's IDM": (EpisodeConfig(controller=(
         ControllerConfig("sumo:ACC"), ControllerConfig("switching", where="controller.v2"),
         ControllerConfig("sumo:IDM", where="controller.v3")), setpoint_m=3.0), 6),
+    "the paper as run (its preset), an end distance": (EpisodeConfig.from_dict(apply_preset(
+        {"preset": "paper-as-run", "attack": {"family": "knots"}, "scenario": {"duration_s": 30.0, "end_distance_m": 250.0}})), 6),
 }
 
 

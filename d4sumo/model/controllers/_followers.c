@@ -31,9 +31,10 @@
 #include "laws.h"
 #include "channel.h"
 
-/* platoon.Platoon.advance's attacker without traffic, lights, a motion or the authors' options: its attack's pedal,
- * or where the attack is NaN its cruise control (control.CruiseControl, afresh at each new cruise window) through
- * vehicle.acceleration_to_command; its speed at the step's end through its actuator */
+/* platoon.Platoon.advance's attacker without traffic, lights or a motion: its attack's pedal, or where the attack is NaN
+ * its cruise control (control.CruiseControl, afresh at each new cruise window) through vehicle.acceleration_to_command;
+ * with the authors' code's options, their controller on a free road, which holds the attack's pedal of each control
+ * period where it attacks (Platoon._attacker_command); its speed at the step's end through its actuator */
 static int attacker_step(Followers *self, long k, double *command_out, double *speed_out) {
     Follower *a = &self->f[0];
     if (k < 0 || k >= self->attack_steps) {
@@ -41,7 +42,11 @@ static int attacker_step(Followers *self, long k, double *command_out, double *s
         return -1;
     }
     double u = self->attack_u[k], speed = self->v[0];
-    if (u != u) { /* NaN: no attack here, the attacker cruises like everyone else */
+    if (self->attacker_every) { /* the authors' attacker: the attack's pedal at this control period's start */
+        double attack = self->attack_u[k - k % self->attacker_every];
+        if (!as_run_command(a, FREE_ROAD_GAP_M, speed, speed, attack != attack, &u))
+            u = a->run.held = attack;
+    } else if (u != u) { /* NaN: no attack here, the attacker cruises like everyone else */
         if (self->attacking) { /* a new cruise window: the PID starts afresh (no kick, no stale integral) */
             a->sw.integral = 0.0;
             a->sw.has_prev = 0;
@@ -223,7 +228,7 @@ static void Followers_dealloc(Followers *self) {
  *   laws     each follower's, from v1: (law (0: SUMO drives it, its numbers zeros), whether its mode is recorded, (setpoint_m, target_mps, step_s,
  *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
  *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
- *            speed_noise_mps, delay steps, normal)) */
+ *            speed_noise_mps, delay steps, normal), then its state (`init_follower`)) */
 static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     (void)kwds;
     PyObject *channel, *lengths, *sources, *randoms, *lie_, *laws, *checked, *attacker = Py_None;
@@ -313,63 +318,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
         }
     }
     for (int i = 1; i < n; i++) {
-        Follower *f = &self->f[i];
-        PyObject *own, *gains, *mitigation, *actuator, *radar, *state = Py_None;
-        if (!PyArg_ParseTuple(PyList_GET_ITEM(laws, i - 1), "ipO!O!dO!O!O|O", &f->law, &f->has_mode, &PyTuple_Type, &own,
-                              &PyTuple_Type, &gains, &f->u, &PyTuple_Type, &mitigation, &PyTuple_Type, &actuator, &radar, &state))
+        if (init_follower(self, &self->f[i], PyList_GET_ITEM(laws, i - 1), attacker != Py_None) < 0)
             return -1;
-        int switching = f->law == LAW_SWITCHING || f->law == LAW_TIMEGAP;
-        if (f->law == LAW_SUMO && (self->channel || attacker == Py_None)) {
-            PyErr_SetString(PyExc_ValueError, "a follower SUMO drives: with the attacker stepped here, without a channel");
-            return -1;
-        }
-        int alone = switching || f->law == LAW_IDM || f->law == LAW_FMU || f->law == LAW_SUMO; /* needs no channel */
-        if (f->law < LAW_SUMO || f->law > LAW_FMU || (!alone && !self->channel)) {
-            PyErr_Format(PyExc_ValueError, "no law %d%s", f->law, self->channel ? "" : " without a channel");
-            return -1;
-        }
-        double o[5], m[2], a[7];
-        if (read_tuple(own, o, 5, "the controller") < 0 || read_tuple(gains, f->c, switching ? 9 + (f->law == LAW_TIMEGAP) : 5, "its gains") < 0
-            || read_tuple(mitigation, m, 2, "its mitigation") < 0 || read_tuple(actuator, a, 7, "its actuator") < 0)
-            return -1;
-        f->setpoint_m = o[0], f->target_mps = o[1], f->step_s = o[2], f->max_accel = o[3], f->max_decel = o[4];
-        f->fallback_mps = m[0], f->fallback_headway_s = m[1], f->mode = 0.0;
-        self->with_mode += f->has_mode;
-        if (switching) { /* its FMU's variables: the scenario's, the car's, the gains (and the time gap) */
-            double *v = f->sw.v;
-            switching_defaults(&f->sw);
-            v[VR_SETPOINT_M] = o[0], v[VR_TARGET_SPEED_MPS] = o[1], v[VR_MAX_ACCEL_MPS2] = o[3], v[VR_MAX_DECEL_MPS2] = o[4];
-            const int gain[9] = {VR_CRUISE_KP, VR_CRUISE_KI, VR_CRUISE_KD, VR_CRUISE_INTEGRAL_CLAMP, VR_CRUISE_OUTPUT_LIMIT_MPS2,
-                                 VR_ACC_KP, VR_ACC_KV, VR_EPS_X_M, VR_EPS_V_MPS};
-            for (int g = 0; g < 9; g++)
-                v[gain[g]] = f->c[g];
-            f->sw.time_gap = f->law == LAW_TIMEGAP;
-            f->sw.time_gap_s = f->law == LAW_TIMEGAP ? f->c[9] : 0.0;
-            if (state != Py_None && cruise_state(state, &f->sw, &f->sw.v[VR_MODE], &f->sw.mode_known) < 0)
-                return -1;
-            f->mode = v[VR_MODE];
-        }
-        if (f->law == LAW_FMU && init_fmu(f, state) < 0)
-            return -1;
-        f->act_accel_max = a[0], f->act_decel_max = a[1], f->alpha = a[2], f->act_step_s = a[3], f->max_speed_mps = a[4];
-        f->accel_mps2 = a[5], f->coast = a[6];
-        f->perfect = radar == Py_None;
-        if (!f->perfect) {
-            long delay;
-            if (!PyArg_ParseTuple(radar, "dddlO", &f->range_m, &f->gap_noise_m, &f->speed_noise_mps, &delay, &f->normal))
-                return -1;
-            Py_INCREF(f->normal);
-            if (delay < 0 || delay > 100000) {
-                PyErr_Format(PyExc_ValueError, "a radar's latency of %ld steps", delay);
-                return -1;
-            }
-            f->capacity = (int)delay + 1;
-            f->readings = PyMem_Calloc((size_t)f->capacity, sizeof(Reading));
-            if (f->readings == NULL) {
-                PyErr_NoMemory();
-                return -1;
-            }
-        }
     }
     if (attacker != Py_None && init_attacker(self, attacker) < 0)
         return -1;

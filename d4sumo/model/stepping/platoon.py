@@ -269,8 +269,8 @@ class Platoon:
         #: the followers, their radars and channel stepped in C where they may be (`compiled`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
         self._attacking = False  # whether the attacker attacked at the last step (a new cruise window starts its PID afresh)
-        #: an attacker that only attacks and cruises, which the C may step
-        self._plain = (self._attacker_driver is None and self._attacker_as_run is None and self._motion is None
+        #: an attacker that only attacks and cruises (as printed, or as the authors' code has it), which the C may step
+        self._plain = (self._attacker_driver is None and self._motion is None
                        and not self._others  # (its attack is plain floats: attack_u above)
                        # a numpy float32 top speed (from the Python API) computes in float32 in the Python
                        and type(self.attacker_actuator.max_speed_mps) in (float, int))

@@ -10,7 +10,7 @@ import pytest
 from d4sumo.engine.ballistic import integrate
 from d4sumo.model.controllers import compiled
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
-from d4sumo.model.controllers.control import PathCACC
+from d4sumo.model.controllers.control import AS_RUN_DEFAULTS, PathCACC
 from d4sumo.model.attacks.maneuvers import maneuver_of
 from d4sumo.model.attacks.messages import BeaconFalsifier
 from d4sumo.model.controllers.commands import ControllerError
@@ -18,7 +18,9 @@ from d4sumo.model.stepping.platoon import Platoon
 from d4sumo.model.world.sensing import RadarParams
 from d4sumo.model.world.v2v import ChannelParams
 
-LAWS = ("switching", "timegap", "idm", "cacc", "ploeg", "consensus", "mixed")  # mixed: switching and cooperative followers in one platoon
+# mixed: switching and cooperative followers in one platoon; as-run: the paper's controller (or its time-gap variant)
+# with the authors' code's options drawn (`SwitchingParams`), their attacker with it
+LAWS = ("switching", "timegap", "idm", "cacc", "ploeg", "consensus", "mixed", "as-run")
 COOPERATIVE = ("cacc", "ploeg", "consensus")
 LIES = (("offset", {"msg_value": -4.0}), ("scaling", {"msg_factor": 1.5}), ("sinusoid", {"msg_amplitude": 3.0, "msg_frequency_hz": 0.5}),
         ("jam", {"msg_duration_s": 3.0}), ("delay", {"msg_delay_s": 1.0}), ("replay", {"msg_window_s": 2.0}), ("knots", {}))
@@ -60,7 +62,25 @@ def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: 
     if imperfect and rng.random() < 0.5:  # the cooperative laws' mitigation
         mitigation = (("fallback_mps", float(rng.uniform(0.5, 3.0))), ("fallback_headway_s", float(rng.uniform(0.8, 1.5))))
         params.update({kind: params[kind] + mitigation for kind in COOPERATIVE})
-    if law == "mixed":  # each follower its own: the paper's, or a cooperative law reading the beacons
+    if law == "as-run":  # the authors' code's options, each drawn (the time-gap variant takes them too)
+        period = float(rng.choice([0.0, step, 0.1, 0.2, 0.3]))
+        options = (("switching_rule", str(rng.choice(["eq1", "code"]))), ("cruise_pid", str(rng.choice(["d4sumo", "code"]))),
+                   ("low_level", str(rng.choice(["exact", "pid"]))), ("control_period_s", period),
+                   ("first_command_zero", bool(rng.random() < 0.5)))
+        chosen = dict(options)
+        if chosen["switching_rule"] == "code":
+            options += (("engage_margin_m", float(rng.uniform(5.0, 30.0))), ("release_margin_m", float(rng.uniform(1.0, 15.0))))
+        if chosen["cruise_pid"] == "code":
+            options += (("cruise_filter_s", float(rng.choice([0.0, 0.5, 1.0]))),)
+        if chosen["low_level"] == "pid":
+            options += (("low_kp", float(rng.uniform(0.05, 0.3))), ("low_ki", float(rng.uniform(0.05, 0.4))),
+                        ("low_kd", float(rng.uniform(0.0, 0.01))), ("low_integral_init", float(rng.choice([0.0, 5.0]))),
+                        ("low_integral_clamp", float(rng.choice([10.0, 2.0]))))
+        if not any(value != AS_RUN_DEFAULTS[key] for key, value in options):
+            options += (("first_command_zero", True),)
+        kind = str(rng.choice(["switching", "timegap"]))
+        controller = ControllerConfig(kind, switching + options + (params["timegap"][-1:] if kind == "timegap" else ()))
+    elif law == "mixed":  # each follower its own: the paper's, or a cooperative law reading the beacons
         kinds = [str(rng.choice(("switching", "timegap") + COOPERATIVE)) for _ in range(followers)]
         kinds[0] = "cacc"  # somebody listens: the platoon has its channel
         rng.shuffle(kinds)
@@ -75,10 +95,11 @@ def _config(rng: np.random.Generator, law: str, tight: bool = False, imperfect: 
                                 seed=int(rng.integers(0, 100)))
         if rng.random() < 0.5:
             channel.update(latency_s=float(rng.choice([0.0, 3 * step])), loss=float(rng.choice([0.0, 0.3])), seed=int(rng.integers(0, 100)))
-    setpoint = float((rng.uniform(6.0, 30.0) if law in ("switching", "timegap") else rng.uniform(2.0, 5.0)) if tight else rng.uniform(3.0, 25.0))
+    setpoint = float((rng.uniform(6.0, 30.0) if law in ("switching", "timegap", "as-run") else rng.uniform(2.0, 5.0)) if tight else rng.uniform(3.0, 25.0))
     return EpisodeConfig(followers=followers, setpoint_m=setpoint, speed_mps=float(rng.uniform(15.0, 33.0)),
                          start=str(rng.choice(["rest", "steady"])), step_s=step, duration_s=20.0, vehicles=vehicles,
-                         controller=controller, radar=radar, v2v=None if law in ("switching", "timegap", "idm") else ChannelParams(**channel))
+                         controller=controller, radar=radar,
+                         v2v=None if law in ("switching", "timegap", "idm", "as-run") else ChannelParams(**channel))
 
 
 def _liars(rng: np.random.Generator, config: EpisodeConfig) -> tuple:
@@ -119,7 +140,7 @@ def test_the_compiled_followers_command_what_the_python_does_bit_for_bit_whateve
             assert fast.advance(k, x, v, pairs) == python.advance(k, x, v, pairs)
         assert fast.commands == python.commands
         assert fast.modes == python.modes
-        assert len(fast.modes) == (200 if law in ("switching", "timegap") else len(fast.modes))  # every step's modes compared
+        assert len(fast.modes) == (200 if law in ("switching", "timegap", "as-run") else len(fast.modes))  # every step's modes compared
         if config.v2v is not None:
             assert fast.channel.sent == python.channel.sent
 
@@ -168,8 +189,6 @@ class _OwnCACC(PathCACC):
 
 @pytest.mark.parametrize("change", [
     {"controller": (ControllerConfig("cacc"), ControllerConfig("sumo:ACC"))},
-    {"controller": ControllerConfig("switching", (("switching_rule", "code"),))},  # the authors' code's options
-    {"controller": ControllerConfig("switching", (("control_period_s", 0.1),))},
     {"maneuver": "cutin"},
     {"controller": ControllerConfig("switching"), "maneuver": "cutout"},
 ])
@@ -177,6 +196,8 @@ def test_the_python_plays_what_the_compiled_followers_do_not(change):
     config = EpisodeConfig(followers=2, **{"controller": ControllerConfig("cacc"), **change})
     assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is None
     for plain in (ControllerConfig("cacc"), ControllerConfig("switching"), ControllerConfig("timegap"), ControllerConfig("idm"),
+                  ControllerConfig("switching", (("switching_rule", "code"),)),  # the authors' code's options
+                  ControllerConfig("timegap", (("control_period_s", 0.1), ("low_level", "pid"))),
                   (ControllerConfig("cacc"), ControllerConfig("switching")), (ControllerConfig("cacc"), ControllerConfig("idm"))):
         config = EpisodeConfig(followers=2, controller=plain)
         assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None

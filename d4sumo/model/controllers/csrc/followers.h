@@ -23,6 +23,20 @@ typedef struct { /* a radar's reading: gap, speed ahead, whether a car is ahead 
     int seen;
 } Reading;
 
+typedef struct { /* the authors' PID (control.CodePID): its gains, period, filter, clamps and state */
+    double kp, ki, kd, period_s, filter_s, clamp, limit, integral, prev_error, filtered, prev_filtered;
+    int has_prev; /* whether it was called before (prev_error not None) */
+} CodePid;
+
+typedef struct { /* the switching law as the authors' code ran it (control.SwitchingController.command_as_run) */
+    long every, calls;       /* steps between two actions (0: the law as printed); calls so far */
+    double period_s, held;   /* the control period; the pedal it holds between actions */
+    double prev_speed;       /* its speed at its last action (has_prev_speed), for the measured acceleration */
+    int has_prev_speed, code_rule, code_cruise, low_pid, first_zero; /* its options (SwitchingParams) */
+    double engage_m, release_m; /* the code rule's margins: engage, engage + release */
+    CodePid cruise, low;     /* the code's cruise PID (code_cruise) and its low-level PID (low_pid) */
+} AsRun;
+
 typedef struct {
     int law; /* LAW_SUMO: SUMO drives it, nothing here */
     double setpoint_m, target_mps, step_s, max_accel, max_decel; /* the controller's */
@@ -32,6 +46,7 @@ typedef struct {
      * acc_kv, eps_x_m, eps_v_mps; time gap: those, and time_gap_s */
     double c[10];
     Switching sw; /* the switching law's state and variables, as its FMU's (switching.h) */
+    AsRun run;    /* the switching law with the authors' code's options (run.every 0: as printed) */
     int has_mode; /* whether its mode is recorded: the switching law's, or the mitigation's */
     double u;    /* Ploeg's integrated command */
     double fallback_mps, fallback_headway_s, mode; /* the mitigation (fallback_mps 0: none), its mode */
@@ -80,6 +95,7 @@ typedef struct {
     int liar;
     Follower *f;    /* f[1] .. f[cars - 1]; f[0] the attacker's cruise control and actuator, where it is stepped here */
     int has_attacker; /* whether the attacker is stepped here too: its attack, and its cruise where the attack is NaN */
+    long attacker_every; /* the authors' attacker (f[0] their controller, on a free road): a pedal each this many steps; 0: not */
     double *attack_u; /* its pedal at each step (NaN: it cruises) */
     Py_ssize_t attack_steps;
     int attacking;  /* whether it attacked at the last step (a new cruise window starts its PID afresh) */

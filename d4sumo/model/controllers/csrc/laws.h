@@ -125,6 +125,8 @@ static double fmu_command(Follower *f, double gap, double speed, double lead) {
     return f->fmu_acceleration ? to_command(out[0], f->max_accel, f->max_decel) : out[0];
 }
 
+#include "as_run.h" /* the switching law as its authors' code ran it */
+
 static double command(Followers *self, int i, Reading r, double now) {
     Follower *f = &self->f[i];
     double speed = self->v[i], gap = r.gap, lead = r.lead, a;
@@ -134,6 +136,12 @@ static double command(Followers *self, int i, Reading r, double now) {
     case LAW_SWITCHING:
     case LAW_TIMEGAP: { /* the FMU's law, on what the radar measured */
         double *v = f->sw.v;
+        if (f->run.every) { /* as its authors' code ran it */
+            double u;
+            as_run_command(f, gap, speed, lead, 1, &u);
+            f->mode = v[VR_MODE];
+            return u;
+        }
         v[VR_GAP_M] = gap, v[VR_SPEED_MPS] = speed, v[VR_LEAD_SPEED_MPS] = lead;
         switching_step(&f->sw, f->step_s);
         f->mode = v[VR_MODE];
