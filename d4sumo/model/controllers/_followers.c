@@ -85,8 +85,8 @@ static int followers_step(Followers *self, long k, double *commands, double *new
         Follower *f = &self->f[i];
         if (f->law == LAW_SUMO)
             continue;
-        Reading r = {gap, self->v[i - 1], gap < FREE_ROAD_GAP_M};
-        if (!f->perfect && sense(f, gap, self->v[i], self->v[i - 1], &r) < 0)
+        Reading r = {gap, self->ahead ? self->lead[i] : self->v[i - 1], gap < FREE_ROAD_GAP_M};
+        if (!f->perfect && sense(f, gap, self->v[i], r.lead, &r) < 0)
             return -1;
         double c = command(self, i, r, now);
         if (f->law == LAW_FMU && PyErr_Occurred()) /* its call failed */
@@ -127,25 +127,7 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
         PyErr_SetString(PyExc_TypeError, "commands, new_speeds and modes: lists");
         return NULL;
     }
-    PyObject *pairs = PySequence_Fast(args[3], "pairs: a sequence of (leader, follower, gap)");
-    if (pairs == NULL)
-        return NULL;
-    int status = PySequence_Fast_GET_SIZE(pairs) < n - 1 ? -1 : 0; /* each follower's gap, read before any Python runs */
-    if (status < 0)
-        PyErr_SetString(PyExc_TypeError, "pairs: one for every follower");
-    for (int i = 1; i < n && status == 0; i++) {
-        PyObject *pair = PySequence_Fast(PySequence_Fast_GET_ITEM(pairs, i - 1), "pairs: (leader, follower, gap)");
-        if (pair == NULL || PySequence_Fast_GET_SIZE(pair) != 3) {
-            if (pair != NULL)
-                PyErr_SetString(PyExc_TypeError, "pairs: (leader, follower, gap)");
-            status = -1;
-        } else {
-            status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &self->gap[i], "a pair's gap");
-        }
-        Py_XDECREF(pair);
-    }
-    Py_DECREF(pairs);
-    if (status < 0)
+    if (read_pairs(self, args[3], args[2]) < 0) /* each follower's gap and speed ahead, read before any Python runs */
         return NULL;
     double *out = self->out; /* commands, new speeds, modes */
     int count = followers_step(self, k, out, out + n, out + 2 * n);
@@ -225,6 +207,8 @@ static void Followers_dealloc(Followers *self) {
  *   randoms  each link's generator's random(), in that order (with loss), else []
  *   lie      (falsify, liar, Message, Channel.sent), or None
  *   attacker None (the Python plays it), or what `init_attacker` reads
+ *   ahead    whether each follower follows the nearest car its pairs put ahead of it (a lane change, traffic: no
+ *            channel), not the car before it in the column (`read_pairs`)
  *   laws     each follower's, from v1: (law (0: SUMO drives it, its numbers zeros), whether its mode is recorded, (setpoint_m, target_mps, step_s,
  *            max_accel, max_decel), its gains (9 for the switching law, 10 for its time-gap variant, else 5), u, (fallback_mps,
  *            fallback_headway_s), its actuator (7), its radar: None (perfect) or (range_m, gap_noise_m,
@@ -232,8 +216,8 @@ static void Followers_dealloc(Followers *self) {
 static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     (void)kwds;
     PyObject *channel, *lengths, *sources, *randoms, *lie_, *laws, *checked, *attacker = Py_None;
-    if (!PyArg_ParseTuple(args, "OO!O!O!OO!O|O", &channel, &PyList_Type, &lengths, &PyList_Type, &sources,
-                          &PyList_Type, &randoms, &lie_, &PyList_Type, &laws, &checked, &attacker))
+    if (!PyArg_ParseTuple(args, "OO!O!O!OO!O|Op", &channel, &PyList_Type, &lengths, &PyList_Type, &sources,
+                          &PyList_Type, &randoms, &lie_, &PyList_Type, &laws, &checked, &attacker, &self->ahead))
         return -1;
     if (self->last != NULL) {
         PyErr_SetString(PyExc_RuntimeError, "made once");
@@ -252,9 +236,13 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
         PyErr_SetString(PyExc_ValueError, "a length for every car, sources and a law for every follower, every >= 1, delay >= 0");
         return -1;
     }
+    if (self->ahead && self->channel) {
+        PyErr_SetString(PyExc_ValueError, "followers who follow whoever is ahead: without a channel");
+        return -1;
+    }
     self->cars = n;
     self->direct = self->delay == 0 && self->loss == 0.0;
-    self->last = PyMem_Calloc(9 * (size_t)n, sizeof(double));
+    self->last = PyMem_Calloc(10 * (size_t)n, sizeof(double));
     self->sources = PyMem_Calloc(2 * (size_t)n * n + 3 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now */
     self->inbox = PyMem_Calloc((size_t)n * (n + 1), sizeof(Beacon));
     self->f = PyMem_Calloc((size_t)n, sizeof(Follower));
@@ -269,7 +257,7 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     double *d = self->last;
     self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n, self->gap = d + 5 * n;
-    self->out = d + 6 * n;
+    self->out = d + 6 * n, self->lead = d + 9 * n;
     self->n_sources = self->sources + n * n, self->is_sender = self->n_sources + n, self->heard = self->is_sender + n;
     self->sent_now = self->heard + n * n;
     self->step_beacons = self->inbox + n * n;

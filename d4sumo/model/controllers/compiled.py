@@ -3,16 +3,20 @@ same commands, modes and speeds as `platoon.Platoon.advance`'s Python, bit for b
 cost (docs/v2v.md, docs/benchmarks.md).
 
 It plays the platoons whose every follower runs d4sumo's `switching` (the paper's controller as printed),
-`timegap` (each as printed or with the authors' code's options: `control.SwitchingParams`), `idm`, an FMU (`fmu:PATH`: its FMI calls made from C, on the instance fmpy made), `cacc`, `ploeg` or `consensus` (the classes themselves, not a subclass), the cooperative ones with or without
-the mitigation (and, beside an attacker stepped here without a channel, followers SUMO's models drive: nothing of theirs), in the paper's column (no lane change, no traffic, no traffic lights): their radars (range,
-noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
-Python's own generators and lying with the Python's own falsifier, in the order the Python does. The
-switching law in C is the one the FMUs d4sumo ships run (`fmus/switching.h`). The attacker too, where it only
-plays its attack and cruises (no traffic, no motion), as printed or as the authors' code has it. Everything else the Python
-plays, as it does everywhere when the extension could not be built (no C compiler at install: the same
-episodes, slower). Where every episode left in a SUMO (or the ballistic world) is such a platoon in the paper's
-column, the step loop itself goes on in C (`play_column`, `engine.loop`): each step's commands, the world's calls and
-the collision checks, as the Python's loop makes them.
+`timegap` (each as printed or with the authors' code's options: `control.SwitchingParams`), `idm`, an FMU
+(`fmu:PATH`: its FMI calls made from C, on the instance fmpy made), `cacc`, `ploeg` or `consensus` (the classes
+themselves, not a subclass), the cooperative ones with or without the mitigation (and, beside an attacker stepped
+here without a channel, followers SUMO's models drive: nothing of theirs), without traffic lights: their radars
+(range, noise, latency), their channel (interval, latency, loss) and a message attack on it, each drawing from the
+Python's own generators and lying with the Python's own falsifier, in the order the Python does. In the paper's
+column each follows the car before it; without a channel, also where the attacker changes lanes or traffic is
+around, each follows the nearest car the step's pairs put ahead of it, a traffic car included. The switching law in
+C is the one the FMUs d4sumo ships run (`fmus/switching.h`). The attacker too, where it only plays its attack and
+cruises (no traffic, no motion), as printed or as the authors' code has it. Everything else the Python plays, as it
+does everywhere when the extension could not be built (no C compiler at install: the same episodes, slower). Where
+every episode left in a SUMO (or the ballistic world) is such a platoon in the paper's column, the step loop itself
+goes on in C (`play_column`, `engine.loop`): each step's commands, the world's calls and the collision checks, as
+the Python's loop makes them.
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
     channel, config = platoon.channel, platoon.config
     # followers SUMO drives (its models) with the attacker stepped here: nothing of theirs is, no beacon for them
     sumo_driven = attacker and channel is None and not platoon._sumo_listening
-    if (Followers is None or not ENABLED or not platoon._one_ahead
+    if (Followers is None or not ENABLED or not platoon._one_ahead and channel is not None  # a channel: the column only
             or len(platoon._python) != config.followers and not sumo_driven
             or (channel is not None and channel.falsify is not None
                 and (type(channel.falsify) is not BeaconFalsifier  # d4sumo's lies: none renames its sender
@@ -82,8 +86,9 @@ def compiled_followers(platoon, attacker: bool = False) -> Callable | None:
         if ours is None:
             return None
     if channel is None:
+        # out of the paper's column (a lane change, traffic) each follows the nearest car its pairs put ahead of it
         return Followers(None, [0.0] * (config.followers + 1), [()] * config.followers, [], None, laws, checked_command,
-                         ours).advance
+                         ours, not platoon._one_ahead).advance
     sources = [channel.sources[i] for i in range(1, config.followers + 1)]
     randoms = [channel.rngs[s, i].random for i, srcs in enumerate(sources, start=1) for s in srcs] if channel.rngs else []
     lie = (channel.falsify, channel.liar, Message, channel.sent) if channel.falsify is not None else None

@@ -80,17 +80,18 @@ def assemble_trace(config: EpisodeConfig, followers: list, commanded: tuple[int,
     return Trace(times_s=times_s, signals=signals, followers=config.followers), min_gaps, warmup_min_gaps
 
 
-def _window_minima(rows: dict[str, list[tuple[int, float]] | np.ndarray], start: int, stop: int) -> dict[str, float]:
+def _window_minima(rows: dict[str, tuple[np.ndarray, np.ndarray] | np.ndarray], start: int, stop: int) -> dict[str, float]:
     """Each pair's minimum gap over samples [start, stop): ``rows`` is a pair's gap at every sample (an
-    array) or at the samples where it followed ((sample, gap) pairs); a pair that never did is left out."""
+    array) or at the samples where it followed ((samples, gaps)); a pair that never did is left out."""
     minima = {}
     for name, gaps in rows.items():
         if isinstance(gaps, np.ndarray):
             minima[name] = float(gaps[start:stop].min())
         else:
-            inside = [gap for k, gap in gaps if start <= k < stop]
-            if inside:
-                minima[name] = min(inside)
+            samples, gaps = gaps
+            inside = gaps[(samples >= start) & (samples < stop)]
+            if inside.size:
+                minima[name] = float(inside.min())
     return minima
 
 
@@ -111,24 +112,32 @@ def _column_gaps(lengths_m: list[float], signals: dict, positions: np.ndarray) -
 
 
 def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lateral_m: np.ndarray | None,
-               traffic: bool = False) -> dict[str, list[tuple[int, float]]]:
+               traffic: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
     pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions (when
-    given); each pair's gaps at the samples where it followed. With ``traffic`` the last of ``ids`` is every
-    traffic car (`traffic.TRAFFIC_ID`): its gaps are not a signal, its pairs' are (``traffic-v3``)."""
+    given); each pair's gaps at the samples where it followed, as (samples, gaps). With ``traffic`` the last of
+    ``ids`` is every traffic car (`traffic.TRAFFIC_ID`): its gaps are not a signal, its pairs' are (``traffic-v3``).
+    Over arrays: fmin keeps the smaller gap as min() does (a NaN never replaces one)."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
     victim = np.full(n_samples, FREE_ROAD_GAP_M)
     attacker = np.full(n_samples, FREE_ROAD_GAP_M)
-    rows: dict[str, list[tuple[int, float]]] = {}
-    for k, sample in enumerate(pairs):
-        for a, b, gap in sample:
-            gaps[k, b] = min(gaps[k, b], gap)
-            if a == 0 or b == 0:
-                attacker[k] = min(attacker[k], gap)
-            else:
-                victim[k] = min(victim[k], gap)
-            rows.setdefault(f"{ids[a]}-{ids[b]}", []).append((k, gap))
+    rows: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    flat = [pair for sample in pairs for pair in sample]
+    if flat:
+        k = np.repeat(np.arange(n_samples), [len(sample) for sample in pairs])
+        a = np.fromiter((pair[0] for pair in flat), dtype=np.intp, count=len(flat))
+        b = np.fromiter((pair[1] for pair in flat), dtype=np.intp, count=len(flat))
+        gap = np.fromiter((pair[2] for pair in flat), dtype=float, count=len(flat))
+        np.fmin.at(gaps, (k, b), gap)
+        with_attacker = (a == 0) | (b == 0)
+        np.fmin.at(attacker, k[with_attacker], gap[with_attacker])
+        np.fmin.at(victim, k[~with_attacker], gap[~with_attacker])
+        code = a * len(ids) + b
+        codes, first = np.unique(code, return_index=True)
+        for c in codes[np.argsort(first)]:  # each pair in the order it first followed
+            mine = code == c
+            rows[f"{ids[c // len(ids)]}-{ids[c % len(ids)]}"] = (k[mine], gap[mine])
     for i, vid in enumerate(ids[:-1] if traffic else ids):
         signals[f"gap_{vid}"] = gaps[:, i]
         if lateral_m is not None:

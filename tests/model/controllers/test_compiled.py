@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -189,8 +190,7 @@ class _OwnCACC(PathCACC):
 
 @pytest.mark.parametrize("change", [
     {"controller": (ControllerConfig("cacc"), ControllerConfig("sumo:ACC"))},
-    {"maneuver": "cutin"},
-    {"controller": ControllerConfig("switching"), "maneuver": "cutout"},
+    {"maneuver": "cutin"},  # a lane change with a channel: the Python's
 ])
 def test_the_python_plays_what_the_compiled_followers_do_not(change):
     config = EpisodeConfig(followers=2, **{"controller": ControllerConfig("cacc"), **change})
@@ -203,6 +203,34 @@ def test_the_python_plays_what_the_compiled_followers_do_not(change):
         assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"))
     assert Platoon(config, np.full(config.steps, np.nan), 40.0, lights=True)._compiled is None
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"), maneuver="cutout")  # no channel: in C
+    assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
+
+
+@pytest.mark.parametrize("law", ("switching", "timegap", "idm", "as-run"))
+def test_followers_out_of_the_column_follow_the_nearest_car_ahead_in_c_as_in_the_python(law, python_only):
+    """A lane change or traffic: each follower follows the nearest car the step's pairs put ahead of it (the first of
+    equal gaps), a traffic car (an index past the platoon's) included, or nobody (a free road at its own speed)."""
+    rng = np.random.default_rng(90 + LAWS.index(law))
+    for _ in range(30):
+        config = dataclasses.replace(_config(rng, law, imperfect=True), maneuver=str(rng.choice(["cutin", "cutout", "swerve"])))
+        attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
+        fast = Platoon(config, attack, 40.0)
+        assert fast._compiled is not None
+        python_only()
+        python = Platoon(config, attack, 40.0)
+        compiled.ENABLED = True
+        assert python._compiled is None
+        n = len(config.vehicle_ids)  # the platoon and the maneuver's other car; then traffic cars, as sensed
+        for k in range(150):
+            m = n + int(rng.integers(0, 4))
+            x = list(np.sort(rng.uniform(0.0, 300.0, m))[::-1])
+            v = [float(rng.uniform(0.0, 40.0)) for _ in range(m)]
+            pairs = [(int(rng.integers(0, m)), int(rng.integers(0, m)), float(rng.choice([4.0, rng.uniform(-1.0, 80.0)])))
+                     for _ in range(int(rng.integers(0, 2 * n)))]
+            assert fast.advance(k, x[:n], v, pairs) == python.advance(k, x[:n], v, pairs)
+        assert fast.commands == python.commands
+        assert fast.modes == python.modes
 
 
 def test_the_python_plays_a_user_subclass():

@@ -45,3 +45,55 @@ static int read_tuple(PyObject *tuple, double *out, Py_ssize_t n, const char *wh
     }
     return 0;
 }
+
+/* A step's pairs (leader, follower, gap): each follower's gap (self->gap). In the column pair i - 1 is follower i's;
+ * with ``ahead`` the nearest pair behind a car is its (the first of equal gaps, as Platoon.advance's ahead), its
+ * speed ahead the leader's in ``speeds`` (a traffic car's too), nobody ahead a free road at its own speed. */
+static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
+    int n = self->cars;
+    PyObject *pairs = PySequence_Fast(pairs_, "pairs: a sequence of (leader, follower, gap)");
+    if (pairs == NULL)
+        return -1;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(pairs);
+    int status = !self->ahead && count < n - 1 ? -1 : 0;
+    if (status < 0)
+        PyErr_SetString(PyExc_TypeError, "pairs: one for every follower");
+    for (int i = 1; i < n && self->ahead; i++)
+        self->gap[i] = FREE_ROAD_GAP_M, self->lead[i] = -1.0; /* the leader's index, until its speed is read */
+    for (Py_ssize_t j = 0; j < (self->ahead ? count : n - 1) && status == 0; j++) {
+        PyObject *pair = PySequence_Fast(PySequence_Fast_GET_ITEM(pairs, j), "pairs: (leader, follower, gap)");
+        if (pair == NULL || PySequence_Fast_GET_SIZE(pair) != 3) {
+            if (pair != NULL)
+                PyErr_SetString(PyExc_TypeError, "pairs: (leader, follower, gap)");
+            status = -1;
+        } else if (!self->ahead) {
+            status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &self->gap[j + 1], "a pair's gap");
+        } else {
+            long a = PyLong_AsLong(PySequence_Fast_GET_ITEM(pair, 0)), b = PyLong_AsLong(PySequence_Fast_GET_ITEM(pair, 1));
+            double gap;
+            if ((a == -1 || b == -1) && PyErr_Occurred())
+                status = -1;
+            else if (b >= 1 && b < n && (status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &gap, "a pair's gap")) == 0
+                     && (self->lead[b] < 0.0 || gap < self->gap[b]))
+                self->gap[b] = gap, self->lead[b] = (double)a;
+        }
+        Py_XDECREF(pair);
+    }
+    Py_DECREF(pairs);
+    if (status < 0 || !self->ahead)
+        return status;
+    PyObject *speeds = PySequence_Fast(speeds_, "speeds");
+    if (speeds == NULL)
+        return -1;
+    for (int i = 1; i < n && status == 0; i++) {
+        Py_ssize_t a = self->lead[i] < 0.0 ? i : (Py_ssize_t)self->lead[i];
+        if (a < 0 || a >= PySequence_Fast_GET_SIZE(speeds)) {
+            PyErr_Format(PyExc_IndexError, "a pair's leader %zd: no such car", a);
+            status = -1;
+        } else {
+            status = as_double(PySequence_Fast_GET_ITEM(speeds, a), &self->lead[i], "a speed");
+        }
+    }
+    Py_DECREF(speeds);
+    return status;
+}

@@ -80,6 +80,8 @@ typedef struct {
     double *last, *x, *v, *acc, *gap, *length; /* each car's speed a step ago; this step's position, speed, acceleration,
                                                 gap to the car ahead; length */
     double *out;    /* a step's commands, new speeds and modes (3 n) */
+    int ahead;      /* whether each follower follows the nearest car its pairs put ahead (else the car before it) */
+    double *lead;   /* with ahead: each follower's speed ahead (its own where nobody is ahead) */
     int *sources;   /* receiver i's sources: sources[i * cars + j], j < n_sources[i] */
     int *n_sources;
     PyObject **random; /* each link's generator's random() (with loss), in the order of `sources` */
