@@ -88,6 +88,8 @@ LEDGER = (
     Added("search.auto.learn_points", "0.20", 128, "the GP's kernel learned from 128 scores"),
     Added("search.bo.edges", "0.22", 0.0),  # (its default: none of the candidates held at the box's bounds)
     Added("search.auto.edges", "0.22", 0.0),
+    Added("search.bo.novelty", "0.22", 0.0),  # (its default: no proposal kept apart from the attacks found)
+    Added("search.auto.novelty", "0.22", 0.0),
 )
 
 

@@ -35,7 +35,7 @@ def test_a_key_at_its_earlier_value_is_left_out_and_given_back_and_a_bool_is_nev
     assert ledger.stored("scenario", {"route": [], "lane": None, "rebuild": True, "signals": "obey"}) == {"signals": "obey"}
     assert ledger.stored("search.auto", {"per_signal": 0, "stall": False}) == {"stall": False}  # False is no option's 0
     assert [e.key for e in ledger.added_after("0.19")] == ["traffic.edging_sensed", "v2v.match_radar", "search.auto.learn_points",
-                                                         "search.bo.edges", "search.auto.edges"]
+                                                         "search.bo.edges", "search.auto.edges", "search.bo.novelty", "search.auto.novelty"]
 
 
 def test_every_default_campaign_of_today_holds_no_key_at_its_earlier_value():
@@ -57,10 +57,11 @@ def test_every_default_campaign_of_today_holds_no_key_at_its_earlier_value():
 def test_as_ran_gives_each_releases_values_newest_first_with_the_defaults_it_had_otherwise():
     assert ledger.as_ran("search.ce") == ({"noise_fraction": 0.0},)
     sets = ledger.as_ran("search.auto")
-    assert sets[0] == {"edges": 0.0} and sets[1] == {"learn_points": 128, "edges": 0.0}  # 0.21's, 0.20's
-    assert sets[2] == {"per_signal": 0, "learn_points": 128, "edges": 0.0}
+    new = {"edges": 0.0, "novelty": 0.0}  # the options 0.22 added
+    assert sets[0] == new and sets[1] == {"learn_points": 128, **new}  # 0.21's, 0.20's
+    assert sets[2] == {"per_signal": 0, "learn_points": 128, **new}
     assert sets[-1] == {"version": 1, "stall": 0, "suffix": 0.0, "patience": 0, "per_signal": 0, "learn_points": 256,
-                        "inducing": 256, "edges": 0.0}  # 0.7's, which ran 256 of each by default
+                        "inducing": 256, **new}  # 0.7's, which ran 256 of each by default
     assert len(sets) == len({json.dumps(s, sort_keys=True) for s in sets})
     assert ledger.as_ran("scenario")[-1]["signals"] == "ignore" and ledger.as_ran("nothing") == ()
 

@@ -20,7 +20,7 @@ that above 1 the peer is ahead in every column).
 
 Usage: python tools/bench_peers.py [--samples 100] [--seeds 8] [--problems default steady-30-10 cacc-lie cutin
                                     swerve-bremen insider-lie sumo-acc-steady]
-                                   [--d4sumo auto random] [--psy-taliro uniform annealing]
+                                   [--d4sumo auto random auto:novelty=0.05] [--psy-taliro uniform annealing]
                                    [--verifai bo ce halton random] [--verifai-python PATH]
 """
 
@@ -43,7 +43,7 @@ from d4sumo.search.campaign import SampleResult
 from d4sumo.search.evaluator import Evaluator
 from d4sumo.search.optimizers import DEFAULT_OPTIMIZER
 from d4sumo.search.runner import run_campaign
-from toolargs import Parser, run_main
+from toolargs import Parser, optimizer_of, run_main
 
 HERE = Path(__file__).resolve().parent
 def _bremen() -> str:
@@ -97,7 +97,9 @@ class Episodes:
 
 
 def d4sumo_run(problem: dict, optimizer: str, samples: int, seed: int) -> list[SampleResult]:
-    campaign = campaign_of({**problem, "search": {"optimizer": optimizer, "samples": samples, "seed": seed}})
+    """A d4sumo campaign of the problem: ``optimizer`` a name, or ``name:key=value,...`` with its options."""
+    name, options = optimizer_of(optimizer)
+    campaign = campaign_of({**problem, "search": {"optimizer": name, "samples": samples, "seed": seed, name: options}})
     return sorted(run_campaign(campaign).samples, key=lambda r: r.index)
 
 

@@ -747,3 +747,43 @@ def test_edges_holds_candidates_at_the_bounds_and_none_leaves_the_proposals_as_t
     assert at_bounds(held) > 2 * max(at_bounds(plain), 1)
     with pytest.raises(ConfigError, match=f"search.{name}.edges"):
         make_optimizer(name, lower, upper, budget=5, rng=np.random.default_rng(0), options={"edges": 1.5})
+
+
+@pytest.mark.parametrize("name", ["bo", "auto"])
+def test_novelty_keeps_each_proposal_apart_from_the_attacks_found_and_none_leaves_the_proposals_as_they_were(name):
+    """``novelty`` = r: once an attack succeeds (a positive score), every proposal lies farther than r of the box from
+    every success and every point pending, in some parameter, so the successes are distinct attacks
+    (`results.analysis.distinct_count`); at 0, the default, no draw changes."""
+    from d4sumo.results.analysis import distinct_count
+
+    lower, upper = np.zeros(4), np.ones(4)
+
+    def run(options):
+        opt = make_optimizer(name, lower, upper, budget=80, rng=np.random.default_rng(5), options=options)
+        asked, scores, told = [], [], []  # told: the scores told when each point was asked
+        while opt.asked < 80:
+            xs = []
+            for _ in range(min(opt.ready(), 80 - opt.asked)):
+                told.append(len(scores))
+                xs.append(opt.ask())
+            for x in xs:
+                scores.append(0.12 - float(np.max(np.abs(x - 0.7))))  # a success within 0.12 of (0.7, .., 0.7)
+                opt.tell(x, scores[-1])
+                asked.append(x)
+        return np.array(asked), np.array(scores), told
+
+    plain, default = run({})[0], run({"novelty": 0.0})[0]
+    assert np.array_equal(plain, default)
+    (without, s0, _), (novel, s1, told) = run({"novelty": 0.0}), run({"novelty": 0.05})
+    checked = 0
+    for k in range(len(novel)):
+        found = novel[:told[k]][s1[:told[k]] > 0.0]
+        if len(found):  # its batch's earlier points, pending, too
+            apart_from = np.vstack([found, novel[told[k]:k]])
+            assert np.all(np.max(np.abs(apart_from - novel[k]), axis=1) > 0.05), f"proposal {k} repeats an attack"
+            checked += 1
+    assert checked >= 10
+    distinct = [distinct_count(x[s > 0.0], lower, upper) for x, s in ((without, s0), (novel, s1))]
+    assert distinct[1] == int(np.sum(s1 > 0.0)) > distinct[0], distinct  # each success an attack of its own
+    with pytest.raises(ConfigError, match=f"search.{name}.novelty"):
+        make_optimizer(name, lower, upper, budget=5, rng=np.random.default_rng(0), options={"novelty": 0.05, "gp_version": 1})

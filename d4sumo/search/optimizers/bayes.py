@@ -19,6 +19,7 @@ import math
 import warnings
 
 import numpy as np
+from scipy.spatial.distance import cdist
 from scipy.stats import qmc
 
 from ...errors import ConfigError
@@ -114,7 +115,8 @@ class BayesianOptimization(GaussianProcessSearch):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000), "edges": (0.0, 0.0, 1.0)}
+               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000), "edges": (0.0, 0.0, 1.0),
+               "novelty": (0.0, 0.0, 0.5)}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -125,6 +127,7 @@ class BayesianOptimization(GaussianProcessSearch):
             self._noise = 1.0  # the learned noise variance, in units of the normalised scores
 
     def _candidates(self, best: np.ndarray) -> np.ndarray:
+        """Perturbations of ``best`` (one point, or one centre per perturbation) and points of the whole box."""
         n_local = int(self.candidates * self.local_fraction)
         local = np.clip(best + self.rng.normal(0.0, self.local_scale, size=(n_local, self.dimension)), 0.0, 1.0)
         glob = self.rng.random((self.candidates - n_local, self.dimension))
@@ -134,8 +137,42 @@ class BayesianOptimization(GaussianProcessSearch):
             glob[:n_edges] = np.where(held, self.rng.integers(0, 2, size=(n_edges, self.dimension)), glob[:n_edges])
         return np.vstack([local, glob])
 
+    @classmethod
+    def resolve_together(cls, options: dict) -> dict:
+        if options["novelty"] and options["gp_version"] == 1:
+            raise ConfigError(f"search.{cls.name}.novelty", options["novelty"],
+                              "0 with gp_version = 1 (scikit-optimize's GP, as d4sumo 0.3 ran it, knew no novelty)")
+        return options
+
     def _propose(self) -> np.ndarray:
-        return self._propose_skopt() if self.options["gp_version"] == 1 else super()._propose()
+        if self.options["gp_version"] == 1:
+            return self._propose_skopt()
+        if self.options["novelty"] and max(self.y) > 0.0:
+            return self._propose_novel()
+        return super()._propose()
+
+    def _propose_novel(self) -> np.ndarray:
+        """Once an attack succeeds, with ``novelty`` = r: another attack, distinct from every one found. Each proposal
+        lies farther than r (of each parameter's range) from every success and every point pending, in some
+        parameter, as `results.analysis.distinct_count` counts attacks distinct; it is the candidate of most
+        expected improvement over a score of 0 (a success, not a better one: the best needs no improving), among
+        perturbations of the successes (``local_fraction``, each of one drawn at random) and points of the whole box."""
+        radius = self.options["novelty"]
+        with one_blas_thread():
+            Z, scores = self._data()
+            gp = self._model(Z, scores)
+            if self._pending:  # a batch (constant liar), as BO's
+                gp = copy.copy(gp)
+                for z in self._pending:
+                    gp.add(z, scores.min())
+            found = Z[scores > 0.0]
+            taken = np.vstack([found, *self._pending]) if self._pending else found
+            cand = self._candidates(found[self.rng.integers(len(found), size=int(self.candidates * self.local_fraction))])
+            # distinct: farther than the radius from every attack taken, in some parameter (Chebyshev)
+            apart = np.all(cdist(cand, taken, "chebyshev") > radius, axis=1)
+            if apart.any():
+                cand = cand[apart]
+            return cand[int(np.argmax(gp.expected_improvement(cand, 0.0, self.xi)))]
 
     # -- scikit-optimize's GP (gp_version 1): the proposals of campaigns stored by d4sumo 0.3 and before ---
 

@@ -91,8 +91,9 @@ class Portfolio(BayesianOptimization):
                # the scores its GP's kernel is learned from: bo's since 0.8; 0.7's auto learned from 256
                "learn_points": (LEARN_POINTS, 16, 100_000)}
 
-    @staticmethod
-    def resolve_together(options: dict) -> dict:
+    @classmethod
+    def resolve_together(cls, options: dict) -> dict:
+        options = super().resolve_together(options)
         if not options["share_min"] <= options["random_share"] <= options["share_max"]:
             raise ConfigError("search.auto.random_share", options["random_share"],
                               f"a share within [share_min, share_max] = [{options['share_min']}, {options['share_max']}]")
