@@ -74,12 +74,11 @@ class _Traffic(_Column):
 
     def __init__(self, world, maneuver, names: tuple[str, ...], crash_m: float, recorded: list[list]):
         super().__init__(world, maneuver, names, crash_m, recorded)
-        self.world_sense, self.recorded, self.n = world.sense, recorded, len(names)
+        self.world_sense, self.recorded = world.sense, recorded
 
     def sense(self, e: int, x: list, v: list) -> tuple[list, tuple | None]:
         pairs, ids_, x_, v_ = self.world_sense(e, x, v)
-        n = self.n
-        self.recorded[e].append([(min(a, n), min(b, n), gap) for a, b, gap in pairs])
+        self.recorded[e].append(pairs)  # a traffic car's index past the platoon's, made one when the trace is assembled
         return pairs, (ids_, x_, v_)
 
     def speeds(self, alone: "_Alone") -> list:

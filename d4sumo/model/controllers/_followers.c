@@ -95,6 +95,8 @@ static int followers_step(Followers *self, long k, double *commands, double *new
             if (take_double(PyObject_CallFunction(self->checked, "dil", c, i, k), &c) < 0)
                 return -1;
         }
+        if (self->capped && self->has_cap[i] && self->cap[i] < c) /* min(c, the cap): what its signal allows */
+            c = self->cap[i];
         new_speeds[out] = apply(f, c, self->v[i]);
         commands[out++] = c;
     }
@@ -104,12 +106,13 @@ static int followers_step(Followers *self, long k, double *commands, double *new
     return out;
 }
 
-/* advance(k, positions, speeds, pairs, commands, new_speeds, modes): step k's beacons, then each follower's
+/* advance(k, positions, speeds, pairs, commands, new_speeds, modes[, caps]): step k's beacons, then each follower's
  * command and its speed at the step's end, appended to commands and new_speeds (Platoon.advance's lists),
- * and the modes of the followers that run the mitigation, appended to modes as one list. */
+ * and the modes of the followers that run the mitigation, appended to modes as one list; caps: each follower's
+ * highest command (its signal's, `signals.SignalDriver.limit`), or None. */
 static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 7) {
-        PyErr_SetString(PyExc_TypeError, "advance(k, positions, speeds, pairs, commands, new_speeds, modes)");
+    if (nargs != 7 && nargs != 8) {
+        PyErr_SetString(PyExc_TypeError, "advance(k, positions, speeds, pairs, commands, new_speeds, modes[, caps])");
         return NULL;
     }
     if (self->last == NULL) {
@@ -128,6 +131,8 @@ static PyObject *Followers_advance(Followers *self, PyObject *const *args, Py_ss
         return NULL;
     }
     if (read_pairs(self, args[3], args[2]) < 0) /* each follower's gap and speed ahead, read before any Python runs */
+        return NULL;
+    if (read_caps(self, nargs == 8 ? args[7] : Py_None) < 0)
         return NULL;
     double *out = self->out; /* commands, new speeds, modes */
     int count = followers_step(self, k, out, out + n, out + 2 * n);
@@ -242,8 +247,8 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     self->cars = n;
     self->direct = self->delay == 0 && self->loss == 0.0;
-    self->last = PyMem_Calloc(10 * (size_t)n, sizeof(double));
-    self->sources = PyMem_Calloc(2 * (size_t)n * n + 3 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now */
+    self->last = PyMem_Calloc(11 * (size_t)n, sizeof(double));
+    self->sources = PyMem_Calloc(2 * (size_t)n * n + 4 * (size_t)n, sizeof(int)); /* sources, n_sources, is_sender, heard, sent_now, has_cap */
     self->inbox = PyMem_Calloc((size_t)n * (n + 1), sizeof(Beacon));
     self->f = PyMem_Calloc((size_t)n, sizeof(Follower));
     self->flights_capacity = 4 * (Py_ssize_t)n * n;
@@ -257,9 +262,9 @@ static int Followers_init(Followers *self, PyObject *args, PyObject *kwds) {
     }
     double *d = self->last;
     self->x = d + n, self->v = d + 2 * n, self->acc = d + 3 * n, self->length = d + 4 * n, self->gap = d + 5 * n;
-    self->out = d + 6 * n, self->lead = d + 9 * n;
+    self->out = d + 6 * n, self->lead = d + 9 * n, self->cap = d + 10 * n;
     self->n_sources = self->sources + n * n, self->is_sender = self->n_sources + n, self->heard = self->is_sender + n;
-    self->sent_now = self->heard + n * n;
+    self->sent_now = self->heard + n * n, self->has_cap = self->sent_now + n;
     self->step_beacons = self->inbox + n * n;
     if (read_floats(lengths, self->length, n, "lengths") < 0)
         return -1;

@@ -270,14 +270,12 @@ class Platoon:
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
         self._attacking = False  # whether the attacker attacked at the last step (a new cruise window starts its PID afresh)
         #: an attacker that only attacks and cruises (as printed, or as the authors' code has it), which the C may step
-        self._plain = (self._attacker_driver is None and self._motion is None
+        self._plain = (self._attacker_driver is None and self._motion is None and not lights
                        and not self._others  # (its attack is plain floats: attack_u above)
                        # a numpy float32 top speed (from the Python API) computes in float32 in the Python
                        and type(self.attacker_actuator.max_speed_mps) in (float, int))
         self._compiled, self._attacker_in_c = None, False
         self._in_c: tuple | None = None  # from which step the column's loop in C records its commands (`played_in_c`)
-        if followers is None and not lights:
-            self.compile()
         #: on a route through traffic lights: what each car sees of the next one at this step (`signals.Stop` or
         #: None, set by the step loop), and the drivers that obey them (`signals.SignalDriver`, by car)
         self.stops: list | None = None  # (None: nobody sees a light that asks anything of it)
@@ -290,6 +288,11 @@ class Platoon:
             obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
             self._drivers = {i: SignalDriver(config.vehicle_of(i), dt) for i in obeying}
             self._python = [(i, self._obeying(i, command), apply, inbox) for i, command, apply, inbox in self._python]
+        #: the followers' drivers, by follower (None: no driver), where any obeys: in C their signals cap the commands
+        self._follower_drivers = ([self._drivers.get(i) for i in range(1, config.followers + 1)]
+                                  if any(0 < i <= config.followers for i in self._drivers) else None)
+        if followers is None:
+            self.compile()
         self.commands: list[list[float]] = []
         self.modes: list[list[float]] = []
         self.pairs: list[list[Pair]] = []  # per sample, lane-changing maneuvers only: who followed whom
@@ -330,6 +333,11 @@ class Platoon:
             return new_speeds
         if self._one_ahead or not self._python and self._attacker_driver is None:
             ahead = None  # the column (car i follows car i - 1, at pair i - 1's gap), or nobody Python commands asks
+        elif self._compiled is not None:  # the followers find theirs in C: the attacker's alone, the nearer of two
+            ahead = {}
+            for a, b, gap in pairs:
+                if b == 0 and (not ahead or gap < ahead[0][1]):
+                    ahead[0] = (a, gap)
         else:
             ahead = {}
             for a, b, gap in pairs:  # a car covering two lanes may have two: the nearer counts
@@ -393,7 +401,13 @@ class Platoon:
         """Each follower Python commands: its command and its speed at the step's end, appended (in C where they may be)."""
         channel = self.channel
         if self._compiled is not None:  # its followers' modes too
-            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
+            if self._follower_drivers is None:
+                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
+            else:  # the highest command each follower's signal allows, as `_obeying` caps the Python's
+                stops = self.stops
+                caps = [None if d is None else d.limit(stops[i] if stops else None, speeds[i])
+                        for i, d in enumerate(self._follower_drivers, start=1)]
+                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, caps)
         elif channel is None:
             for i, command, apply, _ in self._python:
                 # nobody ahead in its lane: a free road

@@ -116,7 +116,8 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
     """From the recorded pairs: each car's gap to the car ahead in its lane(s), the nearest gap of a
     pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions (when
     given); each pair's gaps at the samples where it followed, as (samples, gaps). With ``traffic`` the last of
-    ``ids`` is every traffic car (`traffic.TRAFFIC_ID`): its gaps are not a signal, its pairs' are (``traffic-v3``).
+    ``ids`` is every traffic car (`traffic.TRAFFIC_ID`; the pairs index each as sensed, past the platoon's): its gaps
+    are not a signal, its pairs' are (``traffic-v3``).
     Over arrays: fmin keeps the smaller gap as min() does (a NaN never replaces one)."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
@@ -128,6 +129,9 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
         k = np.repeat(np.arange(n_samples), [len(sample) for sample in pairs])
         a = np.fromiter((pair[0] for pair in flat), dtype=np.intp, count=len(flat))
         b = np.fromiter((pair[1] for pair in flat), dtype=np.intp, count=len(flat))
+        if traffic:  # as sensed, each traffic car its own index past the platoon's: here one, TRAFFIC_ID's
+            np.minimum(a, len(ids) - 1, out=a)
+            np.minimum(b, len(ids) - 1, out=b)
         gap = np.fromiter((pair[2] for pair in flat), dtype=float, count=len(flat))
         np.fmin.at(gaps, (k, b), gap)
         with_attacker = (a == 0) | (b == 0)

@@ -202,9 +202,41 @@ def test_the_python_plays_what_the_compiled_followers_do_not(change):
         config = EpisodeConfig(followers=2, controller=plain)
         assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"))
-    assert Platoon(config, np.full(config.steps, np.nan), 40.0, lights=True)._compiled is None
+    lit = Platoon(config, np.full(config.steps, np.nan), 40.0, lights=True)
+    assert lit._compiled is not None and not lit._attacker_in_c  # the attacker obeys its lights in the Python
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"), maneuver="cutout")  # no channel: in C
     assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
+
+
+@pytest.mark.parametrize("signals", ("obey", "attacker_runs_red"))
+def test_followers_at_traffic_lights_are_capped_in_c_as_their_drivers_cap_the_python(signals, python_only):
+    """On a route through traffic lights each follower's command is the lesser of its controller's and what its signal
+    allows (`signals.SignalDriver`): in C the Python's drivers give each step's caps, and the C takes the lesser."""
+    from d4sumo.model.world.signals import Stop
+
+    rng = np.random.default_rng(7 if signals == "obey" else 8)
+    for _ in range(20):
+        config = dataclasses.replace(_config(rng, str(rng.choice(["switching", "idm", "as-run"]))), signals=signals)
+        attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
+        fast = Platoon(config, attack, 40.0, lights=True)
+        assert fast._compiled is not None
+        python_only()
+        python = Platoon(config, attack, 40.0, lights=True)
+        compiled.ENABLED = True
+        assert python._compiled is None
+        n = config.followers + 1
+        pairs_at = maneuver_of(config).pairs
+        x = list(np.cumsum(rng.uniform(5.0, 40.0, n))[::-1] + 100.0)
+        for k in range(150):
+            x = [xi + float(rng.uniform(0.0, 2.0)) for xi in x]
+            v = [float(rng.uniform(0.0, 30.0)) for _ in range(n)]
+            stops = None if rng.random() < 0.2 else [
+                None if rng.random() < 0.3 else Stop(int(rng.integers(0, 3)), float(rng.uniform(-2.0, 80.0)), str(rng.choice(list("GgyYrRuO"))))
+                for _ in range(n)]
+            fast.stops = python.stops = stops
+            assert fast.advance(k, x, v, pairs_at(x)) == python.advance(k, x, v, pairs_at(x))
+        assert fast.commands == python.commands and fast.modes == python.modes and fast.lights == python.lights
+        assert any(c < -0.5 for row in fast.commands for c in row[1:])  # the caps brake now and then
 
 
 @pytest.mark.parametrize("law", ("switching", "timegap", "idm", "as-run"))

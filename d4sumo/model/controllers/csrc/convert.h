@@ -97,3 +97,24 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
     Py_DECREF(speeds);
     return status;
 }
+
+/* A step's caps: each follower's highest command (what its signal allows), or None (no cap); caps None: none. */
+static int read_caps(Followers *self, PyObject *caps_) {
+    self->capped = caps_ != Py_None;
+    if (!self->capped)
+        return 0;
+    PyObject *caps = PySequence_Fast(caps_, "caps: a cap or None for every follower");
+    if (caps == NULL)
+        return -1;
+    int status = PySequence_Fast_GET_SIZE(caps) == self->cars - 1 ? 0 : -1;
+    if (status < 0)
+        PyErr_SetString(PyExc_TypeError, "caps: a cap or None for every follower");
+    for (int i = 1; i < self->cars && status == 0; i++) {
+        PyObject *cap = PySequence_Fast_GET_ITEM(caps, i - 1);
+        self->has_cap[i] = cap != Py_None;
+        if (self->has_cap[i])
+            status = as_double(cap, &self->cap[i], "a cap");
+    }
+    Py_DECREF(caps);
+    return status;
+}

@@ -82,6 +82,9 @@ typedef struct {
     double *out;    /* a step's commands, new speeds and modes (3 n) */
     int ahead;      /* whether each follower follows the nearest car its pairs put ahead (else the car before it) */
     double *lead;   /* with ahead: each follower's speed ahead (its own where nobody is ahead) */
+    int capped;     /* whether this step's commands are capped (a signal's driver: `read_caps`) */
+    double *cap;    /* each follower's highest command this step, where has_cap */
+    int *has_cap;
     int *sources;   /* receiver i's sources: sources[i * cars + j], j < n_sources[i] */
     int *n_sources;
     PyObject **random; /* each link's generator's random() (with loss), in the order of `sources` */
