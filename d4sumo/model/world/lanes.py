@@ -21,10 +21,16 @@ Pair = tuple[int, int, float]  # (leader index, follower index, bumper gap [m])
 def occupied_lanes(y_m: float, lane_width_m: float) -> tuple[int, ...]:
     """The lanes a car whose centre is ``y_m`` from the road's right edge covers."""
     half = CAR_WIDTH_M / 2.0
-    low = max(0, math.floor((y_m - half) / lane_width_m))
-    high = math.floor((y_m + half) / lane_width_m)
+    left, right = y_m + half, y_m - half  # the body's edges
+    low = max(0, math.floor(right / lane_width_m))
+    high = math.floor(left / lane_width_m)
+    if low == high:  # within one lane (nearly every car, nearly always): the overlap is the body's width or the lane's
+        top, bottom = (low + 1) * lane_width_m, low * lane_width_m
+        return (low,) if (top if top < left else left) - (bottom if bottom > right else right) > LANE_TOLERANCE_M else ()
+    # min(a, b) is b < a and b or a, max(a, b) b > a and b or a: the same floats, without a call each
     return tuple(j for j in range(low, high + 1)
-                 if min(y_m + half, (j + 1) * lane_width_m) - max(y_m - half, j * lane_width_m) > LANE_TOLERANCE_M)
+                 if (((j + 1) * lane_width_m if (j + 1) * lane_width_m < left else left)
+                     - (j * lane_width_m if j * lane_width_m > right else right)) > LANE_TOLERANCE_M)
 
 
 def lane_pairs(positions: Sequence[float], lanes: Sequence[tuple[int, ...]], lengths_m: Sequence[float],
