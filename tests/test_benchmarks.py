@@ -273,11 +273,11 @@ def test_the_profile_sees_sumos_stepping_and_calls_and_loses_no_time(monkeypatch
     import cProfile
     import pstats
 
-    from d4sumo.engine import calls, loop, sumo
+    from d4sumo.engine import calls, sumo
 
     monkeypatch.setattr(calls, "api_call", calls.api_call)  # restored after: the tool rebinds them
     monkeypatch.setattr(sumo, "simulation_step", sumo.simulation_step)
-    monkeypatch.setattr(loop, "NATIVE_CALLS", loop.NATIVE_CALLS)
+    monkeypatch.setattr(calls, "NATIVE", calls.NATIVE)
     import profile_episode
     profile_episode.seen_by_the_profiler()
     parts, total = profile_episode.profiled(profile_episode.episodes_job(1))

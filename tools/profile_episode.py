@@ -107,7 +107,7 @@ def seen_by_the_profiler() -> None:
     """The step loop's bound SUMO calls (`engine.calls`), each through a Python function."""
     import functools
 
-    from d4sumo.engine import calls, loop, sumo
+    from d4sumo.engine import calls, sumo
 
     def api_call(api, domain, name, _raw=calls.api_call):
         return functools.partial(libsumo_call, _raw(api, domain, name))
@@ -118,7 +118,7 @@ def seen_by_the_profiler() -> None:
 
     calls.api_call = api_call
     sumo.simulation_step = simulation_step
-    loop.NATIVE_CALLS = False  # the loop in C calls libsumo's Python (through these frames), not its C++ functions
+    calls.NATIVE = False  # the loop in C and the sensing among traffic call libsumo's Python (through these frames), not its C++ functions
 
 
 def profiled(job) -> tuple[dict[str, float], float]:

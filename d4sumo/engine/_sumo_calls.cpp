@@ -2,7 +2,8 @@
  * (Simulation::step, Vehicle::getLanePosition, getDistance, getSpeed, setSpeed), found in the very library the
  * Python module libsumo runs (so on its one simulation), called without Python's wrapping of each call: a car's
  * position or speed costs about 15 ns where the Python call costs about 150 ns. The same functions the Python
- * wrappers call, so the same doubles.
+ * wrappers call, so the same doubles. Also who is ahead of a platoon among traffic (`traffic_pairs`: neighbours'
+ * _TrafficSense, its every step, with Vehicle::getLeader, getFollower, getSpeed, getLength and getMinGap).
  *
  * bind(path of libsumo's _libsumo.so, libsumo.TraCIException, libsumo.FatalTraCIError) returns a capsule of `WorldCalls` (csrc/world_calls.h),
  * or None where this libsumo does not expose them as this build names them (another compiler's C++ library, another
@@ -22,14 +23,19 @@
 #include <exception>
 #include <string>
 #include <typeinfo>
+#include <utility>
+#include <vector>
 
 namespace {
 
 typedef double (*Getter)(const std::string &);
 typedef void (*Setter)(const std::string &, double);
 typedef void (*Stepper)(double);
+typedef std::pair<std::string, double> (*Search)(const std::string &, double);
 
 Getter getters[3]; /* WORLD_LANE_POSITION, WORLD_DISTANCE, WORLD_SPEED */
+Getter length_, min_gap_;  /* Vehicle::getLength, getMinGap */
+Search leader_, follower_; /* Vehicle::getLeader, getFollower */
 Setter set_speed_;
 Stepper step_;
 PyObject *traci_exception; /* libsumo.TraCIException: SUMO's answer to a call it refuses (a car it does not know) */
@@ -43,6 +49,10 @@ const char *const GETTER_NAMES[3] = {
 };
 const char *const SET_SPEED_NAME = "_ZN7libsumo7Vehicle8setSpeedERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
 const char *const STEP_NAME = "_ZN7libsumo10Simulation4stepEd";
+const char *const LENGTH_NAME = "_ZN7libsumo7Vehicle9getLengthERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
+const char *const MIN_GAP_NAME = "_ZN7libsumo7Vehicle9getMinGapERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
+const char *const LEADER_NAME = "_ZN7libsumo7Vehicle9getLeaderERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
+const char *const FOLLOWER_NAME = "_ZN7libsumo7Vehicle11getFollowerERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
 
 /* the error libsumo's Python wrapper raises for the exception being handled: TraCIException for libsumo's own, else
  * FatalTraCIError; what libsumo's wrappers say of one that is no std::exception */
@@ -103,6 +113,8 @@ static int step(void) {
 
 WorldCalls calls = {make_id, free_id, get, set_speed, step};
 
+#include "traffic_sense.h"
+
 } /* namespace */
 #endif
 
@@ -120,8 +132,10 @@ static PyObject *bind(PyObject *module, PyObject *args) {
         getters[i] = (Getter)dlsym(library, GETTER_NAMES[i]);
     set_speed_ = (Setter)dlsym(library, SET_SPEED_NAME);
     step_ = (Stepper)dlsym(library, STEP_NAME);
+    length_ = (Getter)dlsym(library, LENGTH_NAME), min_gap_ = (Getter)dlsym(library, MIN_GAP_NAME);
+    leader_ = (Search)dlsym(library, LEADER_NAME), follower_ = (Search)dlsym(library, FOLLOWER_NAME);
     dlclose(library); /* it stays loaded: Python holds it */
-    if (!getters[0] || !getters[1] || !getters[2] || !set_speed_ || !step_)
+    if (!getters[0] || !getters[1] || !getters[2] || !set_speed_ || !step_ || !length_ || !min_gap_ || !leader_ || !follower_)
         Py_RETURN_NONE;
     Py_INCREF(exception);
     Py_XSETREF(traci_exception, exception);
@@ -137,6 +151,10 @@ static PyObject *bind(PyObject *module, PyObject *args) {
 static PyMethodDef methods[] = {
     {"bind", bind, METH_VARARGS,
      "bind(path of libsumo's _libsumo.so, libsumo.TraCIException, libsumo.FatalTraCIError): SUMO's calls, or None"},
+#ifdef DIRECT
+    {"traffic_pairs", (PyCFunction)(void (*)(void))traffic_pairs, METH_FASTCALL,
+     "traffic_pairs(ids, lengths, min_gaps, names, x, v): neighbours._TrafficSense's step, once bind gave SUMO's calls"},
+#endif
     {NULL, NULL, 0, NULL},
 };
 

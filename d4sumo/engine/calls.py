@@ -43,6 +43,9 @@ def vehicle_call(api, name: str):
 
 
 _NATIVE: dict = {}  # SUMO's calls in C, bound once a process (None: not to be had)
+#: whether the step loop in C and the sensing among traffic take libsumo's own C++ functions where they can be had (tests
+#: and the profile turn it off: the same episodes, through libsumo's Python)
+NATIVE = True
 
 
 def native_calls(api):
@@ -60,6 +63,16 @@ def native_calls(api):
         else:
             _NATIVE["calls"] = bind(raw.__file__, api.TraCIException, api.FatalTraCIError)
     return _NATIVE["calls"]
+
+
+def native_traffic_pairs(api):
+    """`neighbours._TrafficSense`'s step with libsumo's own C++ functions (`_sumo_calls.traffic_pairs`: the same pairs,
+    ids, positions and speeds), or None where they cannot be had (`native_calls`) or are turned off (`NATIVE`)."""
+    if not NATIVE or native_calls(api) is None:
+        return None
+    from ._sumo_calls import traffic_pairs
+
+    return traffic_pairs
 
 
 def fast_paths() -> str:

@@ -21,6 +21,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..errors import WarmupCollision
+from . import calls as sumo_calls
 from ..model.stepping.batch import PlatoonBatch, collided
 from ..model.config import EpisodeConfig
 from ..model.controllers import compiled
@@ -32,9 +33,6 @@ from ..model.stepping.trace import Episode, rows_array
 #: what they save (measured with tools/bench_batch.py). Episodes the column's loop in C plays (`_Episodes.in_c`)
 #: never take the arrays: at 10, 30 and 60 episodes in one SUMO the loop costs 1.0-1.4 times less than they do
 DETACH_AT = 4
-#: whether the loop in C calls SUMO's C++ functions themselves where the world gives them (tests turn it off to
-#: compare with libsumo's Python calls)
-NATIVE_CALLS = True
 
 
 class _Column:
@@ -185,7 +183,7 @@ class _Episodes:
         (tests/engine/test_loop.py), at a fraction of their cost."""
         steps, n, world = self.steps, len(self.names), self.world
         own_calls = getattr(world, "own_calls", None)  # SUMO's own calls in C (`SumoWorld.own_calls`)
-        calls = own_calls() if NATIVE_CALLS and own_calls is not None else None
+        calls = own_calls() if sumo_calls.NATIVE and own_calls is not None else None
         played = []
         for alone in self.solo:
             platoon = alone.platoon

@@ -9,7 +9,7 @@ from ..errors import SumoError
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import Pair
 from ..model.world.lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
-from .calls import route_junctions, vehicle_call, via_lanes
+from .calls import native_traffic_pairs, route_junctions, vehicle_call, via_lanes
 from .scenarios import Road
 
 
@@ -83,10 +83,14 @@ class _TrafficSense:
         self.get_leader, self.get_follower = vehicle_call(api, "getLeader"), vehicle_call(api, "getFollower")
         self.get_speed, self.get_length = vehicle_call(api, "getSpeed"), vehicle_call(api, "getLength")
         self.get_min_gap = vehicle_call(api, "getMinGap")
+        #: the same step in C++ with libsumo's own functions, where they can be had (`calls.native_traffic_pairs`)
+        self._native = native_traffic_pairs(api)
 
     def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
         """The step's pairs, and the extended ids (each traffic car by its SUMO id), positions (a traffic
         car's front bumper, from its gap) and speeds they index."""
+        if self._native is not None:
+            return self._native(self.ids, self.lengths, self.min_gaps, self.names, x, v)
         ids, n, look = self.ids, len(self.ids), FREE_ROAD_GAP_M
         names, xs, vs = list(self.names), list(x), list(v)
         traffic: dict[str, int] = {}

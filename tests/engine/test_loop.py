@@ -10,7 +10,7 @@ import pytest
 
 from conftest import NATIVE_CALLS_EXPECTED, assert_same_episode, random_plans
 from d4sumo.engine.ballistic import BallisticWorld
-from d4sumo.engine import loop
+from d4sumo.engine import calls as sumo_calls
 from d4sumo.engine.loop import play
 from d4sumo.model.attacks.maneuvers import AttackPlan
 from d4sumo.model.config import ControllerConfig, EpisodeConfig
@@ -43,7 +43,7 @@ def _both(monkeypatch, calls, run):
     in_c = run()
     assert calls, "the loop did not go on in C"
     with monkeypatch.context() as m:
-        m.setattr(loop, "NATIVE_CALLS", False)
+        m.setattr(sumo_calls, "NATIVE", False)
         _assert_same(run(), in_c)
         m.setattr(compiled, "play_column", None)
         python = run()
@@ -131,7 +131,7 @@ def test_an_error_of_sumos_in_the_loop_in_c_is_libsumos_own(monkeypatch):
     said = []
     for native in (True, False):
         removes_another.done = False
-        monkeypatch.setattr(loop, "NATIVE_CALLS", native)
+        monkeypatch.setattr(sumo_calls, "NATIVE", native)
         with pytest.raises(SumoError) as error:
             simulate_batch(config, plans, on_episode=removes_another)
         said.append(str(error.value))
@@ -219,7 +219,7 @@ def test_an_error_of_sumo_that_is_no_traci_refusal_is_libsumos_own_too(monkeypat
     plans = random_plans(config, 4, seed=1)
     said = []
     for native in (True, False):
-        monkeypatch.setattr(loop, "NATIVE_CALLS", native)
+        monkeypatch.setattr(sumo_calls, "NATIVE", native)
         with pytest.raises(Exception) as error:
             simulate_batch(config, plans, on_episode=lambda e, r: libsumo.close())
         said.append((type(error.value), str(error.value)))

@@ -549,3 +549,43 @@ def test_the_warm_up_cache_keeps_its_most_recently_used_and_never_one_in_use(tmp
     assert sorted(f.name for f in tmp_path.iterdir()) == ["6.xml.gz", "7.xml.gz", "8.xml.gz", "9.xml.gz"]
     _prune(tmp_path, 1)  # the two in use stay, whatever the cap
     assert sorted(f.name for f in tmp_path.iterdir()) == ["8.xml.gz", "9.xml.gz"]
+
+
+def test_the_sensing_among_traffic_in_cpp_is_the_pythons_step_by_step_and_episode_by_episode(monkeypatch):
+    """Who is ahead of each car among traffic, with libsumo's own C++ functions (`calls.native_traffic_pairs`): at each
+    step the same pairs, ids, positions and speeds as the Python's, traffic between two followers and behind the rear
+    car included; and the same episodes."""
+    from conftest import NATIVE_CALLS_EXPECTED, assert_same_episode
+    from d4sumo.engine import calls
+
+    if not NATIVE_CALLS_EXPECTED:
+        pytest.skip("no C++ compiler: libsumo's own calls are not built")
+    config = dataclasses.replace(BUSY, setpoint_m=40.0)
+    road = build_road(config.network)
+    compared = traffic_between = 0
+    with open_world(config, road, [config]) as world:
+        api, ids, sense = world.api, world.platoons[0], world.traffic[0]
+        assert sense._native is not None
+        x = [world.get_position(v) for v in ids]
+        api.vehicle.add("traffic.in", "platoon", depart="now", departLane="0", departPos=repr(x[1] - 4.5 - 15.0), departSpeed="30")
+        rng = np.random.default_rng(0)
+        for k in range(300):
+            for vid in ids:
+                api.vehicle.setSpeed(vid, float(rng.uniform(20.0, 34.0)))
+            world.step()
+            x, v = [world.get_position(vid) for vid in ids], [world.get_speed(vid) for vid in ids]
+            native = sense(x, v)
+            with monkeypatch.context() as m:
+                m.setattr(sense, "_native", None)
+                python = sense(x, v)
+            assert native == python and [type(p[2]) for p in native[0]] == [float] * len(native[0])
+            compared += 1
+            traffic_between += any(0 < b < len(ids) and a >= len(ids) for a, b, _ in native[0])
+    assert compared == 300 and traffic_between > 10
+    u = np.full(config.steps, np.nan)
+    u[40:200] = -0.8
+    for c in (config, dataclasses.replace(BUSY, setpoint_m=3.0)):
+        native = simulate(c, u, road=road)
+        monkeypatch.setattr(calls, "NATIVE", False)
+        assert_same_episode(native, simulate(c, u, road=road))
+        monkeypatch.setattr(calls, "NATIVE", True)
