@@ -141,3 +141,22 @@ def test_a_replay_records_each_signal_state_every_step_and_its_time_space_diagra
            and tuple(np.round(color[:3], 3)) == (0.839, 0.153, 0.157)]
     waited_s = fcd["v0"]["time"][stopped]  # on the FCD's clock
     assert any(seg[0][0] <= waited_s <= seg[1][0] for seg in red)  # a red band over the time it waited
+
+
+@pytest.mark.parametrize("signals", ["obey", "attacker_runs_red"])
+def test_at_its_lights_the_cars_stepped_in_c_play_the_pythons_episode(corridor, signals, monkeypatch):
+    """Along the corridor, where a light turns red ahead: followers capped by their signals and the attacker (a careful
+    driver between attacks, as among traffic, obeying or running red) stepped in C play the Python's episode, bit for
+    bit."""
+    from conftest import assert_same_episode
+    from d4sumo.model.controllers import compiled
+
+    config = _config(corridor, signals=signals)  # gneJ11 turns red ahead
+    road = config_road(config)
+    u = np.full(config.steps, np.nan)
+    u[100:140] = -0.5  # an attack between cruises: its cruise starts afresh after it
+    in_c = simulate(config, u, road=road)
+    monkeypatch.setattr(compiled, "ENABLED", False)
+    python = simulate(config, u, road=road)
+    assert_same_episode(in_c, python)
+    assert in_c.trace["light_v0"].max() == 2.0 and in_c.trace["cmd_v1"].min() < 0.0  # red seen, braked for

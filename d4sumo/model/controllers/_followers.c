@@ -31,8 +31,9 @@
 #include "laws.h"
 #include "channel.h"
 
-/* platoon.Platoon.advance's attacker without traffic, lights or a motion: its attack's pedal, or where the attack is NaN
- * its cruise control (control.CruiseControl, afresh at each new cruise window) through vehicle.acceleration_to_command;
+/* platoon.Platoon.advance's attacker without a motion: its attack's pedal, or where the attack is NaN its cruise control
+ * (control.CruiseControl, afresh at each new cruise window; among traffic the lesser of it and the spacing law of a careful
+ * driver, control.CautiousDriver) through vehicle.acceleration_to_command, capped by its signal where it obeys one;
  * with the authors' code's options, their controller on a free road, which holds the attack's pedal of each control
  * period where it attacks (Platoon._attacker_command); its speed at the step's end through its actuator */
 static int attacker_step(Followers *self, long k, double *command_out, double *speed_out) {
@@ -52,10 +53,18 @@ static int attacker_step(Followers *self, long k, double *command_out, double *s
             a->sw.has_prev = 0;
             self->attacking = 0;
         }
-        u = to_command(cruise_acceleration(&a->sw, speed, a->step_s), a->max_accel, a->max_decel);
+        double cruise = cruise_acceleration(&a->sw, speed, a->step_s);
+        if (self->cautious) { /* the lesser of its cruise and the spacing law on the car ahead */
+            double spacing = self->cautious_kp * (self->gap[0] - self->cautious_s0 - self->cautious_h * speed)
+                             + self->cautious_kv * (self->lead[0] - speed);
+            cruise = spacing < cruise ? spacing : cruise;
+        }
+        u = to_command(cruise, a->max_accel, a->max_decel);
     } else {
         self->attacking = 1;
     }
+    if (self->capped && self->has_cap[0] && self->cap[0] < u) /* min(u, the cap): what its signal allows */
+        u = self->cap[0];
     *command_out = u;
     *speed_out = apply(a, u, speed);
     return 0;

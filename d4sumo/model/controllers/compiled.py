@@ -196,11 +196,18 @@ def _attacker_as_run(platoon) -> tuple | None:
     return None if law is None else (platoon.attack_u, platoon._attacker_every, law)
 
 
-def _attacker(platoon) -> tuple:
-    """What the C reads of the attacker: its attack, its cruise control's gains, its car, its actuator."""
-    cruise, actuator, vehicle = platoon.attacker_cruise, platoon.attacker_actuator, platoon.attacker_vehicle
+def _attacker(platoon) -> tuple | None:
+    """What the C reads of the attacker: its attack, its cruise control's gains, its car, its actuator, its state; among
+    traffic, the careful driver it is where it does not attack (`control.CautiousDriver`: its cruise is the driver's)."""
+    driver = platoon._attacker_driver
+    cruise = platoon.attacker_cruise if driver is None else driver.cruise
+    actuator, vehicle = platoon.attacker_actuator, platoon.attacker_vehicle
+    careful = None if driver is None else (driver.setpoint_m, driver.time_gap_s, driver._kp, driver._kv)
+    if careful is not None and not all(type(x) is float or type(x) is int for x in careful):
+        return None
     return (platoon.attack_u, (cruise.kp, cruise.ki, cruise.kd, cruise.clamp, cruise.limit),
             (cruise.target_mps, cruise.step_s, vehicle.max_accel_mps2, vehicle.max_decel_mps2),
             (actuator.accel_max, actuator.decel_max, actuator.alpha, actuator.step_s, actuator.max_speed_mps,
              actuator.accel_mps2, actuator.coast),
-            (float(cruise.integral), cruise.prev_error, float(platoon._attacking)))  # its state: as it starts, or carried on
+            (float(cruise.integral), cruise.prev_error, float(platoon._attacking)),  # its state: as it starts, or carried on
+            careful)

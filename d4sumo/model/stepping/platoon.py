@@ -269,8 +269,9 @@ class Platoon:
         #: the followers, their radars and channel stepped in C where they may be (`compiled`): as the Python below,
         #: bit for bit; not for followers carried on from a batch, whose radars have sensed already
         self._attacking = False  # whether the attacker attacked at the last step (a new cruise window starts its PID afresh)
-        #: an attacker that only attacks and cruises (as printed, or as the authors' code has it), which the C may step
-        self._plain = (self._attacker_driver is None and self._motion is None and not lights
+        #: an attacker that only attacks and cruises (as printed, or as the authors' code has it; among traffic, a careful
+        #: driver between attacks; obeying its lights or not), which the C may step
+        self._plain = (self._motion is None and (self._attacker_driver is None or self._attacker_as_run is None)
                        and not self._others  # (its attack is plain floats: attack_u above)
                        # a numpy float32 top speed (from the Python API) computes in float32 in the Python
                        and type(self.attacker_actuator.max_speed_mps) in (float, int))
@@ -288,9 +289,10 @@ class Platoon:
             obeying = [i for i in self.commanded if i != 0 or config.signals == "obey"]
             self._drivers = {i: SignalDriver(config.vehicle_of(i), dt) for i in obeying}
             self._python = [(i, self._obeying(i, command), apply, inbox) for i, command, apply, inbox in self._python]
-        #: the followers' drivers, by follower (None: no driver), where any obeys: in C their signals cap the commands
-        self._follower_drivers = ([self._drivers.get(i) for i in range(1, config.followers + 1)]
-                                  if any(0 < i <= config.followers for i in self._drivers) else None)
+        #: the drivers of the attacker and its followers, by car (None: no driver), where any obeys: in C their signals
+        #: cap the commands
+        self._car_drivers = ([self._drivers.get(i) for i in range(config.followers + 1)]
+                             if any(i <= config.followers for i in self._drivers) else None)
         if followers is None:
             self.compile()
         self.commands: list[list[float]] = []
@@ -328,7 +330,12 @@ class Platoon:
         own followers)."""
         if self._attacker_in_c:  # the attacker and the followers, in C
             commands, new_speeds = [], []
-            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
+            if self._car_drivers is None:
+                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
+            else:
+                if self._lit:  # what each car sees of the next light, recorded
+                    self.lights.append([light_code(stop) for stop in self.stops] if self.stops else self._dark)
+                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, self._caps(speeds, 0))
             self.commands.append(commands)
             return new_speeds
         if self._one_ahead or not self._python and self._attacker_driver is None:
@@ -401,13 +408,10 @@ class Platoon:
         """Each follower Python commands: its command and its speed at the step's end, appended (in C where they may be)."""
         channel = self.channel
         if self._compiled is not None:  # its followers' modes too
-            if self._follower_drivers is None:
+            if self._car_drivers is None:
                 self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
-            else:  # the highest command each follower's signal allows, as `_obeying` caps the Python's
-                stops = self.stops
-                caps = [None if d is None else d.limit(stops[i] if stops else None, speeds[i])
-                        for i, d in enumerate(self._follower_drivers, start=1)]
-                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, caps)
+            else:  # the attacker's cap is the Python's, above
+                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, self._caps(speeds, 1))
         elif channel is None:
             for i, command, apply, _ in self._python:
                 # nobody ahead in its lane: a free road
@@ -432,6 +436,13 @@ class Platoon:
                     c = checked_command(c, i, k)
                 commands.append(c)
                 new_speeds.append(apply(c, speeds[i]))
+
+    def _caps(self, speeds: list[float], first: int) -> list[float | None]:
+        """The highest command each car's signal allows (None: no driver; the attacker's None from ``first`` 1), as
+        `_obeying` and `_attacker_command`'s caller cap the Python's: for the C (`compiled`)."""
+        stops = self.stops
+        return [None if d is None or i < first else d.limit(stops[i] if stops else None, speeds[i])
+                for i, d in enumerate(self._car_drivers)]
 
     def _feed_sumo(self) -> None:
         """The step's beacons for SUMO's cooperative followers: the newest of each car each reads, where one is new."""

@@ -203,15 +203,16 @@ def test_the_python_plays_what_the_compiled_followers_do_not(change):
         assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"))
     lit = Platoon(config, np.full(config.steps, np.nan), 40.0, lights=True)
-    assert lit._compiled is not None and not lit._attacker_in_c  # the attacker obeys its lights in the Python
+    assert lit._compiled is not None and lit._attacker_in_c  # the attacker obeys its lights in C too
     config = EpisodeConfig(followers=2, controller=ControllerConfig("switching"), maneuver="cutout")  # no channel: in C
     assert Platoon(config, np.full(config.steps, np.nan), 40.0)._compiled is not None
 
 
 @pytest.mark.parametrize("signals", ("obey", "attacker_runs_red"))
 def test_followers_at_traffic_lights_are_capped_in_c_as_their_drivers_cap_the_python(signals, python_only):
-    """On a route through traffic lights each follower's command is the lesser of its controller's and what its signal
-    allows (`signals.SignalDriver`): in C the Python's drivers give each step's caps, and the C takes the lesser."""
+    """On a route through traffic lights each car's command is the lesser of its controller's and what its signal
+    allows (`signals.SignalDriver`): in C the Python's drivers give each step's caps, and the C takes the lesser (the
+    attacker's too, where it obeys them)."""
     from d4sumo.model.world.signals import Stop
 
     rng = np.random.default_rng(7 if signals == "obey" else 8)
@@ -242,13 +243,20 @@ def test_followers_at_traffic_lights_are_capped_in_c_as_their_drivers_cap_the_py
 @pytest.mark.parametrize("law", ("switching", "timegap", "idm", "as-run"))
 def test_followers_out_of_the_column_follow_the_nearest_car_ahead_in_c_as_in_the_python(law, python_only):
     """A lane change or traffic: each follower follows the nearest car the step's pairs put ahead of it (the first of
-    equal gaps), a traffic car (an index past the platoon's) included, or nobody (a free road at its own speed)."""
+    equal gaps), a traffic car (an index past the platoon's) included, or nobody (a free road at its own speed); among
+    traffic the attacker, between attacks, is a careful driver behind what is ahead of it, in C too."""
     rng = np.random.default_rng(90 + LAWS.index(law))
     for _ in range(30):
-        config = dataclasses.replace(_config(rng, law, imperfect=True), maneuver=str(rng.choice(["cutin", "cutout", "swerve"])))
+        config = _config(rng, law, imperfect=True)
+        if rng.random() < 0.5:  # among traffic: the attacker a careful driver between attacks, in C too
+            config = dataclasses.replace(config, start="steady", traffic={"vehicles_per_hour": 600.0, "warmup_s": 30.0})
+        else:
+            config = dataclasses.replace(config, maneuver=str(rng.choice(["cutin", "cutout", "swerve"])))
         attack = np.where(rng.random(config.steps) < 0.4, np.nan, rng.uniform(-1.0, 1.0, config.steps))
+        attack[:int(rng.integers(0, 60))] = np.nan  # cruising a while, behind whatever is ahead
         fast = Platoon(config, attack, 40.0)
         assert fast._compiled is not None
+        assert fast._attacker_in_c or config.traffic is None or fast._attacker_as_run is not None  # (as run among traffic: Python)
         python_only()
         python = Platoon(config, attack, 40.0)
         compiled.ENABLED = True

@@ -47,8 +47,8 @@ static int read_tuple(PyObject *tuple, double *out, Py_ssize_t n, const char *wh
 }
 
 /* A step's pairs (leader, follower, gap): each follower's gap (self->gap). In the column pair i - 1 is follower i's;
- * with ``ahead`` the nearest pair behind a car is its (the first of equal gaps, as Platoon.advance's ahead), its
- * speed ahead the leader's in ``speeds`` (a traffic car's too), nobody ahead a free road at its own speed. */
+ * with ``ahead`` the nearest pair behind a car is its (the attacker's too; the first of equal gaps, as Platoon.advance's
+ * ahead), its speed ahead the leader's in ``speeds`` (a traffic car's too), nobody ahead a free road at its own speed. */
 static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
     int n = self->cars;
     PyObject *pairs = PySequence_Fast(pairs_, "pairs: a sequence of (leader, follower, gap)");
@@ -58,7 +58,7 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
     int status = !self->ahead && count < n - 1 ? -1 : 0;
     if (status < 0)
         PyErr_SetString(PyExc_TypeError, "pairs: one for every follower");
-    for (int i = 1; i < n && self->ahead; i++)
+    for (int i = 0; i < n && self->ahead; i++) /* the attacker's too: a careful driver's (`cautious`) */
         self->gap[i] = FREE_ROAD_GAP_M, self->lead[i] = -1.0; /* the leader's index, until its speed is read */
     for (Py_ssize_t j = 0; j < (self->ahead ? count : n - 1) && status == 0; j++) {
         PyObject *pair = PySequence_Fast(PySequence_Fast_GET_ITEM(pairs, j), "pairs: (leader, follower, gap)");
@@ -73,7 +73,7 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
             double gap;
             if ((a == -1 || b == -1) && PyErr_Occurred())
                 status = -1;
-            else if (b >= 1 && b < n && (status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &gap, "a pair's gap")) == 0
+            else if (b >= 0 && b < n && (status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &gap, "a pair's gap")) == 0
                      && (self->lead[b] < 0.0 || gap < self->gap[b]))
                 self->gap[b] = gap, self->lead[b] = (double)a;
         }
@@ -85,7 +85,7 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
     PyObject *speeds = PySequence_Fast(speeds_, "speeds");
     if (speeds == NULL)
         return -1;
-    for (int i = 1; i < n && status == 0; i++) {
+    for (int i = 0; i < n && status == 0; i++) {
         Py_ssize_t a = self->lead[i] < 0.0 ? i : (Py_ssize_t)self->lead[i];
         if (a < 0 || a >= PySequence_Fast_GET_SIZE(speeds)) {
             PyErr_Format(PyExc_IndexError, "a pair's leader %zd: no such car", a);
@@ -98,19 +98,20 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
     return status;
 }
 
-/* A step's caps: each follower's highest command (what its signal allows), or None (no cap); caps None: none. */
+/* A step's caps: each car's highest command (what its signal allows; the attacker's where it is stepped here), or None
+ * (no cap); caps None: none. */
 static int read_caps(Followers *self, PyObject *caps_) {
     self->capped = caps_ != Py_None;
     if (!self->capped)
         return 0;
-    PyObject *caps = PySequence_Fast(caps_, "caps: a cap or None for every follower");
+    PyObject *caps = PySequence_Fast(caps_, "caps: a cap or None for every car");
     if (caps == NULL)
         return -1;
-    int status = PySequence_Fast_GET_SIZE(caps) == self->cars - 1 ? 0 : -1;
+    int status = PySequence_Fast_GET_SIZE(caps) == self->cars ? 0 : -1;
     if (status < 0)
-        PyErr_SetString(PyExc_TypeError, "caps: a cap or None for every follower");
-    for (int i = 1; i < self->cars && status == 0; i++) {
-        PyObject *cap = PySequence_Fast_GET_ITEM(caps, i - 1);
+        PyErr_SetString(PyExc_TypeError, "caps: a cap or None for every car");
+    for (int i = 0; i < self->cars && status == 0; i++) {
+        PyObject *cap = PySequence_Fast_GET_ITEM(caps, i);
         self->has_cap[i] = cap != Py_None;
         if (self->has_cap[i])
             status = as_double(cap, &self->cap[i], "a cap");

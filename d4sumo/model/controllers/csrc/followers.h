@@ -101,6 +101,9 @@ typedef struct {
     Follower *f;    /* f[1] .. f[cars - 1]; f[0] the attacker's cruise control and actuator, where it is stepped here */
     int has_attacker; /* whether the attacker is stepped here too: its attack, and its cruise where the attack is NaN */
     long attacker_every; /* the authors' attacker (f[0] their controller, on a free road): a pedal each this many steps; 0: not */
+    int cautious;     /* among traffic, where it does not attack: a careful driver (control.CautiousDriver) behind what is
+                         ahead of it (gap[0], lead[0]: with ahead), its cruise f[0]'s */
+    double cautious_s0, cautious_h, cautious_kp, cautious_kv; /* its standstill gap, time gap, and spacing gains */
     double *attack_u; /* its pedal at each step (NaN: it cruises) */
     Py_ssize_t attack_steps;
     int attacking;  /* whether it attacked at the last step (a new cruise window starts its PID afresh) */

@@ -154,7 +154,8 @@ static int attack_signal(Followers *self, PyObject *u) { /* the attacker's pedal
 }
 
 /* the attacker: (attack_u, (cruise_kp, cruise_ki, cruise_kd, cruise_integral_clamp, cruise_output_limit_mps2),
- * (target_mps, step_s, max_accel, max_decel), its actuator (7)[, its cruise's state: `cruise_state`]); or, with the
+ * (target_mps, step_s, max_accel, max_decel), its actuator (7)[, its cruise's state: `cruise_state`[, among traffic a
+ * careful driver's (setpoint_m, time_gap_s, acc_kp, acc_kv) or None]]); or, with the
  * authors' code's options, (attack_u, steps between two of its actions, its controller: a follower's switching law with
  * those options, no radar, no mode recorded (`init_follower`)) */
 static int init_attacker(Followers *self, PyObject *attacker) {
@@ -171,9 +172,17 @@ static int init_attacker(Followers *self, PyObject *attacker) {
         }
         return attack_signal(self, u);
     }
-    if (!PyArg_ParseTuple(attacker, "O!O!O!O!|O", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
-                          &PyTuple_Type, &actuator, &state))
+    PyObject *cautious = Py_None;
+    if (!PyArg_ParseTuple(attacker, "O!O!O!O!|OO", &PyList_Type, &u, &PyTuple_Type, &gains, &PyTuple_Type, &own,
+                          &PyTuple_Type, &actuator, &state, &cautious))
         return -1;
+    self->cautious = cautious != Py_None;
+    if (self->cautious && (!self->ahead || !PyArg_ParseTuple(cautious, "dddd", &self->cautious_s0, &self->cautious_h,
+                                                             &self->cautious_kp, &self->cautious_kv))) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "a careful driver follows whoever is ahead (ahead)");
+        return -1;
+    }
     double g[5], o[4], a[7];
     if (read_tuple(gains, g, 5, "the attacker's cruise gains") < 0 || read_tuple(own, o, 4, "the attacker") < 0
         || read_tuple(actuator, a, 7, "the attacker's actuator") < 0 || attack_signal(self, u) < 0)
