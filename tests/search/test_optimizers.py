@@ -787,3 +787,23 @@ def test_novelty_keeps_each_proposal_apart_from_the_attacks_found_and_none_leave
     assert distinct[1] == int(np.sum(s1 > 0.0)) > distinct[0], distinct  # each success an attack of its own
     with pytest.raises(ConfigError, match=f"search.{name}.novelty"):
         make_optimizer(name, lower, upper, budget=5, rng=np.random.default_rng(0), options={"novelty": 0.05, "gp_version": 1})
+
+
+def test_novelty_draws_more_of_the_box_before_it_repeats_an_attack():
+    """Found by review: where no candidate lay apart from the attacks found, a proposal fell back to any candidate and
+    could repeat one, though points apart were left in the box. Now it draws more of the box first."""
+    lower, upper = np.zeros(2), np.ones(2)
+    opt = make_optimizer("bo", lower, upper, budget=40, rng=np.random.default_rng(1), options={"novelty": 0.3, "batch_size": 1})
+    found = []
+    for k in range(40):
+        x = opt.ask()
+        if found and k >= 10:  # past the initial design
+            grid = np.stack(np.meshgrid(np.linspace(0, 1, 201), np.linspace(0, 1, 201)), -1).reshape(-1, 2)
+            room = np.any(np.all(np.max(np.abs(grid[:, None, :] - np.array(found)[None]), axis=2) > 0.3, axis=1))
+            if room:  # a point of the box lies apart: the proposal does
+                assert np.all(np.max(np.abs(np.array(found) - x), axis=1) > 0.3), (x, found)
+        score = 0.5 - float(np.max(np.abs(x - 0.5)))  # a success nearly everywhere
+        if score > 0.0:
+            found.append(x)
+        opt.tell(x, score)
+    assert len(found) >= 4

@@ -176,7 +176,7 @@ static int Followers_traverse(Followers *self, visitproc visit, void *arg) {
     Py_VISIT(self->checked);
     for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
         Py_VISIT(self->random[j]);
-    for (int i = 1; self->f != NULL && i < self->cars; i++) {
+    for (int i = 0; self->f != NULL && i < self->cars; i++) {
         Py_VISIT(self->f[i].normal);
         Py_VISIT(self->f[i].fmu_fail);
     }
@@ -190,7 +190,7 @@ static int Followers_clear(Followers *self) {
     Py_CLEAR(self->checked);
     for (Py_ssize_t j = 0; self->random != NULL && j < self->links; j++)
         Py_CLEAR(self->random[j]);
-    for (int i = 1; self->f != NULL && i < self->cars; i++) {
+    for (int i = 0; self->f != NULL && i < self->cars; i++) {
         Py_CLEAR(self->f[i].normal);
         Py_CLEAR(self->f[i].fmu_fail);
     }
@@ -200,7 +200,7 @@ static int Followers_clear(Followers *self) {
 static void Followers_dealloc(Followers *self) {
     PyObject_GC_UnTrack(self);
     Followers_clear(self);
-    for (int i = 1; self->f != NULL && i < self->cars; i++)
+    for (int i = 0; self->f != NULL && i < self->cars; i++)
         PyMem_Free(self->f[i].readings);
     PyMem_Free(self->random);
     PyMem_Free(self->last);

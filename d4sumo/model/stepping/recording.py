@@ -89,9 +89,9 @@ def _window_minima(rows: dict[str, tuple[np.ndarray, np.ndarray] | np.ndarray], 
             minima[name] = float(gaps[start:stop].min())
         else:
             samples, gaps = gaps
-            inside = gaps[(samples >= start) & (samples < stop)]
-            if inside.size:
-                minima[name] = float(inside.min())
+            inside = gaps[(samples >= start) & (samples < stop)].tolist()
+            if inside:
+                minima[name] = min(inside)  # min(): the first of equal gaps, a NaN first or never
     return minima
 
 
@@ -117,8 +117,7 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
     pair without the attacker (victim_gap) and with it (attacker_gap), and lateral positions (when
     given); each pair's gaps at the samples where it followed, as (samples, gaps). With ``traffic`` the last of
     ``ids`` is every traffic car (`traffic.TRAFFIC_ID`; the pairs index each as sensed, past the platoon's): its gaps
-    are not a signal, its pairs' are (``traffic-v3``).
-    Over arrays: fmin keeps the smaller gap as min() does (a NaN never replaces one)."""
+    are not a signal, its pairs' are (``traffic-v3``). Over arrays (`_min_at`)."""
     n_samples = len(pairs)
     gaps = np.full((n_samples, len(ids)), FREE_ROAD_GAP_M)
     victim = np.full(n_samples, FREE_ROAD_GAP_M)
@@ -133,10 +132,10 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
             np.minimum(a, len(ids) - 1, out=a)
             np.minimum(b, len(ids) - 1, out=b)
         gap = np.fromiter((pair[2] for pair in flat), dtype=float, count=len(flat))
-        np.fmin.at(gaps, (k, b), gap)
+        _min_at(gaps.reshape(-1), k * len(ids) + b, gap)
         with_attacker = (a == 0) | (b == 0)
-        np.fmin.at(attacker, k[with_attacker], gap[with_attacker])
-        np.fmin.at(victim, k[~with_attacker], gap[~with_attacker])
+        _min_at(attacker, k[with_attacker], gap[with_attacker])
+        _min_at(victim, k[~with_attacker], gap[~with_attacker])
         code = a * len(ids) + b
         codes, first = np.unique(code, return_index=True)
         for c in codes[np.argsort(first)]:  # each pair in the order it first followed
@@ -149,6 +148,20 @@ def _lane_gaps(ids: tuple[str, ...], signals: dict, pairs: list[list[Pair]], lat
     signals["victim_gap"] = victim
     signals["attacker_gap"] = attacker
     return rows
+
+
+def _min_at(out: np.ndarray, slots: np.ndarray, values: np.ndarray) -> None:
+    """out[slot] = min(out[slot], value) for each slot and value in the order given, as Python's min() does it: a value
+    replaces only a greater one (never a NaN, and of 0.0 and -0.0 the first stays), over arrays."""
+    if not len(values):
+        return
+    order = np.lexsort((values, slots))  # by slot, then value (NaN last); equal values in the order given
+    ordered = slots[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = ordered[1:] != ordered[:-1]
+    slot, best = ordered[first], values[order][first]  # each slot's least value, the first of equal ones
+    smaller = best < out[slot]
+    out[slot[smaller]] = best[smaller]
 
 
 def _hold_last(rows: np.ndarray, n_samples: int) -> np.ndarray:

@@ -27,6 +27,10 @@ from .base import Optimizer
 from .gp import LEARN_POINTS, GaussianProcess, one_blas_thread
 
 
+#: with ``novelty``: how many more draws of candidates over the whole box, where none lies apart from the attacks found
+NOVEL_DRAWS = 8
+
+
 class GaussianProcessSearch(Optimizer):
     """What ``bo`` and ``turbo`` share: a Halton initial design, then expected improvement under d4sumo's
     GP, ``batch_size`` points at a time by the constant liar. Kernel hyperparameters are re-learned when
@@ -156,7 +160,9 @@ class BayesianOptimization(GaussianProcessSearch):
         lies farther than r (of each parameter's range) from every success and every point pending, in some
         parameter, as `results.analysis.distinct_count` counts attacks distinct; it is the candidate of most
         expected improvement over a score of 0 (a success, not a better one: the best needs no improving), among
-        perturbations of the successes (``local_fraction``, each of one drawn at random) and points of the whole box."""
+        perturbations of the successes (``local_fraction``, each of one drawn at random) and points of the whole box;
+        where none lies apart, up to `NOVEL_DRAWS` more draws of the whole box, and where none of those does either
+        (attacks all over the box at this radius), the best of all."""
         radius = self.options["novelty"]
         with one_blas_thread():
             Z, scores = self._data()
@@ -170,7 +176,12 @@ class BayesianOptimization(GaussianProcessSearch):
             cand = self._candidates(found[self.rng.integers(len(found), size=int(self.candidates * self.local_fraction))])
             # distinct: farther than the radius from every attack taken, in some parameter (Chebyshev)
             apart = np.all(cdist(cand, taken, "chebyshev") > radius, axis=1)
-            if apart.any():
+            for _ in range(NOVEL_DRAWS):  # attacks all around: more points of the whole box, until one lies apart
+                if apart.any():
+                    break
+                cand = self.rng.random((self.candidates, self.dimension))
+                apart = np.all(cdist(cand, taken, "chebyshev") > radius, axis=1)
+            if apart.any():  # (none: the box holds hardly a point apart at this radius; the best of all, then)
                 cand = cand[apart]
             return cand[int(np.argmax(gp.expected_improvement(cand, 0.0, self.xi)))]
 

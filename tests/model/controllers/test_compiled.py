@@ -347,3 +347,29 @@ def test_an_attacker_whose_top_speed_is_a_float32_is_the_pythons(python_only):
         v = [float(s) for s in new]
         x = [xi + vi * config.step_s for xi, vi in zip(x, v)]
     assert v[0] == pytest.approx(26.0)  # it rode its top speed
+
+
+def test_a_refused_authors_attacker_holds_nothing_and_a_leader_before_the_first_car_is_no_car():
+    """Found by review: an authors' attacker refused for its radar kept its radar's generator (never released); a pair
+    whose leader index is negative was read as nobody ahead, where the Python reads a speed from the end of its list."""
+    import gc
+    import sys
+
+    from d4sumo.model.controllers.commands import checked_command
+
+    config = EpisodeConfig(followers=2, controller=ControllerConfig("switching", (("switching_rule", "code"),)))
+    platoon = Platoon(config, np.full(config.steps, np.nan), 40.0)
+    law = compiled._law(platoon._attacker_as_run, platoon.attacker_actuator, False, None, False, 0, "")
+    normal = object()
+    with_radar = law[:7] + ((100.0, 0.0, 0.0, 0, normal),) + law[8:]
+    laws = [compiled._law(f.controller, f.actuator, f.has_mode, None, False, i, "") for i, f in enumerate(platoon.followers, 1)]
+    before = sys.getrefcount(normal)
+    for _ in range(50):
+        with pytest.raises(ValueError, match="no radar"):
+            compiled.Followers(None, [0.0] * 3, [()] * 2, [], None, laws, checked_command, (platoon.attack_u, 1, with_radar), False)
+    gc.collect()
+    assert sys.getrefcount(normal) == before
+    cutout = EpisodeConfig(followers=2, controller=ControllerConfig("switching"), maneuver="cutout")
+    fast = Platoon(cutout, np.full(cutout.steps, np.nan), 40.0)
+    with pytest.raises(IndexError, match="leader -1"):
+        fast.advance(0, [100.0, 90.0, 80.0], [20.0, 20.0, 20.0, 25.0], [(-1, 1, 5.0)])

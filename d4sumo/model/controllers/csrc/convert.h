@@ -73,6 +73,10 @@ static int read_pairs(Followers *self, PyObject *pairs_, PyObject *speeds_) {
             double gap;
             if ((a == -1 || b == -1) && PyErr_Occurred())
                 status = -1;
+            else if (a < 0) { /* (the Python would read a speed from the end of its list) */
+                PyErr_Format(PyExc_IndexError, "a pair's leader %ld: no such car", a);
+                status = -1;
+            }
             else if (b >= 0 && b < n && (status = as_double(PySequence_Fast_GET_ITEM(pair, 2), &gap, "a pair's gap")) == 0
                      && (self->lead[b] < 0.0 || gap < self->gap[b]))
                 self->gap[b] = gap, self->lead[b] = (double)a;

@@ -20,6 +20,10 @@ static int cruise_state(PyObject *state, Switching *sw, double *flag, int *known
 
 static int code_pid_state(PyObject *state, CodePid *p) { /* control.CodePID: its numbers and state, as it is */
     PyObject *prev;
+    if (!PyTuple_Check(state)) {
+        PyErr_SetString(PyExc_TypeError, "a PID of the authors' code: a tuple of its numbers and state");
+        return -1;
+    }
     if (!PyArg_ParseTuple(state, "ddddddddOdd", &p->kp, &p->ki, &p->kd, &p->period_s, &p->filter_s, &p->clamp, &p->limit,
                           &p->integral, &prev, &p->filtered, &p->prev_filtered))
         return -1;
@@ -32,6 +36,10 @@ static int code_pid_state(PyObject *state, CodePid *p) { /* control.CodePID: its
  * release_m, its code cruise PID or None, its low-level PID or None: `code_pid_state`) */
 static int as_run_state(PyObject *state, AsRun *r) {
     PyObject *prev, *cruise, *low;
+    if (!PyTuple_Check(state)) {
+        PyErr_SetString(PyExc_TypeError, "the authors' options: a tuple of their numbers and state");
+        return -1;
+    }
     if (!PyArg_ParseTuple(state, "llddOppppddOO", &r->every, &r->calls, &r->period_s, &r->held, &prev, &r->code_rule,
                           &r->code_cruise, &r->low_pid, &r->first_zero, &r->engage_m, &r->release_m, &cruise, &low))
         return -1;
