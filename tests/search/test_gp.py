@@ -138,3 +138,20 @@ def test_a_point_added_through_inducing_points_is_what_it_adds_exactly():
     for a, b in zip(added.predict(C), again.predict(C)):
         assert np.allclose(a, b, rtol=1e-8, atol=1e-10)
     assert added.predict(z[None])[1][0] < gp.predict(z[None])[1][0]  # less uncertain where it was added
+
+
+def test_a_fresh_start_keeps_the_likelier_hyperparameters():
+    """gp_version 3: learning climbs from the last values and from length scales, signal and noise variance 1, and
+    keeps the likelier, never a less likely one than the climb from the last values alone; where that climb stops on
+    a worse optimum (seed 14: an interpolating one), the fresh start finds a better one."""
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        Z = rng.random((50, 9))
+        y = np.where(Z[:, 0] > 0.5, 1.0, 0.0) * (Z[:, 1] - 0.5) + 0.3 * rng.standard_normal(50)
+        t = (y - y.mean()) / y.std()
+        warm, fresh = GaussianProcess(9).fit(Z, y, learn=True), GaussianProcess(9, fresh_start=True).fit(Z, y, learn=True)
+        warm_nll = GaussianProcess._neg_log_likelihood(warm.theta, Z, t)[0]
+        fresh_nll = GaussianProcess._neg_log_likelihood(fresh.theta, Z, t)[0]
+        assert fresh_nll <= warm_nll
+        if seed == 14:
+            assert fresh_nll < warm_nll - 5.0

@@ -292,7 +292,7 @@ def test_an_optimisers_state_goes_on_exactly_in_another_process(name, halves_in_
     assert asked == alone
 
 
-@pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("turbo", {"failure_tolerance": 1}),
+@pytest.mark.parametrize("name, options", [("bo", {}), ("bo", {"gp_version": 1}), ("bo", {"gp_version": 3}), ("turbo", {"failure_tolerance": 1}),
                                            ("auto", {"stall": 3})])
 def test_a_bayesian_optimisers_state_pickles_inside_a_batch_and_goes_on_exactly(name, options):
     """A sweep sends the state between chunks; a chunk may end with points asked and not told."""

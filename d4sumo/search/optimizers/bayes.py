@@ -9,7 +9,9 @@ Expected improvement is maximised over random candidates and perturbations of th
 
 The Gaussian process is d4sumo's own (`gp.GaussianProcess`). ``gp_version = 1`` keeps
 scikit-optimize's, which campaigns stored by d4sumo 0.3 and before ran with; it costs 5-20 times the
-time per proposal.
+time per proposal. ``gp_version = 3`` is d4sumo's GP learning its hyperparameters from the last values
+learned and from a fresh start, the likelier kept (`gp.GaussianProcess`, ``fresh_start``); 2 learns from the
+last values alone, as campaigns stored since d4sumo 0.4 ran.
 """
 
 from __future__ import annotations
@@ -53,7 +55,8 @@ class GaussianProcessSearch(Optimizer):
         self._gp = None
         self._fitted = 0  # the scores told when the GP was last fitted
         self._learned = 0  # the scores modelled when the hyperparameters were last learned
-        self._process = GaussianProcess(self.dimension, inducing=o.get("inducing", 0), learn_points=o.get("learn_points", LEARN_POINTS))
+        self._process = GaussianProcess(self.dimension, inducing=o.get("inducing", 0), learn_points=o.get("learn_points", LEARN_POINTS),
+                                        fresh_start=o.get("gp_version") == 3)
         self._run = 0  # the first sample of the current run (turbo starts new runs)
 
     def ready(self) -> int:
@@ -119,7 +122,7 @@ class BayesianOptimization(GaussianProcessSearch):
     name = "bo"
     OPTIONS = {"initial_points": (10, 1, 10_000), "refit_every": (10, 1, 10_000), "candidates": (500, 10, 1_000_000),
                "local_fraction": (0.8, 0.0, 1.0), "local_scale": (0.1, 1e-4, 1.0), "xi": (0.01, 0.0, 10.0),
-               "batch_size": (5, 1, 64), "gp_version": (2, 1, 2), "inducing": (128, 0, 100_000), "edges": (0.0, 0.0, 1.0),
+               "batch_size": (5, 1, 64), "gp_version": (2, 1, 3), "inducing": (128, 0, 100_000), "edges": (0.0, 0.0, 1.0),
                "novelty": (0.0, 0.0, 0.5)}
 
     def __init__(self, *args, **kwargs):
