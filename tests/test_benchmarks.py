@@ -389,3 +389,17 @@ def test_bench_peers_plays_each_peers_sample_as_the_campaigns_own_episode(tmp_pa
         for optimizer in bench_peers.PSY_TALIRO:
             ran = bench_peers.psy_taliro_run(problem, optimizer, 6, 3)
             assert len(ran) == 6 and all(r.outcome != "error" for r in ran)
+
+
+def test_the_baseline_leaves_out_a_key_0_2_refuses_only_where_the_file_sets_the_value_0_2_ran(tmp_path):
+    """d4sumo 0.2 refuses a key it does not know: the paper's sweep files pin CE without noise, which 0.2's CE ran; the
+    baseline leaves that key out for 0.2, and a key at another value stays (0.2 then says so)."""
+    from bench_sweep import without
+
+    grid = Path(__file__).resolve().parent.parent / "examples" / "sweeps" / "paper_parametric.toml"
+    less = without(grid, tmp_path / "copy.toml", "search.ce.noise_fraction")
+    assert less is not None and "noise_fraction" not in less.read_text() and "batch_size = 1" in less.read_text()
+    other = tmp_path / "other.toml"
+    other.write_text(grid.read_text().replace("noise_fraction = 0.0", "noise_fraction = 0.2"))
+    assert without(other, tmp_path / "other-copy.toml", "search.ce.noise_fraction") is None
+    assert without(grid, tmp_path / "c.toml", "search.ce.elite_fraction") is None  # not a key added later

@@ -9,8 +9,8 @@ Usage: python tools/bench_sweep.py [SWEEP.toml ...] [--workers 1 2] [--batch 32]
 Prints the wall time per (workers, batch), samples per second, the peak resident memory of a worker and of
 the client so far, and the speed-up over the first;
 checks that every run stored the same samples (the result depends on neither). ``--baseline`` first
-runs the sweeps with d4sumo 0.2 itself (the last commit of 0.2.0, which reads the paper's sweep files as they are,
-from this checkout's history, with its own command line, on the largest worker count; issue 50's target is 3.8 times faster than it), and prints the speed-up
+runs the sweeps with d4sumo 0.2 itself (the last commit of 0.2.0, from this checkout's history, with its own command
+line, on the sweep files as they are, less a key it refuses where they set it at the value 0.2 ran anyway, on the largest worker count; issue 50's target is 3.8 times faster than it), and prints the speed-up
 of every run over it and its successes beside theirs.
 """
 
@@ -58,6 +58,30 @@ def peak_rss() -> str:
     return f"peak resident memory: a worker {workers:.0f} MiB, this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB"
 
 
+def without(path: Path, copy: Path, key: str) -> Path | None:
+    """The sweep file without ``key`` ("table.name"), written to ``copy``, where it sets it at the value the campaigns
+    stored before the key was added ran (`ledger`); None where it sets it otherwise."""
+    import tomllib
+
+    from d4sumo import ledger
+
+    table, _, name = key.rpartition(".")
+    value = tomllib.loads(path.read_text())
+    for part in (*table.split("."), name):
+        value = value.get(part) if isinstance(value, dict) else None
+    earlier = ledger.earlier(table).get(name, ...)
+    if value is None or value != earlier or type(value) is not type(earlier):
+        return None
+    kept, current = [], ""
+    for line in path.read_text().splitlines(keepends=True):
+        header = re.match(r"\s*\[([^\]]+)\]", line)
+        current = header.group(1).strip() if header else current
+        if not (current == table and re.match(rf"\s*{name}\s*=", line)):
+            kept.append(line)
+    copy.write_text("".join(kept))
+    return copy
+
+
 def release_0_2(paths: list[str], workers: int, tmp: Path) -> tuple[float, int]:
     """The sweeps run by d4sumo 0.2's own code (the last commit of 0.2.0, from this checkout's history, into a folder
     of its own), each into a fresh database: the wall time and the successes it says."""
@@ -67,16 +91,25 @@ def release_0_2(paths: list[str], workers: int, tmp: Path) -> tuple[float, int]:
     if archive.returncode:
         raise SystemExit(f"--baseline: d4sumo 0.2.0 is not in this checkout's history ({archive.stderr.decode().strip()})")
     subprocess.run(["tar", "-x", "-C", str(source)], input=archive.stdout, check=True)
-    t0, successes = time.perf_counter(), 0
+    took, successes = 0.0, 0
     for i, path in enumerate(paths):
-        argv = ["d4sumo", "sweep", str(Path(path).resolve()), "--workers", str(workers), "--db", str(tmp / f"0.2-{i}.sqlite")]
-        run = subprocess.run([sys.executable, "-c", f"import sys; sys.argv = {argv!r}; from d4sumo.cli import main; main()"],
-                             cwd=source, env={**os.environ, "PYTHONPATH": str(source)}, capture_output=True, text=True)
+        path = Path(path)
+        for tries in range(8):  # a key 0.2 refuses, set at the value it ran anyway (CE without noise): left out
+            t0 = time.perf_counter()  # the run that plays the sweep is timed, not those refused
+            argv = ["d4sumo", "sweep", str(path.resolve()), "--workers", str(workers), "--db", str(tmp / f"0.2-{i}-{tries}.sqlite")]
+            run = subprocess.run([sys.executable, "-c", f"import sys; sys.argv = {argv!r}; from d4sumo.cli import main; main()"],
+                                 cwd=source, env={**os.environ, "PYTHONPATH": str(source)}, capture_output=True, text=True)
+            refused = re.search(r"error: (search\.[\w.]+): got .*allowed: a key of", run.stderr + run.stdout)
+            less = without(path, tmp / f"0.2-{i}-{tries}.toml", refused.group(1)) if refused else None  # (its main returns 2)
+            if less is None:
+                break
+            path = less
         said = re.search(r"(\d+) successes in", run.stdout)
         if run.returncode or said is None:
             raise SystemExit(f"--baseline: d4sumo 0.2.0 could not run {path}: {(run.stderr or run.stdout).strip().splitlines()[-1:]}")
         successes += int(said.group(1))
-    return time.perf_counter() - t0, successes
+        took += time.perf_counter() - t0
+    return took, successes
 
 
 def main() -> None:
