@@ -38,6 +38,7 @@ from d4sumo.results.figures import heatmap_columns, heatmap_panels, heatmaps
 from d4sumo.results.report import describe, plot_sample
 from d4sumo.search.campaign import open_store
 from d4sumo.sweep import Sweep, run_sweep
+from d4sumo.sweep.grid import GRID_TO_KEY
 from toolargs import Parser, run_main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -90,6 +91,10 @@ def sweep_of(name: str) -> list[Sweep]:
             resolved["attack"]["family"] = family  # the family as printed, the rest as run
         resolved = with_overrides(resolved, changes)
         one_grid = {**grid, "attack": [resolved["attack"]["family"]]}
+        for axis in one_grid:  # what the grid sets is no fixed value beside it (the preset's start, family, ...): the grid's
+            table, _, key = GRID_TO_KEY[axis].partition(".")
+            if key and isinstance(resolved.get(table), dict):
+                resolved[table].pop(key, None)
         sweeps.append(Sweep.from_dict({"name": f"paper-{name}-{family}", "grid": one_grid, **resolved}, source=file))
     return sweeps
 
