@@ -61,12 +61,11 @@ def peak_rss() -> str:
 def without(path: Path, copy: Path, key: str) -> Path | None:
     """The sweep file without ``key`` ("table.name"), written to ``copy``, where it sets it at the value the campaigns
     stored before the key was added ran (`ledger`); None where it sets it otherwise."""
-    import tomllib
-
     from d4sumo import ledger
+    from d4sumo.tomlfiles import read_toml
 
     table, _, name = key.rpartition(".")
-    value = tomllib.loads(path.read_text())
+    value = read_toml(path, "SWEEP")
     for part in (*table.split("."), name):
         value = value.get(part) if isinstance(value, dict) else None
     earlier = ledger.earlier(table).get(name, ...)
