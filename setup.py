@@ -29,6 +29,7 @@ setup(ext_modules=[Extension("d4sumo.model.controllers._followers", ["d4sumo/mod
                              include_dirs=["d4sumo/model/controllers/csrc", "d4sumo/fmus"], optional=True),
                    # libsumo's C++ functions for the step loop in C (d4sumo/engine/_sumo_calls.cpp): optional, as the other
                    Extension("d4sumo.engine._sumo_calls", ["d4sumo/engine/_sumo_calls.cpp"],
-                             depends=["d4sumo/model/controllers/csrc/world_calls.h", "d4sumo/engine/traffic_sense.h"],
+                             depends=["d4sumo/model/controllers/csrc/world_calls.h", "d4sumo/engine/traffic_sense.h",
+                                      "d4sumo/engine/lateral_sense.h"],
                              include_dirs=["d4sumo/model/controllers/csrc"], libraries=["dl"], language="c++", optional=True)],
       cmdclass={"build_ext": ExactBuild})

@@ -3,7 +3,9 @@
  * Python module libsumo runs (so on its one simulation), called without Python's wrapping of each call: a car's
  * position or speed costs about 15 ns where the Python call costs about 150 ns. The same functions the Python
  * wrappers call, so the same doubles. Also who is ahead of a platoon among traffic (`traffic_pairs`: neighbours'
- * _TrafficSense, its every step, with Vehicle::getLeader, getFollower, getSpeed, getLength and getMinGap).
+ * _TrafficSense, its every step, with Vehicle::getLeader, getFollower, getSpeed, getLength and getMinGap), and who
+ * follows whom in every lane where the attacker changes lanes among traffic (`lateral_pairs`: _LateralTrafficSense's,
+ * with getNeighbors, getLaneID, getLateralLanePosition and Lane::getLastStepVehicleIDs too).
  *
  * bind(path of libsumo's _libsumo.so, libsumo.TraCIException, libsumo.FatalTraCIError) returns a capsule of `WorldCalls` (csrc/world_calls.h),
  * or None where this libsumo does not expose them as this build names them (another compiler's C++ library, another
@@ -23,6 +25,12 @@
 #include <exception>
 #include <string>
 #include <typeinfo>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <set>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -53,6 +61,10 @@ const char *const LENGTH_NAME = "_ZN7libsumo7Vehicle9getLengthERKNSt7__cxx1112ba
 const char *const MIN_GAP_NAME = "_ZN7libsumo7Vehicle9getMinGapERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
 const char *const LEADER_NAME = "_ZN7libsumo7Vehicle9getLeaderERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
 const char *const FOLLOWER_NAME = "_ZN7libsumo7Vehicle11getFollowerERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEd";
+const char *const LANE_ID_NAME = "_ZN7libsumo7Vehicle9getLaneIDERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
+const char *const LATERAL_NAME = "_ZN7libsumo7Vehicle22getLateralLanePositionERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
+const char *const NEIGHBOURS_NAME = "_ZN7libsumo7Vehicle12getNeighborsERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEi";
+const char *const ON_LANE_NAME = "_ZN7libsumo4Lane21getLastStepVehicleIDsERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEE";
 
 /* the error libsumo's Python wrapper raises for the exception being handled: TraCIException for libsumo's own, else
  * FatalTraCIError; what libsumo's wrappers say of one that is no std::exception */
@@ -114,6 +126,7 @@ static int step(void) {
 WorldCalls calls = {make_id, free_id, get, set_speed, step};
 
 #include "traffic_sense.h"
+#include "lateral_sense.h"
 
 } /* namespace */
 #endif
@@ -134,8 +147,11 @@ static PyObject *bind(PyObject *module, PyObject *args) {
     step_ = (Stepper)dlsym(library, STEP_NAME);
     length_ = (Getter)dlsym(library, LENGTH_NAME), min_gap_ = (Getter)dlsym(library, MIN_GAP_NAME);
     leader_ = (Search)dlsym(library, LEADER_NAME), follower_ = (Search)dlsym(library, FOLLOWER_NAME);
+    lane_id_ = (LaneOf)dlsym(library, LANE_ID_NAME), lateral_ = (Getter)dlsym(library, LATERAL_NAME);
+    neighbours_ = (Neighbours)dlsym(library, NEIGHBOURS_NAME), on_lane_ = (OnLane)dlsym(library, ON_LANE_NAME);
     dlclose(library); /* it stays loaded: Python holds it */
-    if (!getters[0] || !getters[1] || !getters[2] || !set_speed_ || !step_ || !length_ || !min_gap_ || !leader_ || !follower_)
+    if (!getters[0] || !getters[1] || !getters[2] || !set_speed_ || !step_ || !length_ || !min_gap_ || !leader_ || !follower_
+        || !lane_id_ || !lateral_ || !neighbours_ || !on_lane_)
         Py_RETURN_NONE;
     Py_INCREF(exception);
     Py_XSETREF(traci_exception, exception);
@@ -154,6 +170,10 @@ static PyMethodDef methods[] = {
 #ifdef DIRECT
     {"traffic_pairs", (PyCFunction)(void (*)(void))traffic_pairs, METH_FASTCALL,
      "traffic_pairs(ids, lengths, min_gaps, names, x, v): neighbours._TrafficSense's step, once bind gave SUMO's calls"},
+    {"lateral_sense", lateral_sense, METH_VARARGS,
+     "lateral_sense(ids, lengths, width_m, edging_m, longest_m, edging_sensed, as_0_21, platoon_lane, lanes, by_place)"},
+    {"lateral_pairs", (PyCFunction)(void (*)(void))lateral_pairs, METH_FASTCALL,
+     "lateral_pairs(sense, names, x, v, covered): neighbours._LateralTrafficSense's step"},
 #endif
     {NULL, NULL, 0, NULL},
 };

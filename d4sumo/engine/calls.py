@@ -75,6 +75,17 @@ def native_traffic_pairs(api):
     return traffic_pairs
 
 
+def native_lateral_pairs(api):
+    """`neighbours._LateralTrafficSense`'s step with libsumo's own C++ functions: (``lateral_sense``, which makes what one
+    platoon's sensing holds, ``lateral_pairs``, its step; `_sumo_calls`: the same pairs, ids, positions and speeds), or
+    None where they cannot be had (`native_calls`) or are turned off (`NATIVE`)."""
+    if not NATIVE or native_calls(api) is None:
+        return None
+    from ._sumo_calls import lateral_pairs, lateral_sense
+
+    return lateral_sense, lateral_pairs
+
+
 def fast_paths() -> str:
     """Which of its optional speed-ups this install has (each built at install where a compiler was found; without
     one, the same episodes, slower): said by ``d4sumo --version``."""

@@ -9,7 +9,7 @@ from ..errors import SumoError
 from ..model.config import EpisodeConfig
 from ..model.attacks.maneuvers import Pair
 from ..model.world.lanes import CAR_WIDTH_M, FREE_ROAD_GAP_M, lane_pairs, occupied_lanes
-from .calls import native_traffic_pairs, route_junctions, vehicle_call, via_lanes
+from .calls import native_lateral_pairs, native_traffic_pairs, route_junctions, vehicle_call, via_lanes
 from .scenarios import Road
 
 
@@ -172,9 +172,18 @@ class _LateralTrafficSense:
         self.get_vehicles = api.lane.getLastStepVehicleIDs
         #: the longest vehicle type SUMO has [m]: how far behind its lane's start a car's rear may be
         self.longest_m = max((api.vehicletype.getLength(t) for t in api.vehicletype.getIDList()), default=0.0)
+        #: the same step in C++ with libsumo's own functions, where they can be had (`calls.native_lateral_pairs`)
+        native = native_lateral_pairs(api)
+        self._native = None
+        if native is not None:
+            sense, self._native = native
+            self._state = sense(tuple(ids), self.lengths, self.width, self.edging_m, self.longest_m, self.edging_sensed,
+                                self.as_0_21, self.platoon_lane, self.route_lanes.lanes, self.route_lanes.by_place)
 
     def __call__(self, x: list[float], v: list[float]) -> tuple[list[Pair], list[str], list[float], list[float]]:
         lanes = self.lateral.sense()  # the platoon's cars' lanes (and the attacker's lateral position, recorded)
+        if self._native is not None:
+            return self._native(self._state, self.names, x, v, lanes)
         near: set[str] = set()
         beside: list[tuple[int, int, tuple]] = []  # (car, mode, SUMO's neighbours there)
         unseen: list[tuple[bool, bool]] = []  # whether SUMO named no leader, no follower: its search may have ended early

@@ -589,3 +589,45 @@ def test_the_sensing_among_traffic_in_cpp_is_the_pythons_step_by_step_and_episod
         monkeypatch.setattr(calls, "NATIVE", False)
         assert_same_episode(native, simulate(c, u, road=road))
         monkeypatch.setattr(calls, "NATIVE", True)
+
+
+@pytest.mark.parametrize("edging_sensed", [True, False])
+def test_the_sensing_of_every_lane_among_traffic_in_cpp_is_the_pythons(monkeypatch, edging_sensed):
+    """Where the attacker changes lanes among traffic, who follows whom in every lane each car covers, with libsumo's own
+    C++ functions (`calls.native_lateral_pairs`): whole episodes the Python's, bit for bit, on SUMO's Bremen motorway
+    with its own demand (through its on-ramp) and on a busy motorway of one edge (where, without edging_sensed, 0.21's
+    way of placing a car off the route is kept)."""
+    from conftest import NATIVE_CALLS_EXPECTED, assert_same_episode, random_plans
+    from d4sumo.engine import calls
+    from d4sumo.model.config import ControllerConfig
+    from d4sumo.sumohome import sumo_home
+
+    if not NATIVE_CALLS_EXPECTED:
+        pytest.skip("no C++ compiler: libsumo's own calls are not built")
+    game = Path(sumo_home()) / "tools" / "game" / "highway"
+    traffic = {"demand": str(game / "highway.rou.xml"), "edging_sensed": edging_sensed}
+    bremen = EpisodeConfig(network=str(game / "highway.net.xml"), route=("145354574", "189597495", "E0", "191842213"),
+                           join_m=450.0, maneuver="swerve", swerve_lanes=3, start="steady", speed_mps=30.0, duration_s=30.0,
+                           controller=ControllerConfig("timegap"), traffic=traffic)
+    busy = dataclasses.replace(BUSY, maneuver="swerve", setpoint_m=5.0,
+                               traffic=dataclasses.replace(BUSY.traffic, edging_sensed=edging_sensed))
+    from d4sumo.model.attacks.maneuvers import attack_plan, maneuver_of
+    from d4sumo.model.attacks.pedals import make_attack
+
+    # a swerve through Bremen's on-ramp, changing lanes four times, that crashes nothing (tools/bench_traffic.py's)
+    swerve = [-0.3355503286279433, 0.8270482295606412, -0.378711273867939, 0.7750934736991419, -0.8642329721845404,
+              0.21589989894509176, -0.29937343136019934, -0.3395127810186547, -0.5243580349054529, 2.8101446115896187,
+              0.8226207432445664, 0.6022549884190292, 1.6178362246396496, 1.9772874541113046, 2.1528750560297025]
+    outcomes = set()
+    for config in (bremen, busy):
+        road = config_road(config)
+        plans = random_plans(config, 3, seed=5)
+        if config is bremen:
+            plans.append(attack_plan(maneuver_of(config).family(make_attack("knots")), swerve, config))
+        for plan in plans:
+            monkeypatch.setattr(calls, "NATIVE", True)
+            native = simulate(config, plan, road=road)
+            monkeypatch.setattr(calls, "NATIVE", False)
+            assert_same_episode(native, simulate(config, plan, road=road))
+            outcomes.add((config.network, native.outcome, len(native.trace)))
+    assert len(outcomes) >= 3 and (bremen.network, "no_crash", bremen.steps + 1) in outcomes, outcomes
