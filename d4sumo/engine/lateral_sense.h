@@ -93,6 +93,20 @@ std::vector<Found> lane_pairs(const std::vector<double> &x, const std::vector<st
     return pairs;
 }
 
+struct PythonError {}; /* a Python error is set: the step returns it as it is */
+
+/* int(text): Python's own parse of a lane's index, its ValueError where the text is none */
+long python_int(const std::string &text) {
+    PyObject *digits = PyUnicode_FromStringAndSize(text.data(), (Py_ssize_t)text.size());
+    PyObject *number = digits == NULL ? NULL : PyLong_FromUnicodeObject(digits, 10);
+    long value = number == NULL ? -1 : PyLong_AsLong(number);
+    Py_XDECREF(digits);
+    Py_XDECREF(number);
+    if (value == -1 && PyErr_Occurred())
+        throw PythonError();
+    return value;
+}
+
 struct Sensed {
     std::vector<Found> pairs;
     std::vector<std::string> traffic;
@@ -112,7 +126,7 @@ Sensed lateral_place(const Lateral &s, const std::set<std::string> &near, const 
         const PlacedLane *lane = s.placed(lane_id);
         PlacedLane legacy;
         if (lane == NULL && s.as_0_21) { /* a car off the route's one edge, at its own lane's position, as 0.21 had it */
-            legacy = {0.0, std::stol(lane_id.substr(lane_id.rfind('_') + 1)) - s.platoon_lane};
+            legacy = {0.0, python_int(lane_id.substr(lane_id.rfind('_') + 1)) - s.platoon_lane};
             lane = &legacy;
         }
         if (lane != NULL) {
@@ -367,15 +381,17 @@ extern "C" PyObject *lateral_pairs(PyObject *module, PyObject *const *args, Py_s
     PyObject *fast = PySequence_Fast(args[4], "covered: each car's lanes");
     if (fast == NULL)
         return NULL;
-    for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(fast); i++) {
+    for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(fast) && !PyErr_Occurred(); i++) {
         PyObject *lanes = PySequence_Fast(PySequence_Fast_GET_ITEM(fast, i), "a car's lanes");
-        if (lanes == NULL) {
-            Py_DECREF(fast);
-            return NULL;
-        }
+        if (lanes == NULL)
+            break;
         covered.emplace_back();
-        for (Py_ssize_t j = 0; j < PySequence_Fast_GET_SIZE(lanes); j++)
-            covered.back().push_back(PyLong_AsLong(PySequence_Fast_GET_ITEM(lanes, j)));
+        for (Py_ssize_t j = 0; j < PySequence_Fast_GET_SIZE(lanes); j++) {
+            long lane = PyLong_AsLong(PySequence_Fast_GET_ITEM(lanes, j));
+            if (lane == -1 && PyErr_Occurred())
+                break;
+            covered.back().push_back(lane);
+        }
         Py_DECREF(lanes);
     }
     Py_DECREF(fast);
@@ -384,6 +400,8 @@ extern "C" PyObject *lateral_pairs(PyObject *module, PyObject *const *args, Py_s
     Sensed found;
     try {
         found = lateral_step(*s, x, v, covered);
+    } catch (const PythonError &) {
+        return NULL;
     } catch (const std::exception &e) {
         raised(e.what());
         return NULL;

@@ -22,9 +22,9 @@ struct Step { /* the step's cars: the platoon's, then the traffic met (names, xs
             if (traffic[j].first == vid)
                 return first_traffic + (Py_ssize_t)j;
         Py_ssize_t index = PyList_GET_SIZE(names);
+        double speed = getters[WORLD_SPEED](vid); /* before any reference is held: SUMO's error may be thrown */
         PyObject *name = PyUnicode_FromStringAndSize(vid.data(), (Py_ssize_t)vid.size());
-        int failed = name == NULL || PyList_Append(names, name) < 0 || append(xs, front_m) < 0
-                     || append(vs, getters[WORLD_SPEED](vid)) < 0;
+        int failed = name == NULL || PyList_Append(names, name) < 0 || append(xs, front_m) < 0 || append(vs, speed) < 0;
         Py_XDECREF(name);
         if (failed)
             return -1;
