@@ -23,8 +23,9 @@ from .command import sumo_command, traffic_files
 from .scenarios import Road
 
 
-#: the version of the warm-up d4sumo saves: a cached state of another is warmed up again
-TRAFFIC_STATE = 1
+#: the version of the warm-up d4sumo saves: a cached state of another is warmed up again (2: its key holds every option
+#: its SUMO is started with, where 1 took a lane-changing attacker's warm-up for an in-lane one's, whichever came first)
+TRAFFIC_STATE = 2
 #: a flow's or a vehicle's element in SUMO's saved state that does not say its insertion checks: its id
 _UNCHECKED = re.compile(rb'<(?:flowState|vehicle) id="([^"]*)"(?![^>]*\binsertionChecks=)')
 
@@ -42,11 +43,15 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
         return None
     demands = traffic_files(config, road)
     sumo = sumo_binary("sumo")
+    cmd = sumo_command(config, road, demand_files=demands) + ["--save-state.rng", "true", "--save-state.precision", "17"]
     key = "\0".join([f"{sumo}:{os.stat(sumo).st_mtime_ns}", str(TRAFFIC_STATE), road.net_file.name, ",".join(d.name for d in demands),
                      str(config.traffic.seed), repr(config.step_s), repr(config.traffic.warmup_s),
                      # what else its SUMO loads: a .sumocfg's additional files and options change the traffic
                      *([config.additional_sha256] if config.additional else []), *(f"{k}={v}" for k, v in config.sumo_options),
-                     *(["insertion-checks", "a process of its own"] if config.traffic.insertion_checks else [])])
+                     *(["insertion-checks", "a process of its own"] if config.traffic.insertion_checks else []),
+                     # and every option it is started with (a lane-changing attacker's lanechange.duration changes how the
+                     # traffic changes lanes too): files by their names, which say their content, wherever the cache is
+                     *(",".join(Path(p).name for p in arg.split(",")) if os.sep in arg else arg for arg in cmd[1:])])
     folder = Path(default_cache_dir()).parent / "traffic-states"
     path = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.xml.gz"
     if path.is_file():
@@ -61,7 +66,6 @@ def traffic_state(config: EpisodeConfig, road: Road) -> Path | None:
         os.close(fd)
     except OSError as exc:
         raise SumoError(f"cannot write the traffic's warm-up under {folder}: {exc.strerror or exc}") from None
-    cmd = sumo_command(config, road, demand_files=demands) + ["--save-state.rng", "true", "--save-state.precision", "17"]
     try:
         _warm_up_alone(cmd, config, road, tmp)
         if config.traffic.insertion_checks:
