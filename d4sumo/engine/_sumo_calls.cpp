@@ -75,6 +75,22 @@ int raised(const char *what) {
     return -1;
 }
 
+struct PythonError {}; /* thrown where a Python error is set already: it is returned as it is */
+
+/* call(): 0, or -1 with SUMO's error (or the Python error already set) raised as libsumo's Python raises it */
+template <class Call> int guarded(Call &&call) {
+    try {
+        call();
+        return 0;
+    } catch (const PythonError &) {
+        return -1;
+    } catch (const std::exception &e) {
+        return raised(e.what());
+    } catch (...) {
+        return raised("unknown exception");
+    }
+}
+
 extern "C" {
 
 static void *make_id(const char *id) {
@@ -89,36 +105,15 @@ static void *make_id(const char *id) {
 static void free_id(void *id) { delete static_cast<std::string *>(id); }
 
 static int get(int what, void *id, double *out) {
-    try {
-        *out = getters[what](*static_cast<std::string *>(id));
-        return 0;
-    } catch (const std::exception &e) {
-        return raised(e.what());
-    } catch (...) {
-        return raised("unknown exception");
-    }
+    return guarded([&] { *out = getters[what](*static_cast<std::string *>(id)); });
 }
 
 static int set_speed(void *id, double speed) {
-    try {
-        set_speed_(*static_cast<std::string *>(id), speed);
-        return 0;
-    } catch (const std::exception &e) {
-        return raised(e.what());
-    } catch (...) {
-        return raised("unknown exception");
-    }
+    return guarded([&] { set_speed_(*static_cast<std::string *>(id), speed); });
 }
 
 static int step(void) {
-    try {
-        step_(0.0);
-        return 0;
-    } catch (const std::exception &e) {
-        return raised(e.what());
-    } catch (...) {
-        return raised("unknown exception");
-    }
+    return guarded([] { step_(0.0); });
 }
 
 } /* extern "C" */

@@ -93,8 +93,6 @@ std::vector<Found> lane_pairs(const std::vector<double> &x, const std::vector<st
     return pairs;
 }
 
-struct PythonError {}; /* a Python error is set: the step returns it as it is */
-
 /* int(text): Python's own parse of a lane's index, its ValueError where the text is none */
 long python_int(const std::string &text) {
     PyObject *digits = PyUnicode_FromStringAndSize(text.data(), (Py_ssize_t)text.size());
@@ -398,17 +396,8 @@ extern "C" PyObject *lateral_pairs(PyObject *module, PyObject *const *args, Py_s
     if (PyErr_Occurred())
         return NULL;
     Sensed found;
-    try {
-        found = lateral_step(*s, x, v, covered);
-    } catch (const PythonError &) {
+    if (guarded([&] { found = lateral_step(*s, x, v, covered); }) < 0)
         return NULL;
-    } catch (const std::exception &e) {
-        raised(e.what());
-        return NULL;
-    } catch (...) {
-        raised("unknown exception");
-        return NULL;
-    }
     PyObject *pairs = PyList_New(0), *names = PySequence_List(args[1]), *xs = float_list(found.xs), *vs = float_list(found.vs);
     int failed = pairs == NULL || names == NULL || xs == NULL || vs == NULL;
     for (size_t k = 0; !failed && k < found.pairs.size(); k++) {

@@ -159,15 +159,10 @@ extern "C" PyObject *traffic_pairs(PyObject *module, PyObject *const *args, Py_s
         PyErr_SetString(PyExc_ValueError, "a name, a position and a speed for every car");
         return NULL;
     }
-    try {
-        if (sense(s, ids, x, lengths, min_gaps) < 0)
-            return NULL;
-    } catch (const std::exception &e) {
-        raised(e.what());
+    if (guarded([&] {
+            if (sense(s, ids, x, lengths, min_gaps) < 0)
+                throw PythonError();
+        }) < 0)
         return NULL;
-    } catch (...) {
-        raised("unknown exception");
-        return NULL;
-    }
     return Py_BuildValue("(OOOO)", s.pairs, s.names, s.xs, s.vs);
 }

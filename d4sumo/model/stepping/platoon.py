@@ -330,12 +330,9 @@ class Platoon:
         own followers)."""
         if self._attacker_in_c:  # the attacker and the followers, in C
             commands, new_speeds = [], []
-            if self._car_drivers is None:
-                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
-            else:
-                if self._lit:  # what each car sees of the next light, recorded
-                    self.lights.append([light_code(stop) for stop in self.stops] if self.stops else self._dark)
-                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, self._caps(speeds, 0))
+            if self._lit:  # what each car sees of the next light, recorded
+                self.lights.append([light_code(stop) for stop in self.stops] if self.stops else self._dark)
+            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, *self._caps(speeds, 0))
             self.commands.append(commands)
             return new_speeds
         if self._one_ahead or not self._python and self._attacker_driver is None:
@@ -408,10 +405,8 @@ class Platoon:
         """Each follower Python commands: its command and its speed at the step's end, appended (in C where they may be)."""
         channel = self.channel
         if self._compiled is not None:  # its followers' modes too
-            if self._car_drivers is None:
-                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes)
-            else:  # the attacker's cap is the Python's, above
-                self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, self._caps(speeds, 1))
+            # (the attacker's cap is the Python's, above)
+            self._compiled(k, positions, speeds, pairs, commands, new_speeds, self.modes, *self._caps(speeds, 1))
         elif channel is None:
             for i, command, apply, _ in self._python:
                 # nobody ahead in its lane: a free road
@@ -437,12 +432,15 @@ class Platoon:
                 commands.append(c)
                 new_speeds.append(apply(c, speeds[i]))
 
-    def _caps(self, speeds: list[float], first: int) -> list[float | None]:
-        """The highest command each car's signal allows (None: no driver; the attacker's None from ``first`` 1), as
-        `_obeying` and `_attacker_command`'s caller cap the Python's: for the C (`compiled`)."""
+    def _caps(self, speeds: list[float], first: int) -> tuple:
+        """The C's last argument (`compiled`): the highest command each car's signal allows (None: no driver; the
+        attacker's None from ``first`` 1), as `_obeying` and `_attacker_command`'s caller cap the Python's; none where
+        nobody obeys a signal."""
+        if self._car_drivers is None:
+            return ()
         stops = self.stops
-        return [None if d is None or i < first else d.limit(stops[i] if stops else None, speeds[i])
-                for i, d in enumerate(self._car_drivers)]
+        return ([None if d is None or i < first else d.limit(stops[i] if stops else None, speeds[i])
+                 for i, d in enumerate(self._car_drivers)],)
 
     def _feed_sumo(self) -> None:
         """The step's beacons for SUMO's cooperative followers: the newest of each car each reads, where one is new."""
